@@ -1,0 +1,1 @@
+"""The environment core: tools, tasks, trajectories, action parsing, the Gymnasium env."""

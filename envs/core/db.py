@@ -1,0 +1,58 @@
+"""The domain database base class: strict pydantic, JSON load/dump, a stable content hash."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Self
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+
+class DataFileError(ValueError):
+    """A data file (database, tasks) is missing or malformed; the message names file and field."""
+
+
+def format_validation_error(exc: ValidationError, *, source: str, item: str | None = None) -> str:
+    """One line per problem: `file [item] field.path: message (got value)`."""
+    lines = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"]) or "<root>"
+        got = "" if err["type"] == "missing" else f" (got {repr(err.get('input'))[:60]})"
+        prefix = f"{source}" + (f" [{item}]" if item else "")
+        lines.append(f"{prefix} field {loc!r}: {err['msg']}{got}")
+    return "\n".join(lines)
+
+
+class DB(BaseModel):
+    """Base of every domain database. Unknown fields are errors, never silently dropped."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Self:
+        path = Path(path)
+        if not path.exists():
+            raise DataFileError(f"{path}: database file not found (run `hcgym data build`)")
+        try:
+            raw = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise DataFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+        try:
+            return cls.model_validate(raw)
+        except ValidationError as exc:
+            raise DataFileError(format_validation_error(exc, source=str(path))) from None
+
+    def dump(self, path: str | Path) -> None:
+        """Write deterministic JSON (sorted keys) so rebuilds produce identical files."""
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(
+            json.dumps(self.model_dump(mode="json"), sort_keys=True, ensure_ascii=False, indent=1) + "\n",
+            encoding="utf-8",
+        )
+
+    def content_hash(self) -> str:
+        """SHA-256 of the canonical JSON: equal states hash equal, whatever the insertion order."""
+        canonical = json.dumps(self.model_dump(mode="json"), sort_keys=True, ensure_ascii=False, separators=(",", ":"))
+        return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
