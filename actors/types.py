@@ -1,0 +1,62 @@
+"""Data that crosses actor boundaries during training (pydantic, so it validates and pickles).
+
+A `RolloutSample` is one finished multi-turn episode in token space, built token-in/token-out:
+`input_ids` is the prompt rendered once by the chat template, then for every turn the generated
+ids followed by the tokenized tool result. Nothing is ever re-rendered, so the learner trains on
+exactly the tokens the generator sampled.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class TurnSpan(BaseModel):
+    """Token positions [start, end) of one assistant turn's generated tokens in `input_ids`."""
+
+    model_config = ConfigDict(extra="forbid")
+    start: int = Field(ge=0)
+    end: int = Field(ge=0)
+    truncated: bool = False  # the turn hit the token limit
+
+
+class RolloutSample(BaseModel):
+    """One episode of one prompt, ready for the loss."""
+
+    model_config = ConfigDict(extra="forbid")
+    sample_id: str                        # unique: f"{task_id}:{group_index}:{seed}"
+    task_id: str
+    domain: str
+    group_id: str                          # samples of the same prompt share it (GRPO group)
+    seed: int
+    prompt_length: int                     # tokens of the rendered prompt
+    input_ids: list[int]                   # prompt + all turns + tool results
+    loss_mask: list[int]                   # 1 on generated (assistant) tokens, 0 elsewhere
+    sampling_logprobs: list[float]         # generator log-prob per position (0.0 where mask is 0)
+    policy_versions: list[int]             # policy version that sampled each position (-1 where mask 0)
+    turns: list[TurnSpan] = Field(default_factory=list)
+    reward: float = 0.0                    # the RL reward (5D total or cosine length reward)
+    reward_components: dict[str, float] = Field(default_factory=dict)
+    correct: bool = False                  # outcome used for hints and dynamic sampling
+    truncated: bool = False                # episode hit a turn or token limit
+    num_tool_calls: int = 0
+    response_tokens: int = 0               # assistant tokens over all turns (the L of Eq. 4)
+    metadata: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _aligned(self) -> "RolloutSample":
+        n = len(self.input_ids)
+        for name in ("loss_mask", "sampling_logprobs", "policy_versions"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"{name} has {len(getattr(self, name))} entries but input_ids has {n}")
+        for span in self.turns:
+            if not (self.prompt_length <= span.start <= span.end <= n):
+                raise ValueError(f"turn span [{span.start}, {span.end}) outside the response of length {n}")
+        return self
+
+    @property
+    def min_policy_version(self) -> int:
+        versions = [v for v in self.policy_versions if v >= 0]
+        return min(versions) if versions else -1

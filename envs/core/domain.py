@@ -1,0 +1,116 @@
+"""The domain contract in code: what a domain folder provides to the environment.
+
+See `envs/domains/README.md` for the contract in prose. A domain's `environment.py` exposes:
+
+    def get_environment() -> DomainEnvironment      # a fresh database + toolkit per call
+    def get_tasks(split: str | None = None) -> list[Task]
+
+`DomainEnvironment` bundles the policy text, the database, the toolkit (domain tools first,
+then shared tools) and an optional safety context used by the reward.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from envs.core.db import DB, DataFileError
+from envs.core.task import Task, load_split, load_tasks
+from envs.core.tools import Toolkit
+
+
+@dataclass
+class DomainEnvironment:
+    """Everything one episode of a domain needs."""
+
+    name: str
+    policy: str
+    toolkit: Toolkit
+    safety_context: Any = None
+    # Called on reset with the task, e.g. to seed episode-specific state from `task.metadata`.
+    on_reset: Callable[["DomainEnvironment", Task], None] | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def db(self) -> DB | None:
+        return self.toolkit.db
+
+    def db_hash(self) -> str | None:
+        db = self.db
+        return db.content_hash() if isinstance(db, DB) else None
+
+
+class DomainTaskStore:
+    """Loads a domain's tasks once: authored tasks committed in the domain folder plus tasks the
+    data build generated, filtered by the split file(s)."""
+
+    def __init__(self, name: str, package_dir: Path, build_dir: Path) -> None:
+        self.name = name
+        self.package_dir = package_dir
+        self.build_dir = build_dir
+        self._tasks: list[Task] | None = None
+        self._splits: dict[str, list[str]] | None = None
+
+    def _task_files(self) -> list[Path]:
+        files = [self.package_dir / "tasks.json", self.build_dir / "tasks.json"]
+        return [f for f in files if f.exists()]
+
+    def all_tasks(self) -> list[Task]:
+        if self._tasks is None:
+            files = self._task_files()
+            if not files:
+                raise DataFileError(
+                    f"domain {self.name!r}: no tasks found in {self.package_dir / 'tasks.json'} or "
+                    f"{self.build_dir / 'tasks.json'} (run `hcgym data build`)"
+                )
+            tasks: list[Task] = []
+            seen: set[str] = set()
+            for path in files:
+                for task in load_tasks(path, domain=self.name):
+                    if task.id in seen:
+                        raise DataFileError(f"{path} [task {task.id!r}]: id also defined in another task file")
+                    seen.add(task.id)
+                    tasks.append(task)
+            self._tasks = tasks
+        return self._tasks
+
+    def splits(self) -> dict[str, list[str]]:
+        if self._splits is None:
+            merged: dict[str, list[str]] = {}
+            for path in (self.package_dir / "split_tasks.json", self.build_dir / "split_tasks.json"):
+                if path.exists():
+                    for split, ids in load_split(path).items():
+                        merged.setdefault(split, []).extend(ids)
+            known = {t.id for t in self.all_tasks()}
+            for split, ids in merged.items():
+                missing = [i for i in ids if i not in known]
+                if missing:
+                    raise DataFileError(
+                        f"domain {self.name!r}: split {split!r} names unknown task ids {missing[:5]}"
+                    )
+            self._splits = merged
+        return self._splits
+
+    def tasks(self, split: str | None = None) -> list[Task]:
+        tasks = self.all_tasks()
+        if split is None:
+            return tasks
+        splits = self.splits()
+        if split not in splits:
+            raise KeyError(f"domain {self.name!r} has no split {split!r} (available: {sorted(splits)})")
+        wanted = set(splits[split])
+        return [t for t in tasks if t.id in wanted]
+
+
+def read_policy(package_dir: Path) -> str:
+    path = package_dir / "policy.md"
+    if not path.exists():
+        raise DataFileError(f"{path}: the domain policy is missing")
+    return path.read_text(encoding="utf-8").strip()
+
+
+def write_split(path: Path, splits: dict[str, list[str]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(splits, indent=1) + "\n", encoding="utf-8")

@@ -1,0 +1,261 @@
+"""`HealthcareGymEnv`: one clinical task per episode, tool calls as actions, the 5D reward at the end.
+
+Example:
+    >>> import gymnasium, envs
+    >>> env = gymnasium.make("HealthcareGym-v0", domain="drug_interaction", split="test")
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(
+    ...     '<tool_call>{"name": "think", "arguments": {"thought": "check the list"}}</tool_call>')
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+
+from envs.core.actions import parse_action
+from envs.core.domain import DomainEnvironment
+from envs.core.spaces import AnyText
+from envs.core.task import Task
+from envs.core.tools import ToolOutcome
+from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord
+
+MAX_ACTION_CHARS = 100_000
+MAX_OBSERVATION_CHARS = 1_000_000
+MAX_TOOL_RESULT_CHARS = 50_000
+
+CALL_FORMAT_HELP = (
+    "To call a tool, write <tool_call>{\"name\": \"<tool>\", \"arguments\": {...}}</tool_call> "
+    "(one block per call; several calls run in order). When you are done, call submit_answer."
+)
+
+
+def render_ticket(task: Task) -> str:
+    """The user-facing task text: the ticket, plus the options of a choice question."""
+    text = task.ticket.strip()
+    if task.options and not all(f"{k}." in text or f"({k})" in text for k in task.options):
+        text += "\n\nOptions:\n" + "\n".join(f"{k}. {v}" for k, v in task.options.items())
+    if task.patient_id and task.patient_id not in text:
+        text += f"\n\nPatient ID: {task.patient_id}"
+    return text
+
+
+def build_system_prompt(domain: DomainEnvironment) -> str:
+    tools = "\n".join(json.dumps(schema, ensure_ascii=False) for schema in domain.toolkit.schemas())
+    return f"{domain.policy}\n\n# Tools\n{CALL_FORMAT_HELP}\n<tools>\n{tools}\n</tools>"
+
+
+class HealthcareGymEnv(gym.Env[str, str]):
+    """A Gymnasium environment over one clinical domain.
+
+    Args:
+        domain: Registered domain name (see `envs.registry.list_domains()`).
+        task_id: Fix the task; otherwise each reset samples one from the split with the env's RNG.
+        split: Task split ("train", "test", ...); None for all tasks of the domain.
+        max_turns: Agent turns before the episode is truncated.
+        render_mode: "ansi" (render returns the transcript) or "human" (prints it).
+        reward_weights: Optional weights for the 5D reward (`envs.rewards.RewardWeights` fields).
+    """
+
+    metadata = {"render_modes": ["ansi", "human"]}
+
+    def __init__(self, domain: str = "drug_interaction", task_id: str | None = None, split: str | None = None,
+                 max_turns: int = 10, render_mode: str | None = None,
+                 reward_weights: dict[str, float] | None = None) -> None:
+        from envs import registry
+
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if not isinstance(max_turns, int) or max_turns < 1:
+            raise ValueError(f"max_turns must be a positive integer, got {max_turns!r}")
+        self.domain_name = domain
+        self.split = split
+        self.max_turns = max_turns
+        self.render_mode = render_mode
+        self.reward_weights = reward_weights
+        self.tasks: list[Task] = registry.get_tasks(domain, split)
+        if not self.tasks:
+            raise ValueError(f"domain {domain!r} has no tasks in split {split!r}")
+        self._tasks_by_id = {t.id: t for t in self.tasks}
+        if task_id is not None and task_id not in self._tasks_by_id:
+            raise KeyError(f"task {task_id!r} is not in domain {domain!r} split {split!r}")
+        self.task_id = task_id
+        self._registry = registry
+        self.observation_space = AnyText(MAX_OBSERVATION_CHARS)
+        self.action_space = AnyText(MAX_ACTION_CHARS)
+        self.domain_env: DomainEnvironment | None = None
+        self.task: Task | None = None
+        self._record: Trajectory | None = None
+        self._done = False
+
+    # -- Gymnasium API ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[str, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        task_id = options.get("task_id", self.task_id)
+        if task_id is not None:
+            if task_id not in self._tasks_by_id:
+                raise KeyError(f"task {task_id!r} is not in domain {self.domain_name!r} split {self.split!r}")
+            task = self._tasks_by_id[task_id]
+        else:
+            task = self.tasks[int(self.np_random.integers(len(self.tasks)))]
+        self.task = task
+        self.domain_env = self._registry.get_environment(self.domain_name)
+        if self.domain_env.on_reset is not None:
+            self.domain_env.on_reset(self.domain_env, task)
+        system_prompt = build_system_prompt(self.domain_env)
+        ticket = render_ticket(task)
+        observation = f"{system_prompt}\n\n# Task\n{ticket}"
+        self._record = Trajectory(
+            task_id=task.id, domain=self.domain_name, seed=seed, system_prompt=system_prompt,
+            first_observation=observation, image_path=task.image_path,
+            messages=[{"role": "system", "content": system_prompt}, {"role": "user", "content": ticket}],
+            db_hash_initial=self.domain_env.db_hash(),
+        )
+        self._done = False
+        info = {
+            "task_id": task.id, "domain": self.domain_name, "tools": self.domain_env.toolkit.schemas(),
+            "policy": self.domain_env.policy, "max_turns": self.max_turns, "system_prompt": system_prompt,
+            "ticket": ticket, "image_path": task.image_path,
+        }
+        return observation, info
+
+    def step(self, action: str) -> tuple[str, SupportsFloat, bool, bool, dict[str, Any]]:
+        if self._record is None or self.domain_env is None or self.task is None:
+            raise RuntimeError("call reset() before step()")
+        if self._done:
+            return "The episode is over; call reset() to start a new one.", 0.0, True, False, {"error": "episode_over"}
+        started = time.perf_counter()
+        turn_index = len(self._record.turns)
+        toolkit = self.domain_env.toolkit
+        if isinstance(action, str) and len(action) > MAX_ACTION_CHARS:
+            parsed = parse_action("")
+            parsed.errors.append(f"action of {len(action)} characters exceeds the limit of {MAX_ACTION_CHARS}")
+            parsed.format = "text"
+            raw = action[:MAX_ACTION_CHARS]
+        else:
+            parsed = parse_action(action, toolkit.definitions)
+            raw = action if isinstance(action, str) else repr(action)
+        records: list[ToolCallRecord] = []
+        parts: list[str] = []
+        submitted: str | None = None
+        for call in parsed.calls:
+            call_start = time.perf_counter()
+            outcome: ToolOutcome = toolkit.call(call.name, call.arguments)
+            text = outcome.as_text()
+            if len(text) > MAX_TOOL_RESULT_CHARS:
+                text = text[:MAX_TOOL_RESULT_CHARS] + f"\n[truncated: result longer than {MAX_TOOL_RESULT_CHARS} characters]"
+            records.append(ToolCallRecord(
+                name=outcome.name, arguments=outcome.arguments, result=text if outcome.ok else None,
+                error=outcome.error, tool_type=str(outcome.tool_type) if outcome.tool_type else None,
+                format=call.format, submit=outcome.submit, duration_s=time.perf_counter() - call_start,
+            ))
+            parts.append(text if len(parsed.calls) == 1 else f"[{outcome.name}] {text}")
+            if outcome.submit and outcome.ok:
+                submitted = str(outcome.arguments.get("answer", ""))
+                break
+        for error in parsed.errors:
+            parts.append(json.dumps({"error": f"could not parse action: {error}"}))
+        if not parsed.calls and not parsed.errors:
+            parts.append("No tool call found in your message. " + CALL_FORMAT_HELP)
+        observation = "\n".join(parts)[:MAX_OBSERVATION_CHARS]
+        turn = TurnRecord(index=turn_index, action=raw, message=parsed.message, action_format=parsed.format,
+                          tool_calls=records, parse_errors=parsed.errors, observation=observation,
+                          duration_s=time.perf_counter() - started)
+        self._record.turns.append(turn)
+        self._record.messages.append(_assistant_message(raw, records))
+        for rec in records:
+            self._record.messages.append({"role": "tool", "name": rec.name,
+                                          "content": rec.result if rec.ok else json.dumps({"error": rec.error})})
+        if not records:
+            self._record.messages.append({"role": "user", "content": observation})
+
+        terminated = submitted is not None
+        truncated = not terminated and len(self._record.turns) >= self.max_turns
+        reward = 0.0
+        info: dict[str, Any] = {"turn": turn_index, "tool_calls": [r.name for r in records],
+                                "action_format": parsed.format, "parse_errors": parsed.errors}
+        if terminated or truncated:
+            self._record.submitted_answer = submitted
+            self._record.terminated, self._record.truncated = terminated, truncated
+            reward = self._finish(info)
+            self._done = True
+        if self.render_mode == "human":
+            print(self._render_turn(turn))
+        return observation, reward, terminated, truncated, info
+
+    def _finish(self, info: dict[str, Any]) -> float:
+        from envs.rewards import score_episode
+
+        record = self._record
+        assert record is not None and self.domain_env is not None and self.task is not None
+        record.db_hash_final = self.domain_env.db_hash()
+        breakdown = score_episode(record, self.task, weights=self.reward_weights,
+                                  context=self.domain_env.safety_context)
+        record.reward = float(breakdown.total)
+        record.reward_components = breakdown.components()
+        record.reward_details = breakdown.model_dump(mode="json")
+        info["reward_components"] = dict(record.reward_components)
+        info["reward_breakdown"] = record.reward_details
+        info["is_correct"] = bool(breakdown.is_correct)
+        info["trajectory"] = record
+        return record.reward
+
+    def render(self) -> str | None:
+        text = self.transcript()
+        if self.render_mode == "human":
+            print(text)
+            return None
+        return text
+
+    # -- records ---------------------------------------------------------------------------------
+    def trajectory(self) -> Trajectory:
+        """The episode so far as a structured record (a copy)."""
+        if self._record is None:
+            raise RuntimeError("no episode yet: call reset()")
+        return self._record.model_copy(deep=True)
+
+    def transcript(self) -> str:
+        if self._record is None:
+            return "(no episode: call reset())"
+        record = self._record
+        lines = [f"=== {record.domain} / {record.task_id} ===", "[user] " + record.messages[1]["content"]]
+        lines += [self._render_turn(turn) for turn in record.turns]
+        if record.reward is not None:
+            comps = ", ".join(f"{k}={v:.3f}" for k, v in record.reward_components.items())
+            lines.append(f"=== reward {record.reward:.3f} ({comps}) ===")
+        return "\n".join(lines)
+
+    @staticmethod
+    def _render_turn(turn: TurnRecord) -> str:
+        lines = [f"--- turn {turn.index + 1} ({turn.action_format}) ---"]
+        if turn.message:
+            lines.append(f"[agent] {turn.message}")
+        for call in turn.tool_calls:
+            args = json.dumps(call.arguments, ensure_ascii=False)
+            lines.append(f"[call] {call.name}({args})")
+            lines.append(f"[result] {call.result}" if call.ok else f"[error] {call.error}")
+        for error in turn.parse_errors:
+            lines.append(f"[parse error] {error}")
+        if not turn.tool_calls and not turn.parse_errors:
+            lines.append(f"[env] {turn.observation}")
+        return "\n".join(lines)
+
+
+def _assistant_message(raw: str, records: list[ToolCallRecord]) -> dict[str, Any]:
+    message: dict[str, Any] = {"role": "assistant", "content": raw}
+    if records:
+        message["tool_calls"] = [
+            {"type": "function", "function": {"name": r.name, "arguments": json.dumps(r.arguments, ensure_ascii=False)}}
+            for r in records
+        ]
+    return message
+
+
+def make_env(domain: str, **kwargs: Any) -> HealthcareGymEnv:
+    return HealthcareGymEnv(domain=domain, **kwargs)
+
+

@@ -1,0 +1,31 @@
+"""`hcgym data build`: run every data builder in order.
+
+A builder is a module with `build(offline: bool = False, force: bool = False) -> dict` that
+writes its output under `envs.core.paths.data_dir()` deterministically and returns a summary of
+counts. To add one, append its module path to BUILDERS.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+
+BUILDERS: list[str] = [
+    "envs.domains.drug_interaction.build",
+]
+
+
+def run_builders(names: list[str] | None = None, *, offline: bool = False, force: bool = False,
+                 echo=print) -> dict[str, dict]:
+    summaries: dict[str, dict] = {}
+    for module_name in BUILDERS:
+        short = module_name.rsplit(".", 2)[-2] if module_name.endswith(".build") else module_name
+        if names and short not in names and module_name not in names:
+            continue
+        start = time.perf_counter()
+        module = importlib.import_module(module_name)
+        echo(f"[data] {short}: building ...")
+        summary = module.build(offline=offline, force=force)
+        echo(f"[data] {short}: {summary} ({time.perf_counter() - start:.1f}s)")
+        summaries[short] = summary
+    return summaries

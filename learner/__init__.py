@@ -1,0 +1,2 @@
+"""learner package."""
+import envs._runtime  # noqa: F401  (CPU-path environment defaults)
