@@ -1,0 +1,456 @@
+"""The policy model: a locally trained tokenizer, a tiny Qwen-architecture LM, and token log-probs.
+
+Nothing here touches a model hub. The CPU path trains a byte-level BPE on the task corpus (plus
+Python stdlib sources for coverage: a small synthetic corpus alone only reaches ~500 merges),
+builds a Qwen3 causal LM from a config, and saves both with `save_pretrained` (safetensors).
+
+The chat format is Qwen-style ChatML. Tool results are rendered on the user side inside a
+`<tool_response>` block, exactly as `tool_turn_text` renders them, so the agent loop can work
+token-in/token-out: it renders the prompt once with `apply_chat_template` and afterwards only
+appends generated ids and `tokenizer.encode(tool_turn_text(result), add_special_tokens=False)`.
+
+Example:
+    >>> tok_dir = train_tokenizer(corpus_texts, vocab_size=4096, output_dir="runs/tok")
+    >>> model_dir = build_tiny_model("runs/tiny", tok_dir)
+    >>> model, tokenizer = load_policy(model_dir)
+    >>> logprobs = per_token_logprobs(model, input_ids, attention_mask)   # [B, T]
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import sysconfig
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+
+import envs._runtime  # noqa: F401  (CPU-path environment defaults before transformers loads)
+
+ENDOFTEXT = "<|endoftext|>"
+IM_START = "<|im_start|>"
+IM_END = "<|im_end|>"
+PAD = "<|pad|>"
+SPECIAL_TOKENS = [ENDOFTEXT, IM_START, IM_END, PAD]
+# Added (non-special) tokens: they survive decoding, so a parser sees them in the text.
+TOOL_TOKENS = ["<tool_call>", "</tool_call>", "<tool_response>", "</tool_response>"]
+
+# Qwen-style ChatML. Written for this project. Roles: system, user, assistant, tool. Consecutive
+# tool messages share one user turn, each in its own <tool_response> block; assistant messages
+# may carry OpenAI-style `tool_calls`, rendered as Hermes <tool_call> JSON blocks. `tools` (OpenAI
+# schemas) are listed in the system turn.
+CHAT_TEMPLATE = (
+    "{%- set ns = namespace(system_done=false) -%}"
+    "{%- if tools -%}"
+    "{{- '<|im_start|>system\\n' -}}"
+    "{%- if messages and messages[0]['role'] == 'system' -%}"
+    "{{- messages[0]['content'] + '\\n\\n' -}}{%- set ns.system_done = true -%}"
+    "{%- endif -%}"
+    "{{- '# Tools\\n\\nYou may call functions. Available functions:\\n<tools>' -}}"
+    "{%- for tool in tools -%}{{- '\\n' + (tool | tojson) -}}{%- endfor -%}"
+    "{{- '\\n</tools>\\n\\nFor each call, return a JSON object inside <tool_call></tool_call> tags:\\n"
+    "<tool_call>\\n{\"name\": <function-name>, \"arguments\": <args-json-object>}\\n</tool_call>"
+    "<|im_end|>\\n' -}}"
+    "{%- endif -%}"
+    "{%- for message in messages -%}"
+    "{%- if message['role'] == 'system' -%}"
+    "{%- if not ns.system_done -%}"
+    "{{- '<|im_start|>system\\n' + message['content'] + '<|im_end|>\\n' -}}{%- set ns.system_done = true -%}"
+    "{%- endif -%}"
+    "{%- elif message['role'] == 'user' -%}"
+    "{{- '<|im_start|>user\\n' + message['content'] + '<|im_end|>\\n' -}}"
+    "{%- elif message['role'] == 'assistant' -%}"
+    "{{- '<|im_start|>assistant\\n' + (message['content'] or '') -}}"
+    "{%- for call in (message.get('tool_calls') or []) -%}"
+    "{%- set fn = call['function'] if call.get('function') else call -%}"
+    "{%- if (loop.first and message['content']) or not loop.first -%}{{- '\\n' -}}{%- endif -%}"
+    "{{- '<tool_call>\\n{\"name\": \"' + fn['name'] + '\", \"arguments\": ' -}}"
+    "{%- if fn['arguments'] is string -%}{{- fn['arguments'] -}}{%- else -%}{{- fn['arguments'] | tojson -}}{%- endif -%}"
+    "{{- '}\\n</tool_call>' -}}"
+    "{%- endfor -%}"
+    "{{- '<|im_end|>\\n' -}}"
+    "{%- elif message['role'] == 'tool' -%}"
+    "{%- if loop.first or messages[loop.index0 - 1]['role'] != 'tool' -%}{{- '<|im_start|>user' -}}{%- endif -%}"
+    "{{- '\\n<tool_response>\\n' + message['content'] + '\\n</tool_response>' -}}"
+    "{%- if loop.last or messages[loop.index0 + 1]['role'] != 'tool' -%}{{- '<|im_end|>\\n' -}}{%- endif -%}"
+    "{%- endif -%}"
+    "{%- endfor -%}"
+    "{%- if add_generation_prompt -%}{{- '<|im_start|>assistant\\n' -}}{%- endif -%}"
+)
+
+
+def tool_turn_text(tool_result: str) -> str:
+    """The text that follows a finished assistant turn when the environment answers with a tool result.
+
+    The generator stops after emitting `<|im_end|>`; what the chat template would render next is
+    the newline closing that turn, the user-side tool response, and the next generation prompt.
+    Tokenize it with `add_special_tokens=False` and append the ids (token-in/token-out).
+
+    Args:
+        tool_result: The observation text returned by `env.step`.
+    """
+    return f"\n{IM_START}user\n<tool_response>\n{tool_result}\n</tool_response>{IM_END}\n{IM_START}assistant\n"
+
+
+def _stdlib_texts(max_files: int, max_chars_per_file: int = 20_000) -> Iterator[str]:
+    """Python stdlib sources in a fixed order: varied code and prose for BPE coverage."""
+    root = sysconfig.get_paths()["stdlib"]
+    files = sorted(glob.glob(os.path.join(root, "*.py")))[:max_files]
+    for path in files:
+        try:
+            with open(path, encoding="utf-8") as handle:
+                yield handle.read(max_chars_per_file)
+        except (OSError, UnicodeDecodeError):
+            continue  # an unreadable stdlib file only costs coverage
+
+
+def train_tokenizer(
+    texts: Iterable[str],
+    vocab_size: int,
+    output_dir: str | os.PathLike,
+    *,
+    include_stdlib: bool = True,
+    max_stdlib_files: int = 400,
+    min_frequency: int = 2,
+) -> Path:
+    """Train a byte-level BPE tokenizer locally and save it with a ChatML chat template.
+
+    Args:
+        texts: The task corpus (tickets, policies, tool descriptions, answers ...).
+        vocab_size: Target vocabulary size including the special and tool tokens (>= 300).
+        output_dir: Where `save_pretrained` writes `tokenizer.json`, `tokenizer_config.json` and
+            `chat_template.jinja`.
+        include_stdlib: Also train on Python stdlib sources (deterministic file order) for coverage.
+        max_stdlib_files: How many stdlib files to read when `include_stdlib` is set.
+        min_frequency: Minimum pair frequency for a merge.
+
+    Returns:
+        The output directory.
+
+    Raises:
+        ValueError: If `vocab_size` is too small for the byte alphabet plus special tokens, or the
+            corpus is empty.
+    """
+    from tokenizers import AddedToken, Tokenizer, decoders, models, pre_tokenizers, trainers
+    from transformers import PreTrainedTokenizerFast
+
+    min_vocab = 256 + len(SPECIAL_TOKENS) + len(TOOL_TOKENS)
+    if vocab_size < min_vocab:
+        raise ValueError(f"vocab_size={vocab_size} is below the byte alphabet plus special tokens ({min_vocab})")
+    corpus = [t for t in texts if t]
+    if not corpus and not include_stdlib:
+        raise ValueError("texts is empty and include_stdlib is False: nothing to train the tokenizer on")
+    if include_stdlib:
+        corpus.extend(_stdlib_texts(max_stdlib_files))
+
+    tok = Tokenizer(models.BPE())
+    tok.pre_tokenizer = pre_tokenizers.ByteLevel(add_prefix_space=False)
+    tok.decoder = decoders.ByteLevel()
+    trainer = trainers.BpeTrainer(
+        # The tool tokens are added below as added tokens; reserve their slots in the budget.
+        vocab_size=vocab_size - len(TOOL_TOKENS),
+        min_frequency=min_frequency,
+        special_tokens=SPECIAL_TOKENS,
+        initial_alphabet=pre_tokenizers.ByteLevel.alphabet(),
+        show_progress=False,
+    )
+    tok.train_from_iterator(corpus, trainer=trainer)
+    tok.add_tokens([AddedToken(t, special=False, normalized=False) for t in TOOL_TOKENS])
+
+    tokenizer = PreTrainedTokenizerFast(
+        tokenizer_object=tok,
+        eos_token=IM_END,
+        pad_token=PAD,
+        unk_token=None,
+        bos_token=None,
+        # Must be a constructor argument: set afterwards it reloads as "right" (stack notes 3).
+        padding_side="left",
+        model_max_length=1_000_000,
+        clean_up_tokenization_spaces=False,
+    )
+    tokenizer.chat_template = CHAT_TEMPLATE
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tokenizer.save_pretrained(str(out))
+    return out
+
+
+def _quiet_transformers() -> None:
+    """No per-shard progress bars: the driver prints one progress line per step instead."""
+    from transformers.utils import logging as hf_logging
+
+    hf_logging.disable_progress_bar()
+
+
+def load_tokenizer(tokenizer_dir: str | os.PathLike):
+    """Load a tokenizer saved by `train_tokenizer` (or any local HF tokenizer directory)."""
+    from transformers import AutoTokenizer
+
+    path = Path(tokenizer_dir)
+    if not (path / "tokenizer.json").exists() and not (path / "tokenizer_config.json").exists():
+        raise FileNotFoundError(f"no tokenizer in {path} (expected tokenizer.json / tokenizer_config.json)")
+    return AutoTokenizer.from_pretrained(str(path), local_files_only=True)
+
+
+TINY_MODEL_DEFAULTS: dict[str, object] = {
+    "hidden_size": 128,
+    "intermediate_size": 256,
+    "num_hidden_layers": 2,
+    "num_attention_heads": 4,
+    "num_key_value_heads": 2,
+    "head_dim": 32,
+    "max_position_embeddings": 8192 + 12288,
+    # Untied: the embedding and the LM head are separate tensors, so safetensors, ZeRO-3 gathering
+    # and the EMA update never meet a shared tensor.
+    "tie_word_embeddings": False,
+    "rms_norm_eps": 1e-6,
+    "rope_theta": 10000.0,
+}
+
+
+def build_tiny_model(
+    output_dir: str | os.PathLike,
+    tokenizer_dir: str | os.PathLike,
+    *,
+    architecture: str = "qwen3",
+    seed: int = 0,
+    **overrides,
+) -> Path:
+    """Build a Qwen-architecture causal LM from a config and save it (safetensors) with its tokenizer.
+
+    Args:
+        output_dir: Model directory to write (`config.json`, `model.safetensors`, tokenizer files).
+        tokenizer_dir: Directory of the tokenizer (from `train_tokenizer`); copied next to the model
+            so `load_policy(output_dir)` finds both.
+        architecture: "qwen3" or "qwen2".
+        seed: Seed for the random initialisation (same seed, same weights).
+        **overrides: Config fields replacing `TINY_MODEL_DEFAULTS` (e.g. `hidden_size=64`).
+
+    Returns:
+        The output directory.
+
+    Raises:
+        ValueError: On an unknown architecture or config field.
+    """
+    from transformers import AutoModelForCausalLM, Qwen2Config, Qwen3Config
+
+    _quiet_transformers()
+    config_cls = {"qwen3": Qwen3Config, "qwen2": Qwen2Config}.get(architecture)
+    if config_cls is None:
+        raise ValueError(f"architecture={architecture!r}: expected 'qwen3' or 'qwen2'")
+    tokenizer = load_tokenizer(tokenizer_dir)
+    fields = {**TINY_MODEL_DEFAULTS, **overrides}
+    if architecture == "qwen2":
+        fields.pop("head_dim", None)  # Qwen2 derives it from hidden_size / heads
+    known = set(config_cls().to_dict()) | {"rope_theta", "head_dim"}
+    unknown = sorted(k for k in fields if k not in known)
+    if unknown:
+        raise ValueError(f"build_tiny_model: unknown config field(s) {unknown} for {config_cls.__name__}")
+    eos_ids = [tokenizer.convert_tokens_to_ids(t) for t in (IM_END, ENDOFTEXT)]
+    config = config_cls(
+        vocab_size=len(tokenizer),
+        pad_token_id=tokenizer.pad_token_id,
+        eos_token_id=eos_ids[0],
+        bos_token_id=None,
+        **fields,
+    )
+    torch.manual_seed(seed)
+    model = AutoModelForCausalLM.from_config(config, dtype=torch.float32)
+    model.generation_config.eos_token_id = eos_ids
+    model.generation_config.pad_token_id = tokenizer.pad_token_id
+    model.generation_config.bos_token_id = None
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    model.save_pretrained(str(out), safe_serialization=True)
+    tokenizer.save_pretrained(str(out))
+    return out
+
+
+def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32, *, tokenizer_dir=None):
+    """Load a causal LM and its tokenizer from a local directory (safetensors only).
+
+    Args:
+        model_dir: Directory written by `build_tiny_model` or `save_pretrained`.
+        dtype: Parameter dtype.
+        tokenizer_dir: Tokenizer directory when it is not stored next to the model.
+
+    Returns:
+        `(model, tokenizer)`; the model is in eval mode.
+    """
+    from transformers import AutoModelForCausalLM
+
+    _quiet_transformers()
+    path = Path(model_dir)
+    if not (path / "config.json").exists():
+        raise FileNotFoundError(f"no model config.json in {path}")
+    model = AutoModelForCausalLM.from_pretrained(
+        str(path), dtype=dtype, local_files_only=True, use_safetensors=True
+    )
+    model.eval()
+    tokenizer = load_tokenizer(tokenizer_dir or path)
+    return model, tokenizer
+
+
+# ----------------------------------------------------------------------------------------------
+# Token log-probs
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class TokenStats:
+    """Per-position statistics of a forward pass; position t describes the prediction of token t.
+
+    All tensors are [B, T] (or [B, T, K]); position 0 has no prediction and holds 0.
+    """
+
+    logprobs: torch.Tensor                     # log p(x_t | x_<t)
+    entropy: torch.Tensor | None = None        # H(p(. | x_<t))
+    gathered: torch.Tensor | None = None       # log p(v | x_<t) at the requested ids, [B, T, K]
+    topk_logprobs: torch.Tensor | None = None  # the model's own top-k log-probs, [B, T, K]
+    topk_ids: torch.Tensor | None = None       # their token ids, [B, T, K]
+
+
+def position_ids_from_mask(attention_mask: torch.Tensor) -> torch.Tensor:
+    """Positions counting only real tokens, so left- and right-padded rows see the same positions."""
+    return (attention_mask.long().cumsum(-1) - 1).clamp(min=0)
+
+
+def _decoder_and_head(model):
+    decoder = model.get_decoder() if hasattr(model, "get_decoder") else None
+    head = model.get_output_embeddings() if hasattr(model, "get_output_embeddings") else None
+    return decoder, head
+
+
+def token_stats(
+    model,
+    input_ids: torch.Tensor,
+    attention_mask: torch.Tensor,
+    *,
+    temperature: float = 1.0,
+    with_entropy: bool = False,
+    gather_ids: torch.Tensor | None = None,
+    topk: int = 0,
+    chunk_size: int = 1024,
+) -> TokenStats:
+    """One forward pass, then log-probs (and optional entropy / top-k) computed chunk by chunk.
+
+    Computing the LM head and log-softmax over chunks of positions keeps the [T, vocab] logits
+    of a long multi-turn episode (20K tokens x 150K vocab on the GPU configs) from being
+    materialised at once.
+
+    Args:
+        model: A causal LM (transformers).
+        input_ids: [B, T] token ids.
+        attention_mask: [B, T] 1 on real tokens (left or right padding both work).
+        temperature: Logits are divided by it, matching the sampler's distribution.
+        with_entropy: Also return the entropy of the predictive distribution.
+        gather_ids: Optional [B, T, K] ids whose log-probs to return (the teacher's top-k).
+        topk: If > 0, also return the model's own top-k log-probs and ids.
+        chunk_size: Positions per LM-head chunk.
+
+    Returns:
+        A `TokenStats` whose position t is the prediction of token t given tokens < t.
+    """
+    if input_ids.dim() != 2 or attention_mask.shape != input_ids.shape:
+        raise ValueError(
+            f"input_ids must be [B, T] and attention_mask the same shape; got {tuple(input_ids.shape)} "
+            f"and {tuple(attention_mask.shape)}"
+        )
+    if temperature <= 0:
+        raise ValueError(f"temperature must be > 0, got {temperature}")
+    if gather_ids is not None and gather_ids.shape[:2] != input_ids.shape:
+        raise ValueError(f"gather_ids must be [B, T, K] with [B, T]={tuple(input_ids.shape)}, got {tuple(gather_ids.shape)}")
+    position_ids = position_ids_from_mask(attention_mask)
+    decoder, head = _decoder_and_head(model)
+    B, T = input_ids.shape
+    if decoder is not None and head is not None:
+        hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
+        logits_of = lambda lo, hi: head(hidden[:, lo:hi])  # noqa: E731
+    else:  # a model without the decoder/head split: full logits in one go
+        full = model(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).logits
+        logits_of = lambda lo, hi: full[:, lo:hi]  # noqa: E731
+
+    # Predictions for targets 1..T-1 come from positions 0..T-2.
+    targets = input_ids[:, 1:]
+    lp_parts, ent_parts, gat_parts, tkv_parts, tki_parts = [], [], [], [], []
+    for lo in range(0, T - 1, chunk_size):
+        hi = min(lo + chunk_size, T - 1)
+        logp = F.log_softmax(logits_of(lo, hi).float() / temperature, dim=-1)
+        lp_parts.append(logp.gather(-1, targets[:, lo:hi].unsqueeze(-1)).squeeze(-1))
+        if with_entropy:
+            ent_parts.append(-(logp.exp() * logp).sum(-1))
+        if gather_ids is not None:
+            gat_parts.append(logp.gather(-1, gather_ids[:, lo + 1 : hi + 1]))
+        if topk:
+            vals, ids = logp.topk(topk, dim=-1)
+            tkv_parts.append(vals)
+            tki_parts.append(ids)
+
+    def stitch(parts, trailing=()):
+        zero = torch.zeros((B, 1, *trailing), dtype=torch.float32, device=input_ids.device)
+        return torch.cat([zero, *parts], dim=1) if parts else zero.expand(B, T, *trailing).clone()
+
+    # A prediction exists only where both the token and its predecessor are real: padding and the
+    # first real token of a left-padded row get 0, like position 0.
+    valid = attention_mask.clone().float()
+    valid[:, 1:] *= attention_mask[:, :-1].float()
+    valid[:, 0] = 0.0
+    stats = TokenStats(logprobs=stitch(lp_parts) * valid)
+    if with_entropy:
+        stats.entropy = stitch(ent_parts) * valid
+    if gather_ids is not None:
+        stats.gathered = stitch(gat_parts, (gather_ids.shape[-1],)) * valid.unsqueeze(-1)
+    if topk:
+        stats.topk_logprobs = stitch(tkv_parts, (topk,)) * valid.unsqueeze(-1)
+        ids = torch.cat([torch.zeros((B, 1, topk), dtype=torch.long, device=input_ids.device), *tki_parts], 1)
+        stats.topk_ids = ids * valid.long().unsqueeze(-1)
+    return stats
+
+
+def per_token_logprobs(
+    model, input_ids: torch.Tensor, attention_mask: torch.Tensor, *, temperature: float = 1.0
+) -> torch.Tensor:
+    """Log-prob of token t given tokens < t, as [B, T] float32; position 0 gets 0.
+
+    Args:
+        model: A causal LM.
+        input_ids: [B, T] token ids.
+        attention_mask: [B, T] mask of real tokens.
+        temperature: The sampling temperature the ids were drawn at.
+    """
+    return token_stats(model, input_ids, attention_mask, temperature=temperature).logprobs
+
+
+def per_token_entropy(
+    model, input_ids: torch.Tensor, attention_mask: torch.Tensor, *, temperature: float = 1.0
+) -> torch.Tensor:
+    """Entropy of the predictive distribution for token t, [B, T]; position 0 gets 0."""
+    return token_stats(model, input_ids, attention_mask, temperature=temperature, with_entropy=True).entropy
+
+
+def entropy_from_logits(logits: torch.Tensor) -> torch.Tensor:
+    """Entropy over the last dimension of raw logits."""
+    logp = F.log_softmax(logits.float(), dim=-1)
+    return -(logp.exp() * logp).sum(-1)
+
+
+def pad_batch(sequences: list[list[int]], pad_id: int, *, side: str = "right") -> tuple[torch.Tensor, torch.Tensor]:
+    """Pad id lists into ([B, T] ids, [B, T] mask); right padding keeps position t at column t."""
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    if not sequences:
+        raise ValueError("pad_batch: no sequences")
+    T = max(len(s) for s in sequences)
+    ids = torch.full((len(sequences), T), pad_id, dtype=torch.long)
+    mask = torch.zeros((len(sequences), T), dtype=torch.long)
+    for i, seq in enumerate(sequences):
+        if side == "right":
+            ids[i, : len(seq)] = torch.tensor(seq, dtype=torch.long)
+            mask[i, : len(seq)] = 1
+        else:
+            ids[i, T - len(seq) :] = torch.tensor(seq, dtype=torch.long)
+            mask[i, T - len(seq) :] = 1
+    return ids, mask
