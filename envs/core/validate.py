@@ -1,0 +1,109 @@
+"""The task validator behind `hcgym tasks validate`.
+
+A task ships only if it
+  1. names only tools that exist in its domain, with arguments valid for their signatures;
+  2. has a gradeable gold answer (or a rubric for long-form tasks);
+  3. replays: in a fresh environment its expected actions run without error, then the gold answer
+     is submitted, and the episode earns full action coverage and full accuracy.
+The reference implementation shipped hundreds of tasks naming tools that did not exist and half
+its rows without a gradeable answer; this is the check that prevents it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from envs.core.task import Task
+from envs.core.tools import ToolArgumentError
+
+
+@dataclass
+class TaskReport:
+    task_id: str
+    domain: str
+    problems: list[str] = field(default_factory=list)
+    reward_components: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def gold_answer_text(task: Task) -> str | None:
+    """What a perfect agent submits."""
+    return task.correct_answer
+
+
+def gold_actions_as_text(task: Task) -> list[str]:
+    """One Hermes-style action per expected tool call, in order."""
+    return [
+        "<tool_call>" + json.dumps({"name": a.name, "arguments": a.arguments}, ensure_ascii=False) + "</tool_call>"
+        for a in task.evaluation_criteria.actions
+    ]
+
+
+def gold_replay(task: Task, domain: str, max_turns: int | None = None) -> tuple[Any, dict[str, Any]]:
+    """Run the gold solution in a fresh environment; returns (trajectory, final info)."""
+    from envs.core.env import HealthcareGymEnv
+
+    actions = gold_actions_as_text(task)
+    turns = max_turns or len(actions) + 2
+    env = HealthcareGymEnv(domain=domain, task_id=task.id, max_turns=turns)
+    env.reset(seed=0, options={"task_id": task.id})
+    info: dict[str, Any] = {}
+    for action in actions:
+        _, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    if not env._done:
+        answer = gold_answer_text(task) or ""
+        submit = {"name": "submit_answer", "arguments": {"answer": answer, "reasoning": "gold replay"}}
+        _, _, _, _, info = env.step("<tool_call>" + json.dumps(submit, ensure_ascii=False) + "</tool_call>")
+    return env.trajectory(), info
+
+
+def validate_task(task: Task, domain: str, toolkit_definitions: dict, *, replay: bool = True) -> TaskReport:
+    report = TaskReport(task_id=task.id, domain=domain)
+    for index, action in enumerate(task.evaluation_criteria.actions):
+        where = f"expected action #{index} {action.name!r}"
+        if action.name not in toolkit_definitions:
+            report.problems.append(f"{where}: no such tool in domain {domain!r}")
+            continue
+        try:
+            toolkit_definitions[action.name].validate(action.arguments)
+        except ToolArgumentError as exc:
+            report.problems.append(f"{where}: {exc}")
+        for key in action.compare_args or []:
+            if key not in action.arguments:
+                report.problems.append(f"{where}: compare_args names {key!r}, which is not among its arguments")
+    if not (task.has_gold_answer or task.evaluation_criteria.rubric):
+        report.problems.append("no gradeable gold answer (correct_answer with answer_type, or a rubric)")
+    if report.problems or not replay:
+        return report
+    trajectory, info = gold_replay(task, domain)
+    for turn in trajectory.turns:
+        for call in turn.tool_calls:
+            if not call.ok:
+                report.problems.append(f"gold replay: call {call.name!r} failed: {call.error}")
+    details = info.get("reward_breakdown") or {}
+    report.reward_components = info.get("reward_components", {})
+    coverage = details.get("action_coverage")
+    if task.evaluation_criteria.actions and coverage is not None and coverage < 1.0 - 1e-9:
+        report.problems.append(f"gold replay: action coverage {coverage:.3f} < 1")
+    accuracy = report.reward_components.get("accuracy")
+    if task.has_gold_answer and (accuracy is None or accuracy < 1.0 - 1e-9):
+        report.problems.append(f"gold replay: accuracy {accuracy} < 1 for gold answer {task.correct_answer!r}")
+    return report
+
+
+def validate_domain(domain: str, *, replay: bool = True, limit: int | None = None) -> list[TaskReport]:
+    from envs import registry
+
+    tasks = registry.get_tasks(domain)
+    definitions = registry.get_environment(domain).toolkit.definitions
+    reports = []
+    for task in tasks[:limit] if limit else tasks:
+        reports.append(validate_task(task, domain, definitions, replay=replay))
+    return reports
