@@ -60,3 +60,37 @@ class RolloutSample(BaseModel):
     def min_policy_version(self) -> int:
         versions = [v for v in self.policy_versions if v >= 0]
         return min(versions) if versions else -1
+
+
+class TeacherOutput(BaseModel):
+    """The EMA teacher's log-probs for one `RolloutSample`, aligned to the student's positions.
+
+    `logprobs[p]` is the teacher's log-prob of `input_ids[p]` at every position p where the sample's
+    `loss_mask` is 1 (the student's generated tokens of every assistant turn), computed on the teacher
+    context `prompt + hint + response`; the hint tokens themselves never appear. Every other position
+    holds 0.0, so `len(logprobs) == len(input_ids)` and position p means the same token for the
+    student and the teacher. With top-k serving, `topk_ids[p]` / `topk_logprobs[p]` are the teacher's
+    k most likely next tokens for position p (a list of length k per position: the ragged sequence
+    dimension comes first, the candidate dimension last), empty lists where the mask is 0.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    sample_id: str
+    teacher_version: int                   # increments at every EMA update or hard copy
+    hint: str = "none"                     # "reinforcing", "corrective" or "none"
+    hint_tokens: int = 0                   # tokens inserted into the teacher context
+    input_length: int                      # len(sample.input_ids), checked by the learner
+    logprobs: list[float]
+    topk_ids: list[list[int]] | None = None
+    topk_logprobs: list[list[float]] | None = None
+    compute_s: float = 0.0                 # teacher forward time for this sample's batch share
+
+    @model_validator(mode="after")
+    def _aligned(self) -> "TeacherOutput":
+        if len(self.logprobs) != self.input_length:
+            raise ValueError(f"teacher logprobs has {len(self.logprobs)} entries, expected input_length={self.input_length}")
+        for name in ("topk_ids", "topk_logprobs"):
+            value = getattr(self, name)
+            if value is not None and len(value) != self.input_length:
+                raise ValueError(f"teacher {name} has {len(value)} positions, expected input_length={self.input_length}")
+        return self

@@ -1,0 +1,179 @@
+"""Pydantic configs of the learner side: losses, optimizer, backends, teacher, weight sync.
+
+The driver's top-level `RunConfig` composes these as fields. Every model forbids unknown keys, so a
+typo in YAML fails with the key's path instead of silently running the default.
+Defaults are the paper's (Appendix D, Table "Training hyperparameters") where it names a value.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+KLEstimator = Literal["k1", "k3"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class GRPOConfig(_Strict):
+    """Eq. 1: clipped group-relative policy gradient plus a KL penalty to a frozen reference."""
+
+    clip_eps_low: float = Field(default=0.2, ge=0, description="lower clip range: ratio >= 1 - eps")
+    clip_eps_high: float = Field(default=0.2, ge=0, description="upper clip range: ratio <= 1 + eps")
+    kl_beta: float = Field(default=0.01, ge=0, description="weight of KL(pi_theta || pi_ref); 0 = no reference model")
+    kl_estimator: KLEstimator = "k3"
+    scale_advantages: bool = Field(default=True, description="divide by the group's std (False = Dr.GRPO)")
+    advantage_eps: float = Field(default=1e-6, gt=0)
+    loss_aggregation: Literal["token_mean", "sequence_mean"] = "token_mean"
+    # Rollout-vs-train mismatch correction (truncated importance sampling): weight each token by
+    # min(pi_old / pi_rollout, cap). None = off. Useful when the generator's numerics differ (vLLM).
+    tis_cap: float | None = Field(default=None, gt=0)
+
+
+class DistillConfig(_Strict):
+    """Eq. 2-3: turn-level truncated on-policy distillation toward the (EMA) teacher."""
+
+    enabled: bool = False
+    lambda_distill: float = Field(default=4.0, ge=0)
+    # k1 / k3: per-token estimates from the sampled tokens' log-probs (the default, what the teacher
+    # serves cheaply); topk: exact KL over the teacher's top-k tokens plus one tail bucket.
+    estimator: Literal["k1", "k3", "topk"] = "k1"
+    topk: int = Field(default=20, ge=1, description="teacher top-k size when estimator = topk")
+    max_turn_tokens: int = Field(default=12_288, ge=1, description="L_max: turns ending beyond it are dropped")
+    # What L_max is measured on: "response" = tokens after the prompt up to the turn's end (generated
+    # plus tool tokens), "generated" = the episode's assistant tokens so far, "context" = absolute
+    # position including the prompt.
+    truncation_basis: Literal["response", "generated", "context"] = "response"
+    drop_length_truncated_turns: bool = Field(
+        default=True, description="also drop turns the generator cut at its token limit (TurnSpan.truncated)"
+    )
+    # Eq. 2 sums the per-turn means over turns; "mean" divides by the number of kept turns.
+    turn_reduction: Literal["sum", "mean"] = "sum"
+
+
+class KLGradConfig(_Strict):
+    """How sampled-token KL estimates are differentiated (applies to KL_ref and the distillation KL).
+
+    "unbiased": value of the estimator plus a score-function term, so the gradient is the gradient
+    of E_{x~pi_theta}[estimate] = KL(pi_theta || pi_other) (the k1 estimate alone has zero expected
+    gradient). "pathwise": differentiate the estimate's value only (the GRPO/DeepSeek k3 convention).
+    """
+
+    mode: Literal["unbiased", "pathwise"] = "unbiased"
+
+
+class LossConfig(_Strict):
+    grpo: GRPOConfig = Field(default_factory=GRPOConfig)
+    distill: DistillConfig = Field(default_factory=DistillConfig)
+    kl_grad: KLGradConfig = Field(default_factory=KLGradConfig)
+    entropy_coef: float = Field(default=0.0, ge=0, description="entropy bonus (0 = only logged)")
+
+
+class OptimConfig(_Strict):
+    lr: float = Field(default=5e-7, gt=0)
+    weight_decay: float = Field(default=0.0, ge=0)
+    betas: tuple[float, float] = (0.9, 0.999)
+    eps: float = Field(default=1e-8, gt=0)
+    max_grad_norm: float = Field(default=1.0, gt=0)
+    micro_batch_size: int = Field(default=1, ge=1, description="samples per forward/backward")
+    updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
+
+
+class DeepSpeedConfig(_Strict):
+    """DeepSpeed ZeRO-3. On CPU it runs with gloo; `world_size` ranks are separate Ray actors."""
+
+    zero_stage: Literal[1, 2, 3] = 3
+    world_size: int = Field(default=1, ge=1)
+    num_cpus_per_rank: float = Field(default=1.0, ge=0)
+    num_gpus_per_rank: float = Field(default=0.0, ge=0)
+    offload_optimizer: bool = False
+    offload_param: bool = False
+    master_addr: str = "127.0.0.1"
+    master_port: int | None = Field(default=None, description="None = pick a free port")
+    # Skip the 70-100 s JIT build of DeepSpeed's shared-memory comm op on CPU (stack notes 4).
+    skip_shm_build: bool = True
+    timeout_s: float = Field(default=600.0, gt=0, description="torch.distributed collective timeout")
+
+
+class LearnerConfig(_Strict):
+    backend: Literal["torch", "deepspeed"] = "torch"
+    dtype: Literal["float32", "bfloat16"] = "float32"
+    device: Literal["cpu", "cuda"] = "cpu"
+    temperature: float = Field(default=1.0, gt=0, description="the generator's sampling temperature")
+    gradient_checkpointing: bool = False
+    logprob_chunk_size: int = Field(default=1024, ge=1)
+    loss: LossConfig = Field(default_factory=LossConfig)
+    optim: OptimConfig = Field(default_factory=OptimConfig)
+    deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)
+    reference_model_dir: str | None = Field(default=None, description="frozen KL reference; None = the initial policy")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "LearnerConfig":
+        if self.backend == "torch" and self.deepspeed.world_size != 1:
+            raise ValueError("learner.deepspeed.world_size > 1 needs learner.backend = 'deepspeed'")
+        return self
+
+
+class HintConfig(_Strict):
+    """Outcome-conditioned privileged hints (Sec. 4.2)."""
+
+    enabled: bool = True
+    reinforcing: str = "Privileged feedback: this attempt's reasoning appears sound and reaches the correct answer."
+    corrective: str = "Privileged feedback: this attempt is incorrect; revisit the differential diagnosis and the evidence."
+    # How a hint is rendered into tokens; {hint} is replaced. A system turn of its own keeps the
+    # ChatML layout valid for the teacher.
+    template: str = "<|im_start|>system\n{hint}<|im_end|>\n"
+    # Insert before the prompt's trailing generation prompt ("<|im_start|>assistant\n") when the
+    # prompt ends with it, so the hint sits between the last prompt turn and the response header;
+    # otherwise exactly at prompt_length.
+    before_generation_prompt: bool = True
+    # Which trajectories count as correct: the sample's `correct` flag (set by the driver from the
+    # grader), or the reference's rule "reward > threshold".
+    correctness_rule: Literal["correct_flag", "reward_above"] = "correct_flag"
+    reward_threshold: float = 0.0
+
+
+class TeacherConfig(_Strict):
+    """The EMA teacher actor (Sec. 4.2 "Stability mechanisms", Algorithm 1)."""
+
+    enabled: bool = False
+    ema_alpha: float = Field(default=0.995, ge=0, le=1)
+    ema_interval: int = Field(default=5, ge=0, description="EMA every N learner steps; 0 = never")
+    hard_copy_interval: int = Field(default=30, ge=0, description="theta_T <- theta_S every M steps; 0 = never")
+    hints: HintConfig = Field(default_factory=HintConfig)
+    serve_topk: int = Field(default=0, ge=0, description="also return the teacher's top-k per position (0 = off)")
+    batch_size: int = Field(default=4, ge=1, description="samples per teacher forward")
+    temperature: float = Field(default=1.0, gt=0)
+    dtype: Literal["float32", "bfloat16"] = "float32"
+    device: Literal["cpu", "cuda"] = "cpu"
+    logprob_chunk_size: int = Field(default=1024, ge=1)
+
+
+def teacher_update_action(step: int, config: TeacherConfig) -> Literal["hard_copy", "ema", "none"]:
+    """What the teacher does after learner step `step` (1-based): hard copy wins over EMA on ties.
+
+    Args:
+        step: The learner step just completed (>= 1).
+        config: Teacher schedule.
+    """
+    if step < 1:
+        raise ValueError(f"step must be >= 1, got {step}")
+    if config.hard_copy_interval and step % config.hard_copy_interval == 0:
+        return "hard_copy"
+    if config.ema_interval and step % config.ema_interval == 0:
+        return "ema"
+    return "none"
+
+
+class WeightSyncConfig(_Strict):
+    """Learner -> generators / teacher weight transfer."""
+
+    transport: Literal["object_store", "collective"] = "object_store"
+    backend: Literal["nccl", "gloo"] = "nccl"
+    bucket_mb: float = Field(default=512.0, gt=0, description="size cap of one broadcast bucket")
+    timeout_s: float = Field(default=120.0, gt=0)
+    master_addr: str = "127.0.0.1"
+    master_port: int | None = None
