@@ -34,10 +34,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     stats = tasks_sub.add_parser("stats", help="counts per domain, split, source and task type")
     stats.add_argument("--json", action="store_true")
     stats.set_defaults(func=cmd_tasks_stats)
-    imp = tasks_sub.add_parser("import", help="convert task files from other formats")
-    imp.add_argument("--format", required=True, help="reference (the paper's reference implementation)")
-    imp.add_argument("--domain", required=True)
-    imp.add_argument("--output", required=True, help="where to write the converted tasks.json")
+    imp = tasks_sub.add_parser("import", help="convert benchmark files (MedQA, MedMCQA, MMLU, PubMedQA, "
+                               "MedLFQA, VQA-RAD, SLAKE, PathVQA) or reference-format task files")
+    imp.add_argument("--format", required=True,
+                     help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | reference")
+    imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA)")
+    imp.add_argument("--output", help="tasks JSON to write (default: the domain's imported-task folder, "
+                     "loaded as split 'imported')")
+    imp.add_argument("--image-dir", help="image folder for VQA formats")
+    imp.add_argument("--cop-base", type=int, default=None, help="MedMCQA: 1 for the original release (default), 0 for 0-3")
     imp.add_argument("path")
     imp.set_defaults(func=cmd_tasks_import)
 
@@ -134,15 +139,28 @@ def cmd_tasks_stats(args: argparse.Namespace) -> int:
 
 
 def cmd_tasks_import(args: argparse.Namespace) -> int:
-    from envs.core.importers import import_reference_tasks
+    from pathlib import Path
+
+    from envs.core.domain import imported_tasks_dir
     from envs.core.task import dump_tasks
 
-    if args.format != "reference":
-        raise ValueError(f"unknown format {args.format!r}; supported: reference")
-    result = import_reference_tasks(args.path, domain=args.domain)
-    dump_tasks(result.tasks, args.output)
-    print(f"imported {len(result.tasks)} tasks into {args.output}")
-    for issue in result.issues:
+    if args.format == "reference":
+        from envs.core.importers import import_reference_tasks
+
+        if not args.domain:
+            raise ValueError("--domain is required for the reference format")
+        result = import_reference_tasks(args.path, domain=args.domain)
+        tasks, issues, domain = result.tasks, [str(i) for i in result.issues], args.domain
+    else:
+        from envs.converters import convert
+
+        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa") else "medical_qa")
+        result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base)
+        tasks, issues = result.tasks, [str(e) for e in result.errors]
+    output = Path(args.output) if args.output else imported_tasks_dir(domain) / f"{args.format}.json"
+    dump_tasks(tasks, output)
+    print(f"imported {len(tasks)} tasks into {output}; {len(issues)} rows reported")
+    for issue in issues:
         print(f"  {issue}")
     return 0
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from envs.core.db import DB, DataFileError
+from envs.core.paths import data_dir
 from envs.core.task import Task, load_split, load_tasks
 from envs.core.tools import Toolkit
 
@@ -55,7 +56,11 @@ class DomainTaskStore:
 
     def _task_files(self) -> list[Path]:
         files = [self.package_dir / "tasks.json", self.build_dir / "tasks.json"]
-        return [f for f in files if f.exists()]
+        return [f for f in files if f.exists()] + self._imported_files()
+
+    def _imported_files(self) -> list[Path]:
+        folder = imported_tasks_dir(self.name)
+        return sorted(folder.glob("*.json")) if folder.is_dir() else []
 
     def all_tasks(self) -> list[Task]:
         if self._tasks is None:
@@ -83,6 +88,9 @@ class DomainTaskStore:
                 if path.exists():
                     for split, ids in load_split(path).items():
                         merged.setdefault(split, []).extend(ids)
+            imported = [t.id for f in self._imported_files() for t in load_tasks(f, domain=self.name)]
+            if imported:
+                merged.setdefault("imported", []).extend(imported)
             known = {t.id for t in self.all_tasks()}
             for split, ids in merged.items():
                 missing = [i for i in ids if i not in known]
@@ -102,6 +110,11 @@ class DomainTaskStore:
             raise KeyError(f"domain {self.name!r} has no split {split!r} (available: {sorted(splits)})")
         wanted = set(splits[split])
         return [t for t in tasks if t.id in wanted]
+
+
+def imported_tasks_dir(domain: str) -> Path:
+    """Tasks users convert from their own benchmark files (`hcgym tasks import`); split 'imported'."""
+    return data_dir() / "imported" / domain
 
 
 def read_policy(package_dir: Path) -> str:

@@ -1,0 +1,228 @@
+"""One converter per public benchmark format.
+
+| format | file | domain | gold |
+|---|---|---|---|
+| medqa | JSONL: question, options {A..}, answer_idx | medical_qa | option letter |
+| medmcqa | JSON lines: id, question, opa..opd, cop (1-4 as released; `cop_base=0` for the 0-3 re-release) | medical_qa | option letter |
+| mmlu | CSV without header: question, A, B, C, D, answer letter | medical_qa | option letter |
+| pubmedqa | JSON {pmid: {QUESTION, CONTEXTS, final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
+| medlfqa | JSONL: Question, Free_form_answer, Must_have [..], Nice_to_have [..] | medical_qa | free text + rubric |
+| vqa-rad | JSON list: image_name, question, answer, answer_type (CLOSED/OPEN) + image folder | visual_diagnosis | yes/no choice or exact |
+| slake | JSON list: img_name, question, answer, answer_type, q_lang + image folder | visual_diagnosis | same |
+| pathvqa | JSON list: image, question, answer + image folder | visual_diagnosis | same |
+"""
+
+from __future__ import annotations
+
+import hashlib
+import string
+from pathlib import Path
+from typing import Any, Callable
+
+from pydantic import ValidationError
+
+from envs.converters.base import (
+    ConversionResult,
+    SourceFileError,
+    iter_csv,
+    iter_json_records,
+    iter_jsonl,
+    load_json,
+    require,
+)
+from envs.core.task import Task
+
+LETTERS = string.ascii_uppercase
+
+
+def _task_id(fmt: str, key: str) -> str:
+    return f"{fmt}_{hashlib.sha256(key.encode('utf-8')).hexdigest()[:12]}"
+
+
+def _add(result: ConversionResult, path: Path, line: int, data: dict[str, Any]) -> None:
+    try:
+        result.tasks.append(Task.model_validate(data))
+    except ValidationError as exc:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'task'}: {e['msg']}" for e in exc.errors())
+        result.add_error(path, line, problems)
+
+
+def _mcq(fmt: str, key: str, question: str, options: dict[str, str], answer: str, domain: str,
+         extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {
+        "id": _task_id(fmt, key), "domain": domain, "ticket": question.strip(), "options": options,
+        "correct_answer": answer, "answer_type": "choice", "raw_question": question,
+        "description": {"source": fmt, "task_type": "multiple_choice", "category": "benchmark"},
+        "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+        "metadata": extra or {},
+    }
+
+
+def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    result = ConversionResult()
+    for line, row in iter_jsonl(path, result):
+        missing = require(row, ["question", "options", "answer_idx"])
+        if missing:
+            result.add_error(path, line, f"missing field {missing!r}")
+            continue
+        options = row["options"]
+        if not isinstance(options, dict) or not options:
+            result.add_error(path, line, "field 'options' must be an object of letter -> text")
+            continue
+        answer = str(row["answer_idx"]).strip().upper()
+        if answer not in options:
+            result.add_error(path, line, f"answer_idx {answer!r} is not one of the options {sorted(options)}")
+            continue
+        _add(result, path, line, _mcq("medqa", row["question"] + answer, row["question"],
+                                      {str(k): str(v) for k, v in options.items()}, answer, domain,
+                                      {"meta_info": row.get("meta_info")}))
+    return result
+
+
+def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int = 1, **_: Any) -> ConversionResult:
+    result = ConversionResult()
+    for line, row in iter_jsonl(path, result):
+        missing = require(row, ["question", "opa", "opb", "opc", "opd"])
+        if missing:
+            result.add_error(path, line, f"missing field {missing!r}")
+            continue
+        try:
+            index = int(row.get("cop")) - cop_base
+        except (TypeError, ValueError):
+            result.add_error(path, line, f"field 'cop' must be an integer, got {row.get('cop')!r}")
+            continue
+        if not 0 <= index <= 3:
+            result.add_error(path, line, f"field 'cop' {row.get('cop')!r} out of range {cop_base}..{cop_base + 3}")
+            continue
+        options = {LETTERS[i]: str(row[k]) for i, k in enumerate(("opa", "opb", "opc", "opd"))}
+        key = str(row.get("id") or row["question"])
+        _add(result, path, line, _mcq("medmcqa", key, row["question"], options, LETTERS[index], domain,
+                                      {"subject": row.get("subject_name"), "topic": row.get("topic_name")}))
+    return result
+
+
+def convert_mmlu(path: Path, domain: str = "medical_qa", subject: str | None = None, **_: Any) -> ConversionResult:
+    result = ConversionResult()
+    subject = subject or path.stem.removesuffix("_test").removesuffix("_dev").removesuffix("_val")
+    for line, row in iter_csv(path, result, expected_columns=6):
+        question, *choices, answer = row
+        answer = answer.strip().upper()
+        if answer not in "ABCD" or len(answer) != 1:
+            result.add_error(path, line, f"answer column must be A-D, got {answer!r}")
+            continue
+        options = dict(zip("ABCD", choices))
+        _add(result, path, line, _mcq("mmlu", subject + question + answer, question, options, answer, domain,
+                                      {"subject": subject}))
+    return result
+
+
+PUBMEDQA_OPTIONS = {"A": "yes", "B": "no", "C": "maybe"}
+
+
+def convert_pubmedqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    result = ConversionResult()
+    data = load_json(path)
+    if not isinstance(data, dict):
+        raise SourceFileError(f"{path}: expected an object of pmid -> record, got {type(data).__name__}")
+    for index, (pmid, row) in enumerate(data.items(), start=1):
+        if not isinstance(row, dict):
+            result.add_error(path, index, f"record {pmid}: expected an object")
+            continue
+        missing = require(row, ["QUESTION", "final_decision"])
+        if missing:
+            result.add_error(path, index, f"record {pmid}: missing field {missing!r}")
+            continue
+        decision = str(row["final_decision"]).strip().lower()
+        letter = {v: k for k, v in PUBMEDQA_OPTIONS.items()}.get(decision)
+        if letter is None:
+            result.add_error(path, index, f"record {pmid}: final_decision must be yes/no/maybe, got {decision!r}")
+            continue
+        contexts = row.get("CONTEXTS") or []
+        ticket = "Context:\n" + "\n".join(str(c) for c in contexts) + f"\n\nQuestion: {row['QUESTION']}"
+        task = _mcq("pubmedqa", str(pmid), ticket, dict(PUBMEDQA_OPTIONS), letter, domain,
+                    {"pmid": str(pmid), "long_answer": row.get("LONG_ANSWER")})
+        task["raw_question"] = row["QUESTION"]
+        _add(result, path, index, task)
+    return result
+
+
+def convert_medlfqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    result = ConversionResult()
+    for line, row in iter_jsonl(path, result):
+        missing = require(row, ["Question", "Free_form_answer"])
+        if missing:
+            result.add_error(path, line, f"missing field {missing!r}")
+            continue
+        must = [str(s) for s in row.get("Must_have") or []]
+        nice = [str(s) for s in row.get("Nice_to_have") or []]
+        rubric = [{"criterion": s, "points": 2.0, "tags": ["must_have"]} for s in must]
+        rubric += [{"criterion": s, "points": 1.0, "tags": ["nice_to_have"]} for s in nice]
+        _add(result, path, line, {
+            "id": _task_id("medlfqa", row["Question"]), "domain": domain, "ticket": row["Question"],
+            "answer_type": "free_text", "correct_answer": row["Free_form_answer"],
+            "description": {"source": "medlfqa", "task_type": "long_form"},
+            "evaluation_criteria": {"nl_assertions": must, "rubric": rubric,
+                                    "reward_basis": ["ANSWER", "NL_ASSERTION", "RUBRIC"]},
+        })
+    return result
+
+
+def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[..., ConversionResult]:
+    def convert(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
+                **_: Any) -> ConversionResult:
+        if image_dir is None:
+            raise SourceFileError(f"{fmt}: pass the image folder (--image-dir) that the JSON's {image_key!r} names refer to")
+        images = Path(image_dir)
+        if not images.is_dir():
+            raise SourceFileError(f"{images}: image folder not found")
+        result = ConversionResult()
+        for line, row in iter_json_records(path, result):
+            if lang_key and row.get(lang_key, "en") != "en":
+                continue  # SLAKE is bilingual; we keep the English questions
+            missing = require(row, [image_key, "question", "answer"])
+            if missing:
+                result.add_error(path, line, f"missing field {missing!r}")
+                continue
+            name = str(row[image_key])
+            candidates = [images / name] + [images / f"{name}{ext}" for ext in (".jpg", ".png", ".jpeg")]
+            image = next((c for c in candidates if c.is_file()), None)
+            if image is None:
+                result.add_error(path, line, f"image {name!r} not found in {images}")
+                continue
+            answer = str(row["answer"]).strip()
+            closed = answer.lower() in ("yes", "no") or str(row.get("answer_type", "")).upper() == "CLOSED"
+            base = {
+                "id": _task_id(fmt, f"{name}|{row['question']}|{answer}"), "domain": domain,
+                "ticket": str(row["question"]), "image_path": str(image.resolve()),
+                "description": {"source": fmt, "task_type": "vqa_closed" if closed else "vqa_open"},
+                "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+                "metadata": {k: row[k] for k in ("qid", "question_type", "modality", "location", "content_type") if k in row},
+            }
+            if closed and answer.lower() in ("yes", "no"):
+                base.update(options={"A": "yes", "B": "no"}, correct_answer="A" if answer.lower() == "yes" else "B",
+                            answer_type="choice")
+            else:
+                base.update(correct_answer=answer, answer_type="exact")
+            _add(result, path, line, base)
+        return result
+
+    return convert
+
+
+CONVERTERS: dict[str, Callable[..., ConversionResult]] = {
+    "medqa": convert_medqa,
+    "medmcqa": convert_medmcqa,
+    "mmlu": convert_mmlu,
+    "pubmedqa": convert_pubmedqa,
+    "medlfqa": convert_medlfqa,
+    "vqa-rad": _vqa("vqa-rad", "image_name"),
+    "slake": _vqa("slake", "img_name", lang_key="q_lang"),
+    "pathvqa": _vqa("pathvqa", "image"),
+}
+
+
+def convert(fmt: str, path: str | Path, **options: Any) -> ConversionResult:
+    """Convert a benchmark file; raises SourceFileError when the whole file cannot be read."""
+    if fmt not in CONVERTERS:
+        raise ValueError(f"unknown format {fmt!r}; supported: {', '.join(sorted(CONVERTERS))} (and 'reference')")
+    return CONVERTERS[fmt](Path(path), **{k: v for k, v in options.items() if v is not None})
