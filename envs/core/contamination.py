@@ -1,0 +1,90 @@
+"""Contamination check: no test (or validation) task may appear in train.
+
+Two tests per held-out task against every training task:
+  * exact: the normalised text (lower case, punctuation and whitespace collapsed) of ticket +
+    options is identical;
+  * near-duplicate: the Jaccard similarity of word 5-gram shingles is >= `threshold` and the gold
+    answers agree (templated generators legitimately produce tickets that differ in one entity;
+    the same answer to a near-identical question is what leaks).
+Candidates come from an inverted index over shingles, so the check is linear in practice.
+"""
+
+from __future__ import annotations
+
+import re
+import unicodedata
+from collections import defaultdict
+from dataclasses import dataclass
+
+from envs.core.task import Task
+
+_NON_WORD = re.compile(r"[^\w]+", re.UNICODE)
+
+
+def normalise(text: str) -> str:
+    text = unicodedata.normalize("NFKC", text).lower()
+    return " ".join(_NON_WORD.sub(" ", text).split())
+
+
+def task_text(task: Task) -> str:
+    options = " ".join(f"{k} {v}" for k, v in sorted((task.options or {}).items()))
+    return normalise(f"{task.ticket} {options}")
+
+
+def shingles(text: str, n: int = 5) -> frozenset[int]:
+    words = text.split()
+    if len(words) < n:
+        return frozenset({hash(text)})
+    return frozenset(hash(" ".join(words[i:i + n])) for i in range(len(words) - n + 1))
+
+
+@dataclass
+class Leak:
+    held_out_id: str
+    train_id: str
+    kind: str  # "exact" or "near"
+    similarity: float
+
+
+def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.9) -> list[Leak]:
+    exact: dict[str, str] = {}
+    index: dict[int, list[int]] = defaultdict(list)
+    train_shingles: list[frozenset[int]] = []
+    for i, task in enumerate(train):
+        text = task_text(task)
+        exact.setdefault(text, task.id)
+        sh = shingles(text)
+        train_shingles.append(sh)
+        for s in sh:
+            index[s].append(i)
+    leaks: list[Leak] = []
+    for task in held_out:
+        text = task_text(task)
+        if text in exact:
+            leaks.append(Leak(task.id, exact[text], "exact", 1.0))
+            continue
+        sh = shingles(text)
+        counts: dict[int, int] = defaultdict(int)
+        for s in sh:
+            for i in index.get(s, ()):
+                counts[i] += 1
+        for i, shared in counts.items():
+            union = len(sh) + len(train_shingles[i]) - shared
+            similarity = shared / union if union else 0.0
+            other = train[i]
+            if similarity >= threshold and (other.correct_answer or "").strip().lower() == (task.correct_answer or "").strip().lower():
+                leaks.append(Leak(task.id, other.id, "near", similarity))
+                break
+    return leaks
+
+
+def check_domain(domain: str, threshold: float = 0.9) -> list[Leak]:
+    from envs import registry
+
+    splits = registry.get_splits(domain)
+    by_id = {t.id: t for t in registry.get_tasks(domain)}
+    train = [by_id[i] for i in splits.get("train", [])]
+    held = [by_id[i] for name in ("test", "validation") for i in splits.get(name, [])]
+    overlap = set(splits.get("train", [])) & {t.id for t in held}
+    leaks = [Leak(i, i, "same id", 1.0) for i in sorted(overlap)]
+    return leaks + find_leaks(train, [t for t in held if t.id not in overlap], threshold)
