@@ -3,7 +3,7 @@
 Two tests per held-out task against every training task:
   * exact: the normalised text (lower case, punctuation and whitespace collapsed) of ticket +
     options is identical;
-  * near-duplicate: the Jaccard similarity of word 5-gram shingles is >= `threshold` and the gold
+  * near-duplicate: the Jaccard similarity of word 5-gram shingles is >= `threshold` (0.7) and the gold
     answers agree (templated generators legitimately produce tickets that differ in one entity;
     the same answer to a near-identical question is what leaks).
 Candidates come from an inverted index over shingles, so the check is linear in practice.
@@ -46,7 +46,7 @@ class Leak:
     similarity: float
 
 
-def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.9) -> list[Leak]:
+def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.7) -> list[Leak]:
     exact: dict[str, str] = {}
     index: dict[int, list[int]] = defaultdict(list)
     train_shingles: list[frozenset[int]] = []
@@ -78,7 +78,7 @@ def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.9) 
     return leaks
 
 
-def check_domain(domain: str, threshold: float = 0.9) -> list[Leak]:
+def check_domain(domain: str, threshold: float = 0.7) -> list[Leak]:
     from envs import registry
 
     splits = registry.get_splits(domain)
