@@ -1,0 +1,284 @@
+"""Environment actors: a pool of Ray actors, each hosting several environments.
+
+`EnvActor` executes an episode's `reset` / `step` calls on a `HealthcareGymEnv` it keeps per
+episode; `EnvPool` schedules episodes over the actors (least-loaded actor with a free slot) and
+hands the agent loop a `RemoteEnv` handle. Tokenization and generation stay outside: the actor
+only runs tools and scores episodes.
+
+Fault model. The actors are created with `max_restarts`, so Ray restarts one that dies. A restart
+loses its environments, so every episode that was in flight on it is lost: its next call fails
+with `RayActorError` (in flight at the crash) or finds its episode unknown (sent after the
+restart). `RemoteEnv` turns both into `EnvActorLost`; `run_episode` then re-runs the episode from
+its start with the same `EpisodeSpec` (same seed), on whichever actor has room. `EpisodeLedger`
+accounts for every episode: each one completes exactly once, and every lost attempt is recorded,
+so a test can check that nothing was lost or counted twice.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import uuid
+from dataclasses import dataclass, field
+from typing import Any
+
+from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finished_info, summarize_final_info
+from actors.types import RolloutSample
+
+
+class EpisodeNotFoundError(KeyError):
+    """The actor does not know the episode (it was restarted since the episode's reset)."""
+
+
+class EnvActorLost(RuntimeError):
+    """The env actor running an episode died or restarted; the episode must be re-run."""
+
+
+class EnvActor:
+    """Hosts up to `slots` environments (one per in-flight episode), reusing idle ones.
+
+    Args:
+        actor_index: Position in the pool (for error messages and accounting).
+        max_turns: Assistant turns per episode (the env truncates after them).
+        slots: In-flight episodes this actor accepts.
+        env_kwargs: Extra `HealthcareGymEnv` arguments (e.g. `reward_weights`).
+    """
+
+    def __init__(self, actor_index: int, max_turns: int, slots: int = 4,
+                 env_kwargs: dict[str, Any] | None = None) -> None:
+        import envs  # noqa: F401  (registers HealthcareGym-v0)
+
+        self.actor_index = actor_index
+        self.max_turns = max_turns
+        self.slots = slots
+        self.env_kwargs = dict(env_kwargs or {})
+        self.incarnation = uuid.uuid4().hex[:8]  # changes on every (re)start
+        self._active: dict[str, Any] = {}
+        self._idle: dict[tuple[str, str | None], list[Any]] = {}
+        self.episodes_started = 0
+
+    def ping(self) -> dict[str, Any]:
+        return {"actor_index": self.actor_index, "pid": os.getpid(), "incarnation": self.incarnation,
+                "active": len(self._active), "episodes_started": self.episodes_started}
+
+    def _env_for(self, domain: str, split: str | None):
+        import gymnasium
+
+        idle = self._idle.setdefault((domain, split), [])
+        if idle:
+            return idle.pop()
+        return gymnasium.make("HealthcareGym-v0", domain=domain, split=split, max_turns=self.max_turns,
+                              **self.env_kwargs)
+
+    def reset(self, key: str, spec: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+        spec = EpisodeSpec.model_validate(spec)
+        if key in self._active:
+            raise ValueError(f"env actor {self.actor_index}: episode key {key!r} is already active")
+        if len(self._active) >= self.slots:
+            raise RuntimeError(f"env actor {self.actor_index}: all {self.slots} slots are busy")
+        env = self._env_for(spec.domain, spec.split)
+        obs, info = env.reset(seed=spec.seed, options={"task_id": spec.task_id})
+        self._active[key] = (env, (spec.domain, spec.split))
+        self.episodes_started += 1
+        return obs, {k: v for k, v in info.items() if k != "tools"}
+
+    def _env(self, key: str):
+        try:
+            return self._active[key][0]
+        except KeyError:
+            raise EpisodeNotFoundError(
+                f"env actor {self.actor_index} (incarnation {self.incarnation}) has no episode {key!r}: "
+                f"it was restarted after the episode began"
+            ) from None
+
+    def step(self, key: str, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self._env(key).step(action)
+        info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
+        if terminated or truncated:
+            info["final"] = summarize_final_info(info, float(reward))
+        return obs, float(reward), bool(terminated), bool(truncated), info
+
+    def finish(self, key: str, reason: str) -> dict[str, Any]:
+        return finished_info(self._env(key))
+
+    def release(self, key: str) -> None:
+        entry = self._active.pop(key, None)
+        if entry is not None:
+            env, where = entry
+            self._idle.setdefault(where, []).append(env)
+
+
+def _is_actor_failure(exc: BaseException) -> bool:
+    from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError
+
+    return isinstance(exc, (RayActorError, ActorDiedError, ActorUnavailableError, EpisodeNotFoundError))
+
+
+class RemoteEnv:
+    """The agent loop's `EnvHandle` for one episode on one `EnvActor`."""
+
+    def __init__(self, pool: "EnvPool", actor_index: int, key: str) -> None:
+        self.pool = pool
+        self.actor_index = actor_index
+        self.key = key
+        self.actor = pool.actors[actor_index]
+
+    async def _call(self, method: str, *args):
+        try:
+            return await getattr(self.actor, method).remote(self.key, *args)
+        except Exception as exc:
+            if _is_actor_failure(exc):
+                raise EnvActorLost(f"env actor {self.actor_index} lost episode {self.key!r} during {method}: "
+                                   f"{type(exc).__name__}") from exc
+            raise
+
+    async def reset(self, spec: EpisodeSpec):
+        return await self._call("reset", spec.model_dump())
+
+    async def step(self, action: str):
+        return await self._call("step", action)
+
+    async def finish(self, reason: str):
+        return await self._call("finish", reason)
+
+    async def close(self) -> None:
+        try:
+            await self.actor.release.remote(self.key)
+        except Exception as exc:  # a dead actor has nothing to release
+            if not _is_actor_failure(exc):
+                raise
+
+
+class EnvPool:
+    """Creates the env actors and schedules episodes over them.
+
+    Args:
+        num_actors: Env actors.
+        slots_per_actor: Episodes in flight per actor.
+        max_turns: Passed to every environment.
+        env_kwargs: Extra environment arguments.
+        max_restarts: Ray restarts per actor (-1 = unlimited).
+        num_cpus: CPU reservation per actor (fractional is fine: tools are light).
+    """
+
+    def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
+                 env_kwargs: dict[str, Any] | None = None, max_restarts: int = -1, num_cpus: float = 0.0) -> None:
+        import ray
+
+        if num_actors < 1 or slots_per_actor < 1:
+            raise ValueError(f"env pool needs num_actors >= 1 and slots_per_actor >= 1, got "
+                             f"{num_actors} and {slots_per_actor}")
+        cls = ray.remote(EnvActor).options(max_restarts=max_restarts, max_task_retries=0, num_cpus=num_cpus)
+        self.actors = [cls.remote(i, max_turns, slots_per_actor, env_kwargs) for i in range(num_actors)]
+        self.slots = slots_per_actor
+        self.in_flight: list[set[str]] = [set() for _ in range(num_actors)]
+        self.lost: list[int] = [0] * num_actors
+        self._free = asyncio.Condition() if _has_loop() else None
+
+    async def ready(self) -> list[dict[str, Any]]:
+        return list(await asyncio.gather(*[a.ping.remote() for a in self.actors]))
+
+    async def lease(self, spec: EpisodeSpec) -> RemoteEnv:
+        """Wait for a free slot on the least-loaded actor and reserve it for the episode."""
+        if self._free is None:
+            self._free = asyncio.Condition()
+        async with self._free:
+            while True:
+                loads = [(len(s), i) for i, s in enumerate(self.in_flight) if len(s) < self.slots]
+                if loads:
+                    _, index = min(loads)
+                    break
+                await self._free.wait()
+            key = f"{spec.sample_id}#{uuid.uuid4().hex[:6]}"  # unique per attempt
+            self.in_flight[index].add(key)
+        return RemoteEnv(self, index, key)
+
+    async def give_back(self, env: RemoteEnv, lost: bool = False) -> None:
+        if lost:
+            self.lost[env.actor_index] += 1
+        else:
+            await env.close()
+        async with self._free:
+            self.in_flight[env.actor_index].discard(env.key)
+            self._free.notify_all()
+
+    def loads(self) -> list[int]:
+        return [len(s) for s in self.in_flight]
+
+
+def _has_loop() -> bool:
+    try:
+        asyncio.get_running_loop()
+        return True
+    except RuntimeError:
+        return False
+
+
+@dataclass
+class EpisodeLedger:
+    """Accounting for episodes: admitted once, completed once, every lost attempt recorded."""
+
+    admitted: dict[str, int] = field(default_factory=dict)   # sample id -> attempts so far
+    completed: set[str] = field(default_factory=set)
+    lost_attempts: list[tuple[str, str]] = field(default_factory=list)  # (sample id, where)
+    failed: dict[str, str] = field(default_factory=dict)     # gave up (attempts exhausted / bad task)
+
+    def admit(self, sample_id: str) -> None:
+        if sample_id in self.admitted:
+            raise ValueError(f"episode {sample_id!r} admitted twice")
+        self.admitted[sample_id] = 0
+
+    def attempt(self, sample_id: str) -> int:
+        self.admitted[sample_id] += 1
+        return self.admitted[sample_id]
+
+    def lose(self, sample_id: str, where: str) -> None:
+        self.lost_attempts.append((sample_id, where))
+
+    def complete(self, sample_id: str) -> None:
+        if sample_id in self.completed:
+            raise RuntimeError(f"episode {sample_id!r} completed twice")
+        if sample_id not in self.admitted:
+            raise RuntimeError(f"episode {sample_id!r} completed but never admitted")
+        self.completed.add(sample_id)
+
+    def fail(self, sample_id: str, why: str) -> None:
+        self.failed[sample_id] = why
+
+    def balance(self) -> dict[str, int]:
+        """admitted = completed + failed + in flight; reruns = lost attempts."""
+        in_flight = len(self.admitted) - len(self.completed) - len(self.failed)
+        return {"admitted": len(self.admitted), "completed": len(self.completed), "failed": len(self.failed),
+                "in_flight": in_flight, "reruns": len(self.lost_attempts),
+                "attempts": sum(self.admitted.values())}
+
+
+async def run_episode(spec: EpisodeSpec, loop: AgentLoop, pool: EnvPool, generate: GenerateFn,
+                      ledger: EpisodeLedger, max_attempts: int = 5) -> RolloutSample:
+    """Run one admitted episode to completion, re-running it from its start (same spec, same seed)
+    when its env actor is lost.
+
+    Raises:
+        EnvActorLost: after `max_attempts` lost attempts (recorded as failed in the ledger).
+    """
+    last: Exception | None = None
+    for _ in range(max_attempts):
+        ledger.attempt(spec.sample_id)
+        env = await pool.lease(spec)
+        try:
+            sample = await loop.run(spec, env, generate)
+        except EnvActorLost as exc:
+            ledger.lose(spec.sample_id, f"env actor {env.actor_index}")
+            await pool.give_back(env, lost=True)
+            last = exc
+            continue
+        except BaseException:
+            await pool.give_back(env)  # not the actor's fault: free the slot and its env
+            raise
+        await pool.give_back(env)
+        sample.metadata["env_actor"] = env.actor_index
+        sample.metadata["attempts"] = ledger.admitted[spec.sample_id]
+        ledger.complete(spec.sample_id)
+        return sample
+    ledger.fail(spec.sample_id, f"lost {max_attempts} times: {last}")
+    raise EnvActorLost(f"episode {spec.sample_id!r} lost {max_attempts} times; last: {last}")

@@ -1,0 +1,364 @@
+"""Generators: token ids in, sampled token ids and their sampling log-probs out.
+
+One interface (`Generator`), two backends:
+
+* `hf` (`HFGenerator`, this module): a transformers causal LM with our own sampling loop over the
+  KV cache, CPU or GPU. Each request carries its own seed and gets its own `torch.Generator`, so a
+  request re-run with the same seed and weights samples the same tokens whatever else is in the
+  batch (up to float noise from padding).
+* `vllm` (`actors.generator_vllm.VLLMGenerator`): GPU only, imported only when selected (the
+  optional `gpu` extra).
+
+`GeneratorActor` wraps a backend in a Ray actor that batches concurrent requests (episodes call
+it one turn at a time) and applies weight updates between batches. Every result carries the
+policy version of the weights that sampled it.
+
+The log-probs returned are those of the distribution the token was actually drawn from: logits
+divided by the temperature, then top-k / top-p truncation and renormalisation. With `top_p=1`
+and `top_k=0` that is exactly the learner's `per_token_logprobs(..., temperature=T)`.
+
+How to add a backend: see `actors/README.md`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import time
+from abc import ABC, abstractmethod
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+import envs._runtime  # noqa: F401  (CPU-path environment defaults before torch loads)
+
+
+class SamplingConfig(BaseModel):
+    """How tokens are drawn. Shared by every backend."""
+
+    model_config = ConfigDict(extra="forbid")
+    temperature: float = Field(default=1.0, gt=0)
+    top_p: float = Field(default=1.0, gt=0, le=1)
+    top_k: int = Field(default=0, ge=0)  # 0 = off
+
+
+class GenerationRequest(BaseModel):
+    """One continuation to sample."""
+
+    model_config = ConfigDict(extra="forbid")
+    request_id: str
+    prompt_ids: list[int] = Field(min_length=1)
+    max_new_tokens: int = Field(ge=1)
+    seed: int
+    # The generator refuses to sample with weights older than this (after a restart it comes back
+    # with its initial weights; the caller then re-sends the current ones and retries).
+    min_version: int = 0
+
+
+class GenerationResult(BaseModel):
+    """The sampled continuation. `logprobs[i]` is the sampling log-prob of `token_ids[i]`."""
+
+    model_config = ConfigDict(extra="forbid")
+    request_id: str
+    token_ids: list[int]
+    logprobs: list[float]
+    finish_reason: Literal["stop", "length"]
+    policy_version: int
+    generate_s: float = 0.0  # wall time of the batch this request rode in
+
+
+class GeneratorBehindError(RuntimeError):
+    """The generator holds older weights than the request needs (typically after a restart)."""
+
+
+class Generator(ABC):
+    """The backend contract. Implementations are plain classes; `GeneratorActor` makes them remote.
+
+    Args:
+        model_dir: Local model directory (config + safetensors + tokenizer).
+        sampling: Sampling parameters.
+        stop_token_ids: Generation of a request ends after it samples one of these.
+        initial_version: The policy version of the weights in `model_dir`.
+        options: Backend-specific options (validated by the backend; unknown keys are errors).
+    """
+
+    name: str = "base"
+
+    def __init__(self, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
+                 initial_version: int = 0, options: dict[str, Any] | None = None) -> None:
+        if not stop_token_ids:
+            raise ValueError("stop_token_ids must name at least one token (e.g. <|im_end|>)")
+        self.model_dir = model_dir
+        self.sampling = sampling
+        self.stop_token_ids = list(stop_token_ids)
+        self.version = initial_version
+
+    @abstractmethod
+    def generate(self, requests: list[GenerationRequest]) -> list[GenerationResult]:
+        """Sample every request; results in request order."""
+
+    @abstractmethod
+    def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
+        """Load a full state dict (parameter name -> tensor) and record its policy version."""
+
+    def check_version(self, requests: list[GenerationRequest]) -> None:
+        need = max(r.min_version for r in requests)
+        if self.version < need:
+            raise GeneratorBehindError(
+                f"{self.name} generator holds policy version {self.version} but a request needs >= {need}"
+            )
+
+
+# ---------------------------------------------------------------------------------------------
+# hf backend
+# ---------------------------------------------------------------------------------------------
+
+
+class HFOptions(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    device: str = "cpu"
+    dtype: Literal["float32", "bfloat16", "float16"] = "float32"
+
+    @field_validator("device")
+    @classmethod
+    def _device(cls, value: str) -> str:
+        if not (value == "cpu" or value.startswith("cuda")):
+            raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {value!r}")
+        return value
+
+
+def processed_logprobs(logits, sampling: SamplingConfig):
+    """Log-probs of the distribution tokens are drawn from: temperature, then top-k, then top-p.
+
+    Args:
+        logits: [B, V] raw next-token logits.
+        sampling: The sampling parameters.
+
+    Returns:
+        [B, V] float32 log-probs; truncated tokens get -inf.
+    """
+    import torch
+
+    scores = logits.float() / sampling.temperature
+    if sampling.top_k and sampling.top_k < scores.shape[-1]:
+        kth = torch.topk(scores, sampling.top_k, dim=-1).values[..., -1:]
+        scores = scores.masked_fill(scores < kth, float("-inf"))
+    if sampling.top_p < 1.0:
+        sorted_scores, order = torch.sort(scores, dim=-1, descending=True)
+        cum = torch.softmax(sorted_scores, dim=-1).cumsum(-1)
+        # Drop a token when the mass before it already reaches top_p; the first token always stays.
+        drop_sorted = (cum - torch.softmax(sorted_scores, dim=-1)) >= sampling.top_p
+        drop = torch.zeros_like(drop_sorted).scatter(-1, order, drop_sorted)
+        scores = scores.masked_fill(drop, float("-inf"))
+    return torch.log_softmax(scores, dim=-1)
+
+
+class HFGenerator(Generator):
+    """transformers model + a per-request-seeded sampling loop over the KV cache."""
+
+    name = "hf"
+
+    def __init__(self, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
+                 initial_version: int = 0, options: dict[str, Any] | None = None) -> None:
+        super().__init__(model_dir, sampling, stop_token_ids, initial_version, options)
+        import torch
+        from transformers import AutoModelForCausalLM
+
+        self.options = HFOptions.model_validate(options or {})
+        self.device = torch.device(self.options.device)
+        dtype = getattr(torch, self.options.dtype)
+        self.model = AutoModelForCausalLM.from_pretrained(
+            model_dir, dtype=dtype, local_files_only=True, use_safetensors=True
+        ).to(self.device)
+        self.model.eval()
+        pad = self.model.config.pad_token_id
+        self.pad_id = int(pad if pad is not None else stop_token_ids[0])
+
+    def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
+        import torch
+
+        with torch.no_grad():
+            missing, unexpected = self.model.load_state_dict(
+                {k: v.to(self.device) for k, v in state_dict.items()}, strict=False
+            )
+        if missing or unexpected:
+            raise ValueError(
+                f"update_weights(version={version}): state dict does not match the model: "
+                f"missing {sorted(missing)[:5]}, unexpected {sorted(unexpected)[:5]}"
+            )
+        self.version = int(version)
+
+    def generate(self, requests: list[GenerationRequest]) -> list[GenerationResult]:
+        import torch
+
+        if not requests:
+            return []
+        self.check_version(requests)
+        started = time.perf_counter()
+        B = len(requests)
+        lengths = [len(r.prompt_ids) for r in requests]
+        T = max(lengths)
+        ids = torch.full((B, T), self.pad_id, dtype=torch.long)
+        mask = torch.zeros((B, T), dtype=torch.long)
+        for i, r in enumerate(requests):  # left padding: every row's next token lands in the last column
+            ids[i, T - lengths[i]:] = torch.tensor(r.prompt_ids, dtype=torch.long)
+            mask[i, T - lengths[i]:] = 1
+        ids, mask = ids.to(self.device), mask.to(self.device)
+        rngs = [torch.Generator(device="cpu").manual_seed(int(r.seed) & 0x7FFF_FFFF_FFFF_FFFF) for r in requests]
+        stop = set(self.stop_token_ids)
+        out_ids: list[list[int]] = [[] for _ in requests]
+        out_lp: list[list[float]] = [[] for _ in requests]
+        finish: list[str | None] = [None] * B
+        max_new = max(r.max_new_tokens for r in requests)
+
+        with torch.no_grad():
+            positions = (mask.cumsum(-1) - 1).clamp(min=0)
+            out = self.model(input_ids=ids, attention_mask=mask, position_ids=positions,
+                             use_cache=True, logits_to_keep=1)
+            past = out.past_key_values
+            next_pos = positions[:, -1:] + 1
+            for _ in range(max_new):
+                logp = processed_logprobs(out.logits[:, -1, :], self.sampling).cpu()
+                probs = logp.exp()
+                step_tokens = torch.full((B, 1), self.pad_id, dtype=torch.long)
+                for i in range(B):
+                    if finish[i] is not None:
+                        continue
+                    token = int(torch.multinomial(probs[i], 1, generator=rngs[i]).item())
+                    out_ids[i].append(token)
+                    out_lp[i].append(float(logp[i, token]))
+                    step_tokens[i, 0] = token
+                    if token in stop:
+                        finish[i] = "stop"
+                    elif len(out_ids[i]) >= requests[i].max_new_tokens:
+                        finish[i] = "length"
+                if all(f is not None for f in finish):
+                    break
+                # Finished rows keep stepping with a pad token that nothing attends to later;
+                # cheaper than re-packing the cache for a few rows.
+                alive = torch.tensor([[0 if f is not None else 1] for f in finish], dtype=torch.long)
+                mask = torch.cat([mask, alive.to(self.device)], dim=1)
+                out = self.model(input_ids=step_tokens.to(self.device), attention_mask=mask,
+                                 position_ids=next_pos, past_key_values=past, use_cache=True)
+                past = out.past_key_values
+                next_pos = next_pos + 1
+        elapsed = time.perf_counter() - started
+        return [
+            GenerationResult(request_id=r.request_id, token_ids=out_ids[i], logprobs=out_lp[i],
+                             finish_reason=finish[i] or "length", policy_version=self.version,
+                             generate_s=elapsed)
+            for i, r in enumerate(requests)
+        ]
+
+
+# ---------------------------------------------------------------------------------------------
+# Backend registry and the Ray actor
+# ---------------------------------------------------------------------------------------------
+
+# name -> "module:Class". The vllm module is imported only when that backend is selected.
+GENERATOR_BACKENDS: dict[str, str] = {
+    "hf": "actors.generator:HFGenerator",
+    "vllm": "actors.generator_vllm:VLLMGenerator",
+}
+
+
+def make_generator(backend: str, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
+                   initial_version: int = 0, options: dict[str, Any] | None = None) -> Generator:
+    """Instantiate a backend by name (see `GENERATOR_BACKENDS`)."""
+    if backend not in GENERATOR_BACKENDS:
+        raise ValueError(f"generator backend {backend!r} is unknown; choose one of {sorted(GENERATOR_BACKENDS)}")
+    module_name, cls_name = GENERATOR_BACKENDS[backend].split(":")
+    cls = getattr(importlib.import_module(module_name), cls_name)
+    return cls(model_dir, sampling, stop_token_ids, initial_version, options)
+
+
+class GeneratorService:
+    """Batches concurrent `generate` calls and serialises them with weight updates.
+
+    Runs inside an async Ray actor (`GeneratorActor`); usable directly with asyncio in-process.
+
+    Args:
+        backend, model_dir, sampling, stop_token_ids, initial_version, options: as `make_generator`.
+        max_batch_size: Most requests sampled together.
+        batch_wait_s: How long the first request of a batch waits for company.
+    """
+
+    def __init__(self, backend: str, model_dir: str, sampling: SamplingConfig | dict, stop_token_ids: list[int],
+                 initial_version: int = 0, options: dict[str, Any] | None = None,
+                 max_batch_size: int = 16, batch_wait_s: float = 0.01) -> None:
+        if max_batch_size < 1:
+            raise ValueError(f"max_batch_size must be >= 1, got {max_batch_size}")
+        sampling = SamplingConfig.model_validate(sampling) if isinstance(sampling, dict) else sampling
+        self.generator = make_generator(backend, model_dir, sampling, stop_token_ids, initial_version, options)
+        self.max_batch_size = max_batch_size
+        self.batch_wait_s = batch_wait_s
+        self._queue: asyncio.Queue | None = None
+        self._worker: asyncio.Task | None = None
+        self._lock: asyncio.Lock | None = None
+        self.stats = {"batches": 0, "requests": 0, "tokens": 0, "busy_s": 0.0}
+
+    def _ensure_started(self) -> None:
+        if self._queue is None:
+            self._queue = asyncio.Queue()
+            self._lock = asyncio.Lock()
+            self._worker = asyncio.get_running_loop().create_task(self._run())
+
+    async def generate(self, request: GenerationRequest | dict) -> GenerationResult:
+        """Sample one request (batched with whatever else is waiting)."""
+        self._ensure_started()
+        request = GenerationRequest.model_validate(request) if isinstance(request, dict) else request
+        future = asyncio.get_running_loop().create_future()
+        await self._queue.put((request, future))
+        return await future
+
+    async def update_weights(self, state_dict: dict[str, Any], version: int) -> int:
+        """Load new weights between batches; returns the new version."""
+        self._ensure_started()
+        async with self._lock:
+            await asyncio.to_thread(self.generator.update_weights, state_dict, version)
+        return self.generator.version
+
+    def version(self) -> int:
+        return self.generator.version
+
+    def get_stats(self) -> dict[str, float]:
+        return dict(self.stats, version=self.generator.version)
+
+    async def _run(self) -> None:
+        while True:
+            batch = [await self._queue.get()]
+            deadline = time.monotonic() + self.batch_wait_s
+            while len(batch) < self.max_batch_size:
+                timeout = deadline - time.monotonic()
+                if timeout <= 0:
+                    break
+                try:
+                    batch.append(await asyncio.wait_for(self._queue.get(), timeout))
+                except asyncio.TimeoutError:
+                    break
+            requests = [req for req, _ in batch]
+            started = time.perf_counter()
+            try:
+                async with self._lock:
+                    # In a thread, so new requests keep queueing while the model runs.
+                    results = await asyncio.to_thread(self.generator.generate, requests)
+            except Exception as exc:  # every waiter learns why
+                for _, fut in batch:
+                    if not fut.done():
+                        fut.set_exception(exc)
+                continue
+            self.stats["batches"] += 1
+            self.stats["requests"] += len(requests)
+            self.stats["tokens"] += sum(len(r.token_ids) for r in results)
+            self.stats["busy_s"] += time.perf_counter() - started
+            for (_, fut), result in zip(batch, results):
+                if not fut.done():
+                    fut.set_result(result)
+
+
+def generator_actor_class():
+    """The Ray actor class around `GeneratorService` (created lazily so importing this module
+    does not import Ray)."""
+    import ray
+
+    return ray.remote(GeneratorService)

@@ -1,0 +1,300 @@
+"""The run config: one pydantic model for a whole training run, loaded from YAML.
+
+Every section forbids unknown keys, so a typo fails with its path instead of silently running a
+default:
+
+    $ hcgym train --config bad.yaml
+    hcgym train: error: bad.yaml: invalid config
+      trainer.batch_sise: unknown key
+      rollout.group_size: Input should be a valid integer (got 'three')
+
+The learner-side sections (`learner`, `teacher`, `weight_sync`) are T1's models from
+`learner/config_models.py`; this module composes them with the rollout side and the driver.
+
+A config may start from another with `extends: other.yaml` (path relative to the file); mappings
+merge key by key, everything else is replaced. `--set key.path=value` overrides apply last.
+
+Example:
+    >>> cfg = load_config("configs/tiny_cpu_ttopd.yaml", overrides=["trainer.max_steps=3"])
+    >>> cfg.trainer.max_steps
+    3
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from actors.agent_loop import RolloutLimits
+from actors.generator import SamplingConfig
+from learner.config_models import LearnerConfig, TeacherConfig, WeightSyncConfig
+
+
+class ConfigError(ValueError):
+    """A config file is unreadable or invalid; the message names the file and each key path."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class TinyModelConfig(_Strict):
+    """A Qwen-architecture model built from a config, with a BPE tokenizer trained on the task corpus."""
+
+    architecture: Literal["qwen3", "qwen2"] = "qwen3"
+    vocab_size: int = Field(default=3072, ge=300)
+    include_stdlib_corpus: bool = True
+    max_stdlib_files: int = Field(default=150, ge=0)
+    # Config fields replacing learner.model.TINY_MODEL_DEFAULTS (hidden_size, num_hidden_layers, ...).
+    overrides: dict[str, int | float | bool] = Field(default_factory=dict)
+
+
+class ModelConfig(_Strict):
+    """Where the initial policy comes from: `tiny` builds one, `pretrained` loads a local directory."""
+
+    kind: Literal["tiny", "pretrained"] = "tiny"
+    path: str | None = Field(default=None, description="local model dir (kind: pretrained)")
+    tiny: TinyModelConfig = Field(default_factory=TinyModelConfig)
+
+    @model_validator(mode="after")
+    def _path(self) -> "ModelConfig":
+        if self.kind == "pretrained" and not self.path:
+            raise ValueError("model.path is required when model.kind is 'pretrained'")
+        return self
+
+
+class SFTConfig(_Strict):
+    """Warm start: supervised fine-tuning on gold-replay trajectories before RL."""
+
+    enabled: bool = False
+    epochs: float = Field(default=3.0, gt=0)
+    lr: float = Field(default=3e-3, gt=0)
+    batch_size: int = Field(default=8, ge=1)
+    max_tasks: int | None = Field(default=None, ge=1, description="gold replays from at most this many train tasks")
+    weight_decay: float = Field(default=0.0, ge=0)
+    warmup_frac: float = Field(default=0.05, ge=0, le=1)
+    max_grad_norm: float = Field(default=1.0, gt=0)
+
+
+class DataConfig(_Strict):
+    domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
+    train_split: str = "train"
+    val_split: str = "test"
+    max_train_tasks: int | None = Field(default=None, ge=1)
+    max_val_tasks: int | None = Field(default=None, ge=1)
+    # Tasks whose prompt exceeds rollout.max_prompt_tokens are dropped up front (counted, logged).
+    filter_long_prompts: bool = True
+
+
+class RolloutConfig(RolloutLimits):
+    """Episode limits (from `RolloutLimits`) plus how rollouts are produced."""
+
+    group_size: int = Field(default=3, ge=1, description="G rollouts per prompt")
+    num_env_actors: int = Field(default=2, ge=1)
+    slots_per_env_actor: int = Field(default=8, ge=1)
+    env_actor_max_restarts: int = Field(default=-1, ge=-1)
+    max_episode_attempts: int = Field(default=5, ge=1, description="re-runs of an episode whose env actor died")
+
+
+class GeneratorConfig(_Strict):
+    backend: Literal["hf", "vllm"] = "hf"
+    num_generators: int = Field(default=1, ge=1)
+    sampling: SamplingConfig = Field(default_factory=SamplingConfig)
+    max_batch_size: int = Field(default=16, ge=1)
+    batch_wait_s: float = Field(default=0.01, ge=0)
+    options: dict[str, Any] = Field(default_factory=dict, description="backend options (HFOptions / VLLMOptions)")
+    num_cpus: float = Field(default=1.0, ge=0)
+    num_gpus: float = Field(default=0.0, ge=0)
+    max_restarts: int = Field(default=-1, ge=-1)
+    max_call_attempts: int = Field(default=5, ge=1, description="retries of one generate call across restarts")
+
+
+class RewardConfig(_Strict):
+    """The RL reward and the correctness rule (dynamic sampling and teacher hints read `correct`)."""
+
+    kind: Literal["total", "cosine"] = "total"
+    # Eq. 4 (cosine length reward); max_length None = rollout.max_response_tokens.
+    r_max: float = 1.1
+    r_min: float = 0.7
+    r_penalty: float = -0.5
+    max_length: int | None = Field(default=None, ge=1)
+    correct_if: Literal["is_correct", "reward_positive", "accuracy_at_least"] = "is_correct"
+    accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
+
+
+class DynamicSamplingConfig(_Strict):
+    enabled: bool = True
+    criterion: Literal["correct", "reward"] = Field(
+        default="correct", description="mixed outcome = both correct and incorrect members / reward std > eps")
+    reward_eps: float = Field(default=1e-6, ge=0)
+    # Groups admitted per step at most, as a multiple of trainer.batch_size; past it the step trains
+    # on what it has (logged as a short batch), or skips when it has nothing.
+    max_admissions_factor: float = Field(default=4.0, ge=1)
+
+
+class TrainerConfig(_Strict):
+    batch_size: int = Field(default=8, ge=1, description="prompts (groups) per learner step")
+    max_steps: int = Field(default=60, ge=0)
+    max_staleness: int = Field(default=0, ge=0, description="max policy-version lag of admitted work; 0 = on-policy")
+    dynamic_sampling: DynamicSamplingConfig = Field(default_factory=DynamicSamplingConfig)
+    checkpoint_interval: int = Field(default=0, ge=0, description="steps between checkpoints; 0 = only at the end")
+    keep_checkpoints: int = Field(default=2, ge=1)
+    val_interval: int = Field(default=5, ge=0, description="steps between validations; 0 = off")
+    val_at_start: bool = True
+    val_group_size: int = Field(default=1, ge=1)
+    val_temperature: float | None = Field(default=None, gt=0, description="None = generator.sampling.temperature")
+    save_trajectories: bool = True
+    weight_sync_timeout_s: float = Field(default=120.0, gt=0)
+    teacher_timeout_s: float = Field(default=600.0, gt=0)
+
+
+class RayConfig(_Strict):
+    address: str | None = Field(default=None, description="None = start a local cluster")
+    num_cpus: int | None = Field(default=2, ge=1)
+    include_dashboard: bool = False
+    namespace: str = "hcgym"
+    learner_num_cpus: float = Field(default=1.0, ge=0)
+    learner_num_gpus: float = Field(default=0.0, ge=0)
+    teacher_num_cpus: float = Field(default=0.0, ge=0)
+    teacher_num_gpus: float = Field(default=0.0, ge=0)
+    teacher_max_restarts: int = Field(default=-1, ge=-1)
+
+
+class MetricsConfig(_Strict):
+    tensorboard: bool = True
+    ray_metrics: bool = True
+    progress: bool = True  # one line per step on stdout
+
+
+class RunConfig(_Strict):
+    name: str = "run"
+    seed: int = 0
+    output_dir: str = "runs/run"
+    model: ModelConfig = Field(default_factory=ModelConfig)
+    sft: SFTConfig = Field(default_factory=SFTConfig)
+    data: DataConfig = Field(default_factory=DataConfig)
+    rollout: RolloutConfig = Field(default_factory=RolloutConfig)
+    generator: GeneratorConfig = Field(default_factory=GeneratorConfig)
+    reward: RewardConfig = Field(default_factory=RewardConfig)
+    trainer: TrainerConfig = Field(default_factory=TrainerConfig)
+    learner: LearnerConfig = Field(default_factory=LearnerConfig)
+    teacher: TeacherConfig = Field(default_factory=TeacherConfig)
+    weight_sync: WeightSyncConfig = Field(default_factory=WeightSyncConfig)
+    ray: RayConfig = Field(default_factory=RayConfig)
+    metrics: MetricsConfig = Field(default_factory=MetricsConfig)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "RunConfig":
+        distill = self.learner.loss.distill
+        if distill.enabled and not self.teacher.enabled:
+            raise ValueError("learner.loss.distill.enabled needs teacher.enabled: true (the distillation target)")
+        if self.teacher.enabled and not distill.enabled:
+            raise ValueError("teacher.enabled without learner.loss.distill.enabled: the teacher would serve nobody")
+        if distill.enabled and distill.estimator == "topk" and self.teacher.serve_topk < distill.topk:
+            raise ValueError(f"learner.loss.distill.estimator 'topk' needs teacher.serve_topk >= "
+                             f"learner.loss.distill.topk ({distill.topk}), got {self.teacher.serve_topk}")
+        if abs(self.learner.temperature - self.generator.sampling.temperature) > 1e-9:
+            raise ValueError(f"learner.temperature ({self.learner.temperature}) must equal "
+                             f"generator.sampling.temperature ({self.generator.sampling.temperature})")
+        if self.generator.backend == "vllm" and self.generator.num_gpus <= 0:
+            raise ValueError("generator.backend 'vllm' needs generator.num_gpus > 0")
+        return self
+
+    @property
+    def cosine_max_length(self) -> int:
+        return self.reward.max_length or self.rollout.max_response_tokens
+
+
+# ---------------------------------------------------------------------------------------------
+# YAML loading
+# ---------------------------------------------------------------------------------------------
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for key, value in over.items():
+        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def _read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict:
+    path = path.resolve()
+    if path in seen:
+        raise ConfigError(f"{path}: 'extends' cycle: {' -> '.join(str(p) for p in (*seen, path))}")
+    if not path.exists():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""
+        raise ConfigError(f"{path}: not valid YAML{at}: {getattr(exc, 'problem', exc)}") from None
+    raw = raw or {}
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: the top level must be a mapping of sections, got {type(raw).__name__}")
+    parent = raw.pop("extends", None)
+    if parent is None:
+        return raw
+    if not isinstance(parent, str):
+        raise ConfigError(f"{path}: extends: expected a file path, got {type(parent).__name__}")
+    return _merge(_read_yaml(path.parent / parent, (*seen, path)), raw)
+
+
+def _set_path(data: dict, dotted: str, value: Any) -> None:
+    keys = dotted.split(".")
+    node = data
+    for key in keys[:-1]:
+        child = node.setdefault(key, {})
+        if not isinstance(child, dict):
+            raise ConfigError(f"override {dotted!r}: {key!r} is not a section")
+        node = child
+    node[keys[-1]] = value
+
+
+def format_errors(exc: ValidationError) -> list[str]:
+    """One line per error: `dotted.key.path: message (got value)`."""
+    lines = []
+    for err in exc.errors():
+        path = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        if err["type"] == "extra_forbidden":
+            lines.append(f"{path}: unknown key")
+            continue
+        got = err.get("input")
+        shown = "" if isinstance(got, (dict, list)) or got is None else f" (got {got!r})"
+        lines.append(f"{path}: {err['msg']}{shown}")
+    return lines
+
+
+def validate_config(data: dict, source: str = "<config>") -> RunConfig:
+    try:
+        return RunConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(format_errors(exc))) from None
+
+
+def load_config(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> RunConfig:
+    """Load a YAML run config, apply `key.path=value` overrides (values parsed as YAML), validate.
+
+    Raises:
+        ConfigError: naming the file and the key path of every problem.
+    """
+    path = Path(path)
+    data = _read_yaml(path)
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override {item!r}: expected key.path=value")
+        key, _, text = item.partition("=")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            value = text
+        _set_path(data, key.strip(), value)
+    return validate_config(data, str(path))
+
+
+def dump_config(config: RunConfig, path: str | Path) -> None:
+    """Write the resolved config (what actually ran) next to the run's outputs."""
+    Path(path).write_text(yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False), encoding="utf-8")

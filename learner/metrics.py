@@ -1,0 +1,236 @@
+"""What a run records: per-step metrics (metrics.jsonl, TensorBoard, Ray dashboard) and trajectories.
+
+`metrics.jsonl` in the run directory has one JSON object per learner step, with at least
+`REQUIRED_KEYS`; validation results join the step they ran after (`val_*` keys). The same
+scalars go to TensorBoard (`run_dir/tensorboard`) and, as `ray.util.metrics` gauges and
+histograms, to the Ray dashboard / Prometheus endpoint (Ray prefixes the names with `ray_`).
+
+Trajectories are written per step to Parquet (`run_dir/trajectories/step_XXXXXX.parquet`): token
+ids, loss mask, sampling log-probs, policy versions, turn spans, reward components and metadata,
+plus the teacher's log-probs when TT-OPD ran, so a step can be replayed into the loss for
+debugging (`read_samples`, `learner.train.replay_loss`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+from actors.types import RolloutSample, TeacherOutput
+
+REQUIRED_KEYS = (
+    "step", "reward_mean", "accuracy", "response_length_mean", "turns_mean", "tool_calls_mean",
+    "kl_teacher", "kl_ref", "entropy", "grad_norm", "filtered_groups_frac", "teacher_wait_frac",
+    "trajectories_per_s",
+)
+
+
+def _mean(values: Sequence[float]) -> float:
+    return float(sum(values) / len(values)) if values else 0.0
+
+
+def rollout_metrics(samples: Sequence[RolloutSample], max_response_tokens: int, prefix: str = "") -> dict[str, float]:
+    """Rollout-side statistics of a set of episodes (a training batch or a validation pass).
+
+    Args:
+        samples: The episodes.
+        max_response_tokens: The response limit (for the clip ratio).
+        prefix: Prepended to every key (e.g. "val_").
+    """
+    if not samples:
+        return {}
+    lengths = [s.response_tokens for s in samples]
+    out = {
+        "reward_mean": _mean([s.reward for s in samples]),
+        "reward_std": float(math.sqrt(_mean([(s.reward - _mean([x.reward for x in samples])) ** 2 for s in samples]))),
+        "env_reward_mean": _mean([float(s.metadata.get("env_reward", s.reward)) for s in samples]),
+        "accuracy": _mean([1.0 if s.correct else 0.0 for s in samples]),
+        "response_length_mean": _mean(lengths),
+        "response_length_max": float(max(lengths)),
+        # Clip ratio: episodes cut by the response-token limit (the paper's "clipping").
+        "response_clip_ratio": _mean([1.0 if s.metadata.get("truncation") == "response_tokens" else 0.0
+                                      for s in samples]),
+        "sequence_length_mean": _mean([len(s.input_ids) for s in samples]),
+        "turns_mean": _mean([len(s.turns) for s in samples]),
+        "tool_calls_mean": _mean([s.num_tool_calls for s in samples]),
+        "truncated_frac": _mean([1.0 if s.truncated else 0.0 for s in samples]),
+        "max_turns_frac": _mean([1.0 if s.metadata.get("truncation") == "max_turns" else 0.0 for s in samples]),
+        "episodes": float(len(samples)),
+    }
+    components: dict[str, list[float]] = {}
+    for s in samples:
+        for key, value in s.reward_components.items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                components.setdefault(key, []).append(float(value))
+    for key, values in components.items():
+        out[f"reward_component/{key}"] = _mean(values)
+    if max_response_tokens:
+        out["response_length_frac_of_max"] = out["response_length_mean"] / max_response_tokens
+    return {f"{prefix}{k}": v for k, v in out.items()}
+
+
+class MetricsSink:
+    """Writes step records to metrics.jsonl, TensorBoard and Ray metrics.
+
+    Args:
+        run_dir: The run directory.
+        tensorboard: Also write TensorBoard event files.
+        ray_metrics: Also export `ray.util.metrics` gauges / histograms (needs Ray initialised).
+        run_name: Tag value distinguishing runs on a shared dashboard.
+    """
+
+    HISTOGRAMS = {
+        "response_length": [64, 128, 256, 512, 1024, 2048, 4096, 8192, 12288, 16384],
+        "episode_reward": [-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25],
+    }
+
+    def __init__(self, run_dir: str | Path, *, tensorboard: bool = True, ray_metrics: bool = True,
+                 run_name: str = "run", resume: bool = False) -> None:
+        self.run_dir = Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.path = self.run_dir / "metrics.jsonl"
+        if not resume and self.path.exists():
+            self.path.unlink()
+        self.run_name = run_name
+        self._tb = None
+        if tensorboard:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self._tb = SummaryWriter(log_dir=str(self.run_dir / "tensorboard"))
+        self._gauges: dict[str, Any] = {}
+        self._hists: dict[str, Any] = {}
+        self._ray = ray_metrics
+
+    def truncate_after(self, step: int) -> None:
+        """On resume: drop records of steps after the checkpoint (they will be redone)."""
+        if not self.path.exists():
+            return
+        keep = [line for line in self.path.read_text(encoding="utf-8").splitlines()
+                if line.strip() and json.loads(line).get("step", 0) <= step]
+        self.path.write_text("".join(line + "\n" for line in keep), encoding="utf-8")
+
+    def _ray_gauge(self, key: str):
+        from ray.util.metrics import Gauge
+
+        name = "hcgym_" + "".join(c if c.isalnum() else "_" for c in key)
+        if name not in self._gauges:
+            self._gauges[name] = Gauge(name, description=f"training metric {key}", tag_keys=("run",))
+        return self._gauges[name]
+
+    def observe(self, name: str, values: Iterable[float]) -> None:
+        """Feed a Ray histogram (per-episode values: response length, reward)."""
+        if not self._ray:
+            return
+        from ray.util.metrics import Histogram
+
+        if name not in self._hists:
+            self._hists[name] = Histogram(f"hcgym_{name}", description=f"per-episode {name}",
+                                          boundaries=self.HISTOGRAMS[name], tag_keys=("run",))
+        for value in values:
+            self._hists[name].observe(float(value), tags={"run": self.run_name})
+
+    def write(self, record: dict[str, Any]) -> None:
+        step = int(record["step"])
+        with self.path.open("a", encoding="utf-8") as handle:
+            handle.write(json.dumps(record, sort_keys=False, default=float) + "\n")
+        for key, value in record.items():
+            if key == "step" or not isinstance(value, (int, float)) or isinstance(value, bool):
+                continue
+            if not math.isfinite(float(value)):
+                continue
+            if self._tb is not None:
+                self._tb.add_scalar(key, float(value), step)
+            if self._ray:
+                self._ray_gauge(key).set(float(value), tags={"run": self.run_name})
+        if self._tb is not None:
+            self._tb.flush()
+
+    def close(self) -> None:
+        if self._tb is not None:
+            self._tb.close()
+
+
+def read_metrics(run_dir: str | Path) -> list[dict[str, Any]]:
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no metrics.jsonl (is {run_dir} a run directory?)")
+    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+
+
+# ---------------------------------------------------------------------------------------------
+# Trajectories <-> Parquet
+# ---------------------------------------------------------------------------------------------
+
+_JSON_FIELDS = ("turns", "reward_components", "metadata")
+
+
+def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: int,
+                  teacher: dict[str, TeacherOutput] | None = None, accepted: dict[str, bool] | None = None) -> Path:
+    """Write episodes (and their teacher log-probs, when given) to one Parquet file.
+
+    Args:
+        samples: Episodes.
+        path: Output file.
+        step: The learner step that consumed them (a column, for filtering).
+        teacher: sample id -> teacher output (TT-OPD runs).
+        accepted: sample id -> whether dynamic sampling kept its group (default True).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    teacher = teacher or {}
+    accepted = accepted or {}
+    rows: dict[str, list] = {name: [] for name in RolloutSample.model_fields}
+    rows.update({"step": [], "accepted": [], "teacher_logprobs": [], "teacher_version": [], "teacher_hint": []})
+    for s in samples:
+        data = s.model_dump(mode="json")
+        for name in RolloutSample.model_fields:
+            value = data[name]
+            rows[name].append(json.dumps(value, ensure_ascii=False) if name in _JSON_FIELDS else value)
+        t = teacher.get(s.sample_id)
+        rows["step"].append(step)
+        rows["accepted"].append(bool(accepted.get(s.sample_id, True)))
+        rows["teacher_logprobs"].append(t.logprobs if t else None)
+        rows["teacher_version"].append(t.teacher_version if t else None)
+        rows["teacher_hint"].append(t.hint if t else None)
+    schema = pa.schema([
+        ("sample_id", pa.string()), ("task_id", pa.string()), ("domain", pa.string()), ("group_id", pa.string()),
+        ("seed", pa.int64()), ("prompt_length", pa.int32()), ("input_ids", pa.list_(pa.int32())),
+        ("loss_mask", pa.list_(pa.int8())), ("sampling_logprobs", pa.list_(pa.float32())),
+        ("policy_versions", pa.list_(pa.int32())), ("turns", pa.string()), ("reward", pa.float64()),
+        ("reward_components", pa.string()), ("correct", pa.bool_()), ("truncated", pa.bool_()),
+        ("num_tool_calls", pa.int32()), ("response_tokens", pa.int32()), ("metadata", pa.string()),
+        ("step", pa.int32()), ("accepted", pa.bool_()), ("teacher_logprobs", pa.list_(pa.float32())),
+        ("teacher_version", pa.int32()), ("teacher_hint", pa.string()),
+    ])
+    table = pa.table({f.name: pa.array(rows[f.name], type=f.type) for f in schema}, schema=schema)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(table, str(path))
+    return path
+
+
+def read_samples(path: str | Path) -> tuple[list[RolloutSample], dict[str, dict[str, Any]]]:
+    """Read a Parquet file written by `write_samples`.
+
+    Returns:
+        (samples, extras) where extras[sample_id] has `step`, `accepted` and, for TT-OPD runs,
+        `teacher_logprobs`, `teacher_version`, `teacher_hint`.
+    """
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such trajectory file")
+    samples, extras = [], {}
+    for row in pq.read_table(str(path)).to_pylist():
+        extra = {k: row.pop(k) for k in ("step", "accepted", "teacher_logprobs", "teacher_version", "teacher_hint")}
+        for name in _JSON_FIELDS:
+            row[name] = json.loads(row[name])
+        # float32 storage: the log-probs come back rounded to float32, which is what the learner uses.
+        sample = RolloutSample.model_validate(row)
+        samples.append(sample)
+        extras[sample.sample_id] = extra
+    return samples, extras
