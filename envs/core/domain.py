@@ -32,6 +32,8 @@ class DomainEnvironment:
     safety_context: Any = None
     # Called on reset with the task, e.g. to seed episode-specific state from `task.metadata`.
     on_reset: Callable[["DomainEnvironment", Task], None] | None = None
+    # Replaces `envs.rewards.score_episode` for this episode (e.g. the pathway score); same signature.
+    scorer: Callable[..., Any] | None = None
     extras: dict[str, Any] = field(default_factory=dict)
 
     @property

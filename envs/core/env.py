@@ -193,8 +193,8 @@ class HealthcareGymEnv(gym.Env[str, str]):
         record = self._record
         assert record is not None and self.domain_env is not None and self.task is not None
         record.db_hash_final = self.domain_env.db_hash()
-        breakdown = score_episode(record, self.task, weights=self.reward_weights,
-                                  context=self.domain_env.safety_context)
+        scorer = self.domain_env.scorer or score_episode
+        breakdown = scorer(record, self.task, self.reward_weights, self.domain_env.safety_context)
         record.reward = float(breakdown.total)
         record.reward_components = breakdown.components()
         record.reward_details = breakdown.model_dump(mode="json")

@@ -1,0 +1,126 @@
+"""The cross-domain pathway domain: each task is a pathway run as one episode.
+
+The episode's toolkit is a `PathwayEngine` built at reset for the task's pathway, over fresh
+environments of every domain the pathway touches, with the pathway's patient inserted into each
+(`add_patient(domain_env, record)` of that domain's environment module). The reward is the
+pathway score (per phase and overall, see `score_pathway`) with the 5D reward's safety penalties
+and critical cap applied on top.
+"""
+
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from envs.core.db import DataFileError
+from envs.core.domain import DomainEnvironment, read_policy
+from envs.core.task import Task
+from envs.domains.cross_domain.pathway import Pathway, PathwayEngine
+
+HERE = Path(__file__).parent
+PATHWAY_FILE = HERE / "pathways.json"
+# Final-answer weight in the overall pathway score; the rest is the mean phase score.
+FINAL_ANSWER_WEIGHT = 0.2
+
+
+@lru_cache(maxsize=4)
+def load_pathways(path: Path = PATHWAY_FILE) -> dict[str, Pathway]:
+    if not path.exists():
+        raise DataFileError(f"{path}: pathway file not found")
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DataFileError(f"{path}: not valid JSON at line {exc.lineno}: {exc.msg}") from None
+    out: dict[str, Pathway] = {}
+    for index, item in enumerate(raw):
+        try:
+            pathway = Pathway.model_validate(item)
+        except Exception as exc:
+            raise DataFileError(f"{path} [pathway #{index} {item.get('id')!r}]: {exc}") from None
+        out[pathway.id] = pathway
+    return out
+
+
+def pathway_task(pathway: Pathway) -> Task:
+    actions = [a for phase in pathway.phases for a in phase.required_actions]
+    assertions = [s for phase in pathway.phases for s in phase.nl_assertions]
+    phases = " -> ".join(f"{p.name} ({p.domain})" for p in pathway.phases)
+    ticket = (f"{pathway.presentation}\n\nThis is a multi-phase clinical pathway: {phases}. Work through each "
+              f"phase with its tools; the next phase starts when the current one is complete (call "
+              f"get_pathway_status at any time). At the end: {pathway.final_question}")
+    return Task(
+        id=f"pathway_{pathway.id}", domain="cross_domain", ticket=ticket, patient_id=pathway.patient_id,
+        correct_answer=pathway.final_answer, answer_type="exact", answer_aliases=pathway.answer_aliases,
+        emergency=pathway.emergency,
+        description={"source": "authored:pathway", "task_type": "pathway", "category": pathway.title},
+        evaluation_criteria={"actions": [a.model_dump() for a in actions], "nl_assertions": assertions,
+                             "reward_basis": ["ACTION", "NL_ASSERTION", "ANSWER"]},
+        metadata={"pathway_id": pathway.id},
+    )
+
+
+def _reset(domain_env: DomainEnvironment, task: Task, pathways: dict[str, Pathway] | None = None) -> None:
+    from envs import registry
+
+    pathway = (pathways or load_pathways())[task.metadata["pathway_id"]]
+    envs_by_domain: dict[str, DomainEnvironment] = {}
+    for domain in dict.fromkeys(p.domain for p in pathway.phases):
+        env = registry.get_environment(domain)
+        record = pathway.patients.get(domain)
+        if record is not None:
+            module = registry.domain_module(domain)
+            if not hasattr(module, "add_patient"):
+                raise DataFileError(f"pathway {pathway.id!r}: domain {domain!r} has no add_patient hook")
+            module.add_patient(env, record)
+        envs_by_domain[domain] = env
+    engine = PathwayEngine(pathway, envs_by_domain)
+    domain_env.toolkit = engine
+    domain_env.scorer = lambda trajectory, t, weights, context: score_pathway(engine, trajectory, t, weights, context)
+    first = envs_by_domain[pathway.phases[0].domain]
+    domain_env.safety_context = first.safety_context
+    domain_env.extras["engine"] = engine
+
+
+def score_pathway(engine: PathwayEngine, trajectory: Any, task: Task, weights: Any, context: Any):
+    """Overall = (1 - w) * mean phase score + w * final-answer accuracy, then the 5D reward's
+    safety penalties and critical cap. Per-phase scores go to `details["pathway_phases"]`."""
+    from envs.rewards import score_episode
+
+    base = score_episode(trajectory, task, weights=weights, context=context)
+    phases = engine.phase_scores()
+    mean_phase = sum(p["score"] for p in phases) / len(phases)
+    overall = (1 - FINAL_ANSWER_WEIGHT) * mean_phase + FINAL_ANSWER_WEIGHT * base.accuracy
+    total = min(1.0, max(0.0, overall - base.penalty))
+    if base.capped:
+        total = min(total, base.total)
+    details = {**base.details, "pathway_phases": phases, "pathway_overall": overall, "five_d_total": base.total}
+    return base.model_copy(update={"total": total, "details": details})
+
+
+def get_environment() -> DomainEnvironment:
+    from envs.domains.cross_domain.pathway import PathwayControlTools
+
+    env = DomainEnvironment(name="cross_domain", policy=read_policy(HERE), toolkit=PathwayControlTools(None),
+                            on_reset=_reset)
+    return env
+
+
+def get_tasks(split: str | None = None) -> list[Task]:
+    tasks = [pathway_task(p) for p in load_pathways().values()]
+    if split is None:
+        return tasks
+    splits = get_splits()
+    if split not in splits:
+        raise KeyError(f"domain 'cross_domain' has no split {split!r} (available: {sorted(splits)})")
+    wanted = set(splits[split])
+    return [t for t in tasks if t.id in wanted]
+
+
+def get_splits() -> dict[str, list[str]]:
+    path = HERE / "split_tasks.json"
+    if path.exists():
+        return json.loads(path.read_text(encoding="utf-8"))
+    ids = sorted(f"pathway_{p}" for p in load_pathways())
+    return {"train": ids[: max(1, len(ids) * 3 // 4)], "test": ids[max(1, len(ids) * 3 // 4):]}
