@@ -109,10 +109,16 @@ class HealthcareGymEnv(gym.Env[str, str]):
         system_prompt = build_system_prompt(self.domain_env)
         ticket = render_ticket(task)
         observation = f"{system_prompt}\n\n# Task\n{ticket}"
+        user_content: str | list[dict[str, str]] = ticket
+        if task.image_path:
+            # Multimodal policies get the image as a content part (chat templates that support images
+            # render it); text-only policies see the path in the observation.
+            observation += f"\n\n[image: {task.image_path}]"
+            user_content = [{"type": "image", "image": task.image_path}, {"type": "text", "text": ticket}]
         self._record = Trajectory(
             task_id=task.id, domain=self.domain_name, seed=seed, system_prompt=system_prompt,
             first_observation=observation, image_path=task.image_path,
-            messages=[{"role": "system", "content": system_prompt}, {"role": "user", "content": ticket}],
+            messages=[{"role": "system", "content": system_prompt}, {"role": "user", "content": user_content}],
             db_hash_initial=self.domain_env.db_hash(),
         )
         self._done = False
@@ -222,7 +228,10 @@ class HealthcareGymEnv(gym.Env[str, str]):
         if self._record is None:
             return "(no episode: call reset())"
         record = self._record
-        lines = [f"=== {record.domain} / {record.task_id} ===", "[user] " + record.messages[1]["content"]]
+        content = record.messages[1]["content"]
+        if isinstance(content, list):
+            content = " ".join(part.get("text") or f"[image: {part.get('image')}]" for part in content)
+        lines = [f"=== {record.domain} / {record.task_id} ===", "[user] " + content]
         lines += [self._render_turn(turn) for turn in record.turns]
         if record.reward is not None:
             comps = ", ".join(f"{k}={v:.3f}" for k, v in record.reward_components.items())

@@ -179,3 +179,15 @@ def test_fuzz_malformed_actions_never_raise_and_failed_calls_change_nothing(acti
 
 
 _FUZZ_ENV = HealthcareGymEnv(domain="ward", max_turns=50)
+
+
+def test_image_tasks_give_an_image_content_part():
+    env = HealthcareGymEnv(domain="ward")
+    task = env._tasks_by_id["ward_choice"].model_copy(update={"image_path": "/data/cxr_001.png"})
+    env._tasks_by_id["ward_choice"] = task
+    obs, info = env.reset(seed=0, options={"task_id": "ward_choice"})
+    assert "[image: /data/cxr_001.png]" in obs and info["image_path"] == "/data/cxr_001.png"
+    record = env.trajectory()
+    assert record.image_path == "/data/cxr_001.png"
+    assert record.messages[1]["content"][0] == {"type": "image", "image": "/data/cxr_001.png"}
+    assert "[image: /data/cxr_001.png]" in env.transcript()
