@@ -1,0 +1,317 @@
+"""The two search engines behind a knowledge base.
+
+* Free text (almost every agent query): **bm25s** with its numba backend. bm25s precomputes
+  every (term, document) BM25 weight into a CSC sparse matrix, so a query is a sum of a few
+  columns plus a top-k selection: measured 1.7 ms at the median over 828K passages, against
+  6.5 ms for tantivy and 674 ms for the paper's SQLite FTS5 (see docs/kb.md, docs/benchmarks.md).
+  Loaded with ``mmap=True``, so every process on a machine shares one copy in the page cache.
+* Query syntax (phrases, AND/OR/NOT, +/-): **tantivy**, which has positions, phrase queries,
+  boolean queries and block-max WAND. Same analyzer, same BM25 parameters (k1=1.2, b=0.75,
+  Lucene idf), so the two engines score a plain term identically up to tantivy's one-byte
+  field-norm quantisation.
+
+Building: bm25s's own ``BM25.index`` holds every document as a Python list of token strings
+(5.8 GB at 828K passages). `BM25Builder` streams instead: it maps tokens to ids as documents
+arrive, keeps compact numpy (doc, term, tf) arrays, then computes the matrix with bm25s's own
+idf/tf scoring functions and writes bm25s's on-disk format (`BM25.save`), which `BM25.load`
+reads back. A test checks the result is identical to ``bm25s.BM25.index`` on a corpus.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+K1 = 1.2
+B = 0.75
+METHOD = "lucene"  # idf = log(1 + (N - df + 0.5) / (df + 0.5)): always > 0, as tantivy/Lucene
+
+
+# --------------------------------------------------------------------------------------------
+# bm25s
+# --------------------------------------------------------------------------------------------
+
+
+class BM25Builder:
+    """Streaming construction of a bm25s index from analysed token lists."""
+
+    def __init__(self, k1: float = K1, b: float = B, method: str = METHOD, flush_tokens: int = 4_000_000) -> None:
+        self.k1, self.b, self.method = k1, b, method
+        self.vocab: dict[str, int] = {}
+        self.n_docs = 0
+        self._flushed_docs = 0
+        self._buf_ids: list[int] = []
+        self._buf_lens: list[int] = []
+        self._docs: list[np.ndarray] = []
+        self._terms: list[np.ndarray] = []
+        self._tfs: list[np.ndarray] = []
+        self._lens: list[np.ndarray] = []
+        self.flush_tokens = flush_tokens
+
+    def add(self, tokens: list[str]) -> None:
+        vocab = self.vocab
+        ids = [vocab.setdefault(t, len(vocab)) for t in tokens]
+        self._buf_ids.extend(ids)
+        self._buf_lens.append(len(ids))
+        self.n_docs += 1
+        if len(self._buf_ids) >= self.flush_tokens:
+            self._flush()
+
+    def _flush(self) -> None:
+        if not self._buf_lens:
+            return
+        lens = np.asarray(self._buf_lens, dtype=np.int64)
+        ids = np.asarray(self._buf_ids, dtype=np.int64)
+        docs = np.repeat(np.arange(self._flushed_docs, self._flushed_docs + len(lens), dtype=np.int64), lens)
+        keys, tf = np.unique((docs << 32) | ids, return_counts=True)  # sorted by (doc, term)
+        self._docs.append((keys >> 32).astype(np.int32))
+        self._terms.append((keys & 0xFFFFFFFF).astype(np.int32))
+        self._tfs.append(tf.astype(np.float32))
+        self._lens.append(lens.astype(np.float32))
+        self._flushed_docs += len(lens)
+        self._buf_ids, self._buf_lens = [], []
+
+    def build(self) -> dict:
+        """Return bm25s's `scores` dict (data, indices, indptr, num_docs)."""
+        from bm25s.scoring import _select_idf_scorer, _select_tfc_scorer
+
+        self._flush()
+        n_docs, n_vocab = self.n_docs, len(self.vocab)
+        if n_docs == 0:
+            raise ValueError("cannot build a BM25 index over zero documents")
+        doc = np.concatenate(self._docs) if self._docs else np.zeros(0, np.int32)
+        term = np.concatenate(self._terms) if self._terms else np.zeros(0, np.int32)
+        tf = np.concatenate(self._tfs) if self._tfs else np.zeros(0, np.float32)
+        lens = np.concatenate(self._lens)
+        self._docs, self._terms, self._tfs, self._lens = [], [], [], []
+
+        df = np.bincount(term, minlength=n_vocab)
+        idf_fn = _select_idf_scorer(self.method)
+        idf = np.zeros(n_vocab, dtype=np.float32)
+        for t in np.flatnonzero(df):
+            idf[t] = idf_fn(int(df[t]), N=n_docs)
+        avg_len = float(lens.mean())
+        tfc = _select_tfc_scorer(self.method)(tf_array=tf, l_d=lens[doc], l_avg=avg_len, k1=self.k1, b=self.b)
+        del tf
+        data = (idf[term] * tfc).astype(np.float32)
+        del tfc
+        order = np.argsort(term, kind="stable")  # column-major; rows stay ascending within a column
+        indices = doc[order]
+        del doc
+        data = data[order]
+        del order, term
+        indptr = np.zeros(n_vocab + 1, dtype=np.int64)
+        np.cumsum(df, out=indptr[1:])
+        self.avg_len = avg_len
+        return {"data": data, "indices": indices.astype(np.int32), "indptr": indptr, "num_docs": n_docs}
+
+    def save(self, out_dir: Path) -> dict:
+        import bm25s
+
+        scores = self.build()
+        retriever = bm25s.BM25(k1=self.k1, b=self.b, method=self.method, backend="numba", auto_compile=False)
+        retriever.scores = scores
+        retriever.vocab_dict = self.vocab
+        retriever.unique_token_ids_set = set(self.vocab.values())
+        retriever.nonoccurrence_array = None
+        out_dir.mkdir(parents=True, exist_ok=True)
+        retriever.save(str(out_dir), show_progress=False)
+        return {"num_docs": scores["num_docs"], "vocab": len(self.vocab), "postings": int(len(scores["data"]))}
+
+
+_F32, _I32 = np.dtype("float32"), np.dtype("int32")
+_KERNEL: list = []
+
+
+def _cached_kernel():
+    """bm25s's own single-query numba kernel, compiled with numba's on-disk cache.
+
+    bm25s compiles its kernel without ``cache=True``, which costs ~6 s in every new process (every
+    Ray replica, every `hcgym kb search`). The same function compiled with ``cache=True`` loads
+    in ~0.5 s after the first time. Calling the kernel directly also skips `retrieve`'s per-call
+    input checks. Falls back to `BM25.retrieve` if bm25s's internals move.
+    """
+    if not _KERNEL:
+        try:
+            from bm25s.numba import retrieve_utils
+            from numba import njit
+
+            _KERNEL.append(njit(nogil=True, cache=True)(retrieve_utils._retrieve_internal_jitted))
+        except Exception:  # pragma: no cover - depends on the installed bm25s
+            _KERNEL.append(None)
+    return _KERNEL[0]
+
+
+class BM25Searcher:
+    """A loaded (memory-mapped) bm25s index."""
+
+    def __init__(self, path: Path) -> None:
+        import bm25s
+
+        self.path = Path(path)
+        self.retriever = bm25s.BM25.load(str(self.path), mmap=True, load_corpus=False, show_progress=False)
+        if self.retriever.backend != "numba":
+            self.retriever.backend = "numba"
+            self.retriever.compile(activate_numba=True, warmup=False)
+        self.vocab: dict[str, int] = self.retriever.vocab_dict
+        self.indptr = self.retriever.scores["indptr"]
+        self.num_docs = int(self.retriever.scores["num_docs"])
+
+    def validate(self) -> None:
+        scores = self.retriever.scores
+        n_post = int(self.indptr[-1])
+        if len(self.indptr) != len(self.vocab) + 1 or n_post != len(scores["data"]) or n_post != len(scores["indices"]):
+            raise ValueError("bm25s arrays are inconsistent (truncated or mismatched files)")
+
+    def term_ids(self, terms: list[str], max_terms: int) -> list[int]:
+        ids = [self.vocab[t] for t in terms if t in self.vocab]
+        if len(ids) > max_terms:  # keep the most selective terms (smallest document frequency)
+            df = [int(self.indptr[i + 1] - self.indptr[i]) for i in ids]
+            keep = sorted(range(len(ids)), key=lambda j: (df[j], j))[:max_terms]
+            ids = [ids[j] for j in sorted(keep)]
+        return ids
+
+    def search(self, ids: list[int], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Top-k (doc indices, scores) with score > 0, best first."""
+        if not ids or k <= 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.float32)
+        k = min(k, self.num_docs)
+        kernel = _cached_kernel()
+        if kernel is not None:
+            s = self.retriever.scores
+            scores, docs = kernel(np.asarray(ids, dtype=np.int32), np.array([0, len(ids)], dtype=np.int32), k, True,
+                                  _F32, _I32, s["data"], s["indptr"], s["indices"], self.num_docs, None, weight_mask)
+        else:  # bm25s changed its internals: use the public API
+            docs, scores = self.retriever.retrieve(
+                [ids], k=k, show_progress=False, n_threads=1, weight_mask=weight_mask, return_as="tuple"
+            )
+        docs, scores = np.asarray(docs[0]), np.asarray(scores[0])
+        keep = scores > 0
+        return docs[keep], scores[keep]
+
+    def warmup(self) -> None:
+        """Compile the numba kernel now (first call otherwise pays ~1-2 s)."""
+        if self.vocab:
+            self.search([next(iter(self.vocab.values()))], 1)
+
+
+# --------------------------------------------------------------------------------------------
+# tantivy
+# --------------------------------------------------------------------------------------------
+
+TOKENIZER = "kb"
+
+
+def tantivy_schema():
+    import tantivy
+
+    sb = tantivy.SchemaBuilder()
+    sb.add_text_field("text", stored=False, tokenizer_name=TOKENIZER, index_option="position")
+    sb.add_text_field("source", stored=False, tokenizer_name="raw", index_option="basic")
+    sb.add_text_field("category", stored=False, tokenizer_name="raw", index_option="basic")
+    sb.add_unsigned_field("row", stored=False, indexed=False, fast=True)
+    return sb.build()
+
+
+class TantivyBuilder:
+    def __init__(self, path: Path, heap_bytes: int = 256_000_000, threads: int | None = None) -> None:
+        import tantivy
+
+        from kb_service.analysis import build_analyzer
+
+        path.mkdir(parents=True, exist_ok=True)
+        self.index = tantivy.Index(tantivy_schema(), path=str(path), reuse=False)
+        self.index.register_tokenizer(TOKENIZER, build_analyzer())
+        threads = threads or max(1, min(2, os.cpu_count() or 1))
+        self.writer = self.index.writer(heap_size=heap_bytes, num_threads=threads)
+        self._doc = tantivy.Document
+
+    def add(self, row: int, text: str, source: str, category: str) -> None:
+        doc = self._doc()
+        doc.add_text("text", text)
+        doc.add_text("source", source)
+        doc.add_text("category", category)
+        doc.add_unsigned("row", row)
+        self.writer.add_document(doc)
+
+    def close(self) -> None:
+        self.writer.commit()
+        self.writer.wait_merging_threads()
+
+
+class TantivySearcher:
+    def __init__(self, path: Path) -> None:
+        import tantivy
+
+        from kb_service.analysis import build_analyzer
+
+        self.path = Path(path)
+        self._t = tantivy
+        self.index = tantivy.Index.open(str(self.path))
+        self.index.register_tokenizer(TOKENIZER, build_analyzer())
+        self.schema = self.index.schema
+        self.num_docs = int(self.index.searcher().num_docs)
+
+    def to_query(self, node, source: list[str] | None = None, category: str | None = None):
+        """Translate an analysis.Node tree into a tantivy Query (None when nothing can match)."""
+        q = self._node(node)
+        if q is None:
+            return None
+        t = self._t
+        filters = []
+        if source:
+            filters.append(t.Query.term_set_query(self.schema, "source", list(source)))
+        if category is not None:
+            filters.append(t.Query.term_query(self.schema, "category", category))
+        if filters:
+            clauses = [(t.Occur.Must, q)] + [(t.Occur.Must, t.Query.const_score_query(f, 0.0)) for f in filters]
+            q = t.Query.boolean_query(clauses)
+        return q
+
+    def _node(self, node):
+        t = self._t
+        if node.op == "TERM":
+            return t.Query.term_query(self.schema, "text", node.tokens[0][1])
+        if node.op == "PHRASE":
+            return t.Query.phrase_query(self.schema, "text", [(p, w) for p, w in node.tokens])
+        if node.op in ("NOT", "MUST"):
+            # Only meaningful inside a boolean; on its own, NOT x matches nothing, +x is x.
+            return None if node.op == "NOT" else self._node(node.children[0])
+        positive, clauses = False, []
+        for child in node.children:
+            if child.op == "NOT":
+                q = self._node(child.children[0])
+                if q is not None:
+                    clauses.append((t.Occur.MustNot, q))
+                continue
+            if child.op == "MUST":
+                q = self._node(child.children[0])
+                occur = t.Occur.Must
+            else:
+                q = self._node(child)
+                occur = t.Occur.Must if node.op == "AND" else t.Occur.Should
+            if q is not None:
+                clauses.append((occur, q))
+                positive = True
+        if not positive:
+            return None
+        return t.Query.boolean_query(clauses)
+
+    def search(self, query, k: int) -> tuple[list[int], list[float]]:
+        if query is None or k <= 0:
+            return [], []
+        searcher = self.index.searcher()
+        hits = searcher.search(query, limit=min(k, max(1, self.num_docs)), count=False).hits
+        if not hits:
+            return [], []
+        rows = searcher.fast_field_values("row", [addr for _, addr in hits])
+        return [int(r) for r in rows], [float(s) for s, _ in hits]
+
+
+def write_json(path: Path, obj: dict) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2, ensure_ascii=False, sort_keys=False))
+    os.replace(tmp, path)

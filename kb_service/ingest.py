@@ -1,0 +1,454 @@
+"""Building a knowledge base: stream passages in, deduplicate, index, publish atomically.
+
+Inputs are streamed record by record (constant memory): JSONL (``.jsonl``/``.ndjson``/``.json``,
+optionally ``.gz``), Parquet (read in row batches), a SQLite FTS5 database in the paper's
+reference layout (``passages_fts(doc_id, source, title, content, category, dataset_name)``),
+article JSONL (``{url, title, text}``, which also fills the article store), or any Python
+iterator of dicts (the default build's sources).
+
+Stages, all in ``<out>.building/`` next to the target:
+
+1. ingest: rows go into ``passages.sqlite`` with ``INSERT OR IGNORE`` on the unique doc_id (the
+   first occurrence of a doc_id wins; later ones are counted as duplicates). After every batch
+   the input's position is committed in the same transaction, so an interrupted build resumes
+   where it stopped (``resume=True``, the default); an input whose file changed since starts
+   the build afresh.
+2. index: one pass over the store in row order feeds the bm25s builder and the tantivy writer
+   with the same analysed text; per-document source/category ids are written for filters.
+3. publish: ``manifest.json`` is written last, then the directory is swapped into place, so a
+   reader sees either the old knowledge base or the new one, never a half-built one.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import shutil
+import sqlite3
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator
+
+import numpy as np
+
+from kb_service.kb import FORMAT, FORMAT_VERSION
+
+REFERENCE_TABLE = "passages_fts"
+REFERENCE_COLUMNS = ("doc_id", "source", "title", "content", "category", "dataset_name")
+
+
+class IngestError(ValueError):
+    """An input cannot be read at all (wrong format, missing table or columns)."""
+
+
+@dataclass
+class Input:
+    """One stream of passage records. `open(skip)` yields records after the first `skip`."""
+
+    name: str
+    fingerprint: str
+    open: Callable[[int], Iterator[Any]]
+    total: int | None = None
+    provenance: dict | None = None
+    articles: bool = False  # records are {url, title, text} articles, split into passages
+
+
+# ------------------------------------------------------------------------------------ readers
+
+
+def _jsonl_records(path: Path, skip: int) -> Iterator[Any]:
+    opener = gzip.open if path.name.endswith(".gz") else open
+    seen = 0
+    with opener(path, "rt", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            if not line.strip():
+                continue
+            seen += 1
+            if seen <= skip:
+                continue
+            try:
+                yield json.loads(line)
+            except json.JSONDecodeError as exc:
+                yield _Bad(f"line {lineno}: invalid JSON ({exc.msg})")
+
+
+def _parquet_records(path: Path, skip: int) -> Iterator[Any]:
+    import pyarrow.parquet as pq
+
+    pf = pq.ParquetFile(path)
+    names = set(pf.schema_arrow.names)
+    if "content" not in names and "text" not in names:
+        raise IngestError(f"{path}: a Parquet passage file needs a 'content' column (has: {sorted(names)})")
+    wanted = [c for c in (*REFERENCE_COLUMNS, "id", "text", "provenance") if c in names]
+    seen = 0
+    for batch in pf.iter_batches(batch_size=4096, columns=wanted):
+        n = batch.num_rows
+        if seen + n <= skip:
+            seen += n
+            continue
+        start = max(0, skip - seen)
+        seen += n
+        yield from batch.slice(start).to_pylist()
+
+
+def _fts5_records(path: Path, skip: int) -> Iterator[Any]:
+    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        cols = _reference_columns(conn, path)
+        sel = ", ".join(cols)
+        cur = conn.execute(f"SELECT {sel} FROM {REFERENCE_TABLE} ORDER BY rowid LIMIT -1 OFFSET ?", (skip,))
+        while True:
+            rows = cur.fetchmany(2000)
+            if not rows:
+                break
+            for row in rows:
+                yield dict(zip(cols, row))
+    finally:
+        conn.close()
+
+
+def _reference_columns(conn: sqlite3.Connection, path: Path) -> list[str]:
+    try:
+        info = conn.execute(f"PRAGMA table_info({REFERENCE_TABLE})").fetchall()
+    except sqlite3.DatabaseError as exc:
+        raise IngestError(f"{path}: not a readable SQLite database ({exc})") from None
+    cols = [r[1] for r in info]
+    if not cols:
+        raise IngestError(f"{path}: no table {REFERENCE_TABLE!r}; expected the reference layout "
+                          f"{REFERENCE_TABLE}({', '.join(REFERENCE_COLUMNS)})")
+    missing = [c for c in ("doc_id", "content") if c not in cols]
+    if missing:
+        raise IngestError(f"{path}: table {REFERENCE_TABLE} lacks column(s) {missing}; expected "
+                          f"{REFERENCE_TABLE}({', '.join(REFERENCE_COLUMNS)})")
+    return [c for c in REFERENCE_COLUMNS if c in cols]
+
+
+def _fingerprint(path: Path) -> str:
+    st = path.stat()
+    return f"file:{st.st_size}:{st.st_mtime_ns}"
+
+
+def file_input(path: str | Path, *, provenance: dict | None = None, articles: bool = False,
+               source: str = "wikipedia") -> Input:
+    """An Input for a passage file (JSONL, Parquet, reference FTS5 SQLite) or an article JSONL."""
+    path = Path(path)
+    if not path.is_file():
+        raise IngestError(f"input file {path} does not exist")
+    name = path.name.lower()
+    if articles:
+        from kb_service.pages import article_passages, read_article_jsonl
+
+        def open_articles(skip: int) -> Iterator[Any]:
+            seen = 0
+            for art in read_article_jsonl(path):
+                for rec in article_passages(art, source=source, provenance=provenance):
+                    seen += 1
+                    if seen > skip:
+                        yield rec
+
+        return Input(f"articles:{path.resolve()}", _fingerprint(path), open_articles, provenance=provenance,
+                     articles=True)
+    if name.endswith((".jsonl", ".ndjson", ".json", ".jsonl.gz", ".ndjson.gz", ".json.gz")):
+        opener = lambda skip: _jsonl_records(path, skip)  # noqa: E731
+        total = None
+    elif name.endswith((".parquet", ".pq")):
+        import pyarrow.parquet as pq
+
+        total = pq.ParquetFile(path).metadata.num_rows
+        opener = lambda skip: _parquet_records(path, skip)  # noqa: E731
+    elif name.endswith((".db", ".sqlite", ".sqlite3")):
+        conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        try:
+            _reference_columns(conn, path)
+            total = int(conn.execute(f"SELECT count(*) FROM {REFERENCE_TABLE}").fetchone()[0])
+        finally:
+            conn.close()
+        opener = lambda skip: _fts5_records(path, skip)  # noqa: E731
+    else:
+        raise IngestError(f"{path}: unknown input format; use .jsonl/.ndjson/.json(.gz), .parquet, or a "
+                          f"reference FTS5 database (.db/.sqlite)")
+    return Input(str(path.resolve()), _fingerprint(path), opener, total=total, provenance=provenance)
+
+
+def iterable_input(name: str, fingerprint: str, factory: Callable[[], Iterable[Any]],
+                   provenance: dict | None = None, total: int | None = None) -> Input:
+    """An Input over a re-creatable iterator (`factory()` is called again on resume)."""
+
+    def opener(skip: int) -> Iterator[Any]:
+        for i, rec in enumerate(factory()):
+            if i >= skip:
+                yield rec
+
+    return Input(name, fingerprint, opener, total=total, provenance=provenance)
+
+
+# ------------------------------------------------------------------------------------ records
+
+
+class _Bad:
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+
+def _text(value: Any) -> str:
+    if value is None:
+        return ""
+    return value if isinstance(value, str) else str(value)
+
+
+def coerce_record(rec: Any) -> tuple[tuple[str, str, str, str, str, str], dict | None] | str:
+    """(doc_id, source, title, content, category, dataset_name), provenance -- or a reason string."""
+    if isinstance(rec, _Bad):
+        return rec.reason
+    if not isinstance(rec, dict):
+        return f"not an object ({type(rec).__name__})"
+    doc_id = _text(rec.get("doc_id", rec.get("id"))).strip()
+    if not doc_id:
+        return "missing doc_id"
+    source = _text(rec.get("source")).strip()
+    if not source:
+        return f"{doc_id}: missing source"
+    content = _text(rec.get("content", rec.get("text")))
+    if not content.strip():
+        return f"{doc_id}: empty content"
+    prov = rec.get("provenance")
+    if isinstance(prov, str):
+        try:
+            prov = json.loads(prov)
+        except json.JSONDecodeError:
+            prov = {"note": prov}
+    prov = {str(k): _text(v) for k, v in prov.items()} if isinstance(prov, dict) and prov else None
+    row = (doc_id[:512], source[:128], _text(rec.get("title")).strip(), content,
+           _text(rec.get("category")).strip(), _text(rec.get("dataset_name")).strip())
+    return row, prov
+
+
+# ------------------------------------------------------------------------------------ build
+
+
+@dataclass
+class BuildReport:
+    out: str
+    n_passages: int = 0
+    sources: dict[str, int] = field(default_factory=dict)
+    inputs: list[dict] = field(default_factory=list)
+    articles: int = 0
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {"out": self.out, "n_passages": self.n_passages, "sources": self.sources, "inputs": self.inputs,
+                "articles": self.articles, "seconds": self.seconds}
+
+
+def _tqdm(enabled: bool, **kw):
+    from tqdm import tqdm
+
+    return tqdm(disable=not enabled, mininterval=1.0, **kw)
+
+
+def build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] | None = None,
+             article_iter: Callable[[], Iterable[dict]] | None = None, resume: bool = True,
+             progress: bool = True, batch_size: int = 2000, manifest_extra: dict | None = None,
+             echo: Callable[[str], None] = print) -> dict:
+    """Build (or resume building) a knowledge base at `out`; returns the summary dict."""
+    out = Path(out)
+    staging = out.parent / (out.name + ".building")
+    t0 = time.perf_counter()
+    if staging.exists() and not resume:
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True, exist_ok=True)
+    report = BuildReport(out=str(out))
+
+    from kb_service.store import StoreWriter
+
+    writer = StoreWriter(staging / "passages.sqlite")
+    try:
+        for inp in inputs:
+            prog = writer.progress(inp.name)
+            if prog and prog["fingerprint"] != inp.fingerprint:
+                writer.close()
+                echo(f"[kb] input {inp.name} changed since the interrupted build; starting the build afresh")
+                return build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=False,
+                                progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo)
+            report.inputs.append(_ingest_one(writer, inp, prog, progress, batch_size, echo))
+        report.seconds["ingest"] = round(time.perf_counter() - t0, 1)
+        n = writer.count()
+        if n == 0:
+            rejected = sum(i["rejected"] for i in report.inputs)
+            raise IngestError(f"no passages to index: the inputs gave 0 valid records ({rejected} rejected)"
+                              + (f"; first problems: {report.inputs[0].get('problems')}" if report.inputs else ""))
+        writer.finalize()
+
+        t1 = time.perf_counter()
+        n_articles = 0
+        if article_files or article_iter is not None:
+            from kb_service.pages import PageStoreWriter, read_article_jsonl
+
+            pw = PageStoreWriter(staging / "articles")
+            streams: list[Iterable[dict]] = [read_article_jsonl(Path(p)) for p in (article_files or [])]
+            if article_iter is not None:
+                streams.append(article_iter())
+            for stream in streams:
+                for art in stream:
+                    pw.add(art["title"], art["text"], art.get("url", ""))
+            n_articles = pw.close()["articles"]
+            report.seconds["articles"] = round(time.perf_counter() - t1, 1)
+
+        t2 = time.perf_counter()
+        index_info = _build_indexes(writer, staging, n, progress, echo)
+        report.seconds["index"] = round(time.perf_counter() - t2, 1)
+        report.sources = writer.source_counts()
+        provenance = _provenance_by_source(writer)
+    finally:
+        writer.close()
+
+    report.n_passages = n
+    report.articles = n_articles
+    report.seconds["total"] = round(time.perf_counter() - t0, 1)
+    from importlib.metadata import version
+
+    manifest = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "n_passages": n,
+        "sources": report.sources,
+        "articles": n_articles,
+        "provenance": provenance,
+        "engine": {"free_text": f"bm25s {version('bm25s')} (numba)", "structured": f"tantivy {version('tantivy')}",
+                   "bm25": {"k1": 1.2, "b": 0.75, "idf": "lucene"},
+                   "analyzer": "simple tokenizer, remove >40 chars, lowercase, ascii fold, English stop words, "
+                               "Snowball English stemmer", **index_info},
+        "inputs": report.inputs,
+        "built_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "build_seconds": report.seconds,
+        **(manifest_extra or {}),
+    }
+    from kb_service.engines import write_json
+
+    write_json(staging / "manifest.json", manifest)
+    _publish(staging, out)
+    _print_summary(report, echo)
+    return report.as_dict()
+
+
+def _ingest_one(writer, inp: Input, prog: dict | None, progress: bool, batch_size: int, echo) -> dict:
+    stats = {"input": inp.name, "rows": 0, "inserted": 0, "duplicates": 0, "rejected": 0, "problems": []}
+    if prog and prog["done"]:
+        stats.update(rows=prog["rows_done"], inserted=prog["inserted"], duplicates=prog["duplicates"],
+                     rejected=prog["rejected"], resumed="already complete")
+        echo(f"[kb] {inp.name}: already ingested ({prog['inserted']} passages), skipping")
+        return stats
+    start = prog["rows_done"] if prog else 0
+    if start:
+        stats.update(inserted=prog["inserted"], duplicates=prog["duplicates"], rejected=prog["rejected"])
+        stats["resumed_from"] = start
+        echo(f"[kb] {inp.name}: resuming after {start} records")
+    rows_done = start
+    batch: list[tuple] = []
+    bar = _tqdm(progress, total=inp.total, initial=start, unit=" passages", desc=f"ingest {Path(inp.name).name[:40]}")
+
+    def flush(done: bool) -> None:
+        nonlocal batch
+        inserted = writer.insert_many(batch) if batch else 0
+        stats["inserted"] += inserted
+        stats["duplicates"] += len(batch) - inserted
+        writer.set_progress(inp.name, inp.fingerprint, rows_done, done, stats["inserted"], stats["duplicates"],
+                            stats["rejected"])
+        writer.commit()
+        bar.update(len(batch))
+        batch = []
+
+    for rec in inp.open(start):
+        rows_done += 1
+        got = coerce_record(rec)
+        if isinstance(got, str):
+            stats["rejected"] += 1
+            if len(stats["problems"]) < 5:
+                stats["problems"].append(got)
+            continue
+        row, prov = got
+        batch.append((*row, writer.provenance_id(prov or inp.provenance)))
+        if len(batch) >= batch_size:
+            flush(False)
+    flush(True)
+    bar.close()
+    stats["rows"] = rows_done
+    if not stats["problems"]:
+        del stats["problems"]
+    return stats
+
+
+def _build_indexes(writer, staging: Path, n: int, progress: bool, echo) -> dict:
+    from kb_service.analysis import analyze
+    from kb_service.engines import BM25Builder, TantivyBuilder, write_json
+
+    for sub in ("bm25", "tantivy", "docmeta"):
+        if (staging / sub).exists():
+            shutil.rmtree(staging / sub)
+    bm = BM25Builder()
+    tv = TantivyBuilder(staging / "tantivy")
+    sources: dict[str, int] = {}
+    categories: dict[str, int] = {}
+    source_ids = np.zeros(n, dtype=np.int16)
+    category_ids = np.zeros(n, dtype=np.int32)
+    bar = _tqdm(progress, total=n, unit=" passages", desc="index")
+    for rows in writer.iter_rows():
+        for rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
+            i = rowid - 1
+            text = f"{title}\n{content}" if title else content
+            bm.add(analyze(text))
+            tv.add(i, text, source, category)
+            source_ids[i] = sources.setdefault(source, len(sources))
+            category_ids[i] = categories.setdefault(category, len(categories))
+        bar.update(len(rows))
+    bar.close()
+    if len(sources) > np.iinfo(np.int16).max:
+        raise IngestError(f"too many distinct sources ({len(sources)}); sources name collections, not documents")
+    t = time.perf_counter()
+    info = bm.save(staging / "bm25")
+    tv.close()
+    echo(f"[kb] indexes written ({info['vocab']} terms, {info['postings']} postings, {time.perf_counter() - t:.1f}s "
+         f"to finish)")
+    (staging / "docmeta").mkdir(exist_ok=True)
+    np.save(staging / "docmeta" / "source_ids.npy", source_ids)
+    np.save(staging / "docmeta" / "category_ids.npy", category_ids)
+    write_json(staging / "docmeta" / "names.json", {"sources": list(sources), "categories": list(categories)})
+    return {"vocabulary": info["vocab"], "postings": info["postings"]}
+
+
+def _provenance_by_source(writer) -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    rows = writer.conn.execute(
+        "SELECT p.source, v.json FROM (SELECT DISTINCT source, prov_id FROM passages) p "
+        "JOIN provenance v ON v.id = p.prov_id ORDER BY p.source"
+    )
+    for source, js in rows:
+        prov = json.loads(js)
+        slim = {k: prov[k] for k in ("package", "version", "license") if k in prov} or prov
+        if slim not in out.setdefault(source, []):
+            out[source].append(slim)
+    return out
+
+
+def _publish(staging: Path, out: Path) -> None:
+    old = None
+    if out.exists():
+        old = out.parent / f"{out.name}.old-{os.getpid()}-{int(time.time())}"
+        os.replace(out, old)
+    os.replace(staging, out)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _print_summary(report: BuildReport, echo) -> None:
+    echo(f"[kb] built {report.out}: {report.n_passages} passages"
+         + (f", {report.articles} articles" if report.articles else "") + f" in {report.seconds.get('total')}s")
+    width = max((len(s) for s in report.sources), default=6)
+    for source, count in sorted(report.sources.items(), key=lambda kv: -kv[1]):
+        echo(f"[kb]   {source:<{width}}  {count:>9,}")
+    for inp in report.inputs:
+        extra = f", {inp['rejected']} rejected {inp.get('problems', '')}" if inp["rejected"] else ""
+        echo(f"[kb]   input {Path(inp['input']).name}: {inp['inserted']} new, {inp['duplicates']} duplicate doc_ids{extra}")

@@ -1,0 +1,67 @@
+"""The passage schema (the paper's six columns) and the search-result model.
+
+A passage is what the knowledge base stores and ranks: ``doc_id, source, title, content,
+category, dataset_name`` exactly as the paper's FTS5 table, plus optional provenance
+(package, version, licence) that the default build fills for every record.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+PASSAGE_FIELDS = ("doc_id", "source", "title", "content", "category", "dataset_name")
+
+
+class PassageRecord(BaseModel):
+    """One passage as ingested (a JSONL line, a Parquet row, a reference FTS5 row)."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    doc_id: str = Field(min_length=1, max_length=512)
+    source: str = Field(min_length=1, max_length=128)
+    title: str = ""
+    content: str = Field(min_length=1)
+    category: str = ""
+    dataset_name: str = ""
+    provenance: dict[str, str] | None = None
+
+    @field_validator("doc_id", "source", mode="before")
+    @classmethod
+    def _strip(cls, value: Any) -> Any:
+        return value.strip() if isinstance(value, str) else value
+
+    @field_validator("title", "category", "dataset_name", mode="before")
+    @classmethod
+    def _none_to_empty(cls, value: Any) -> Any:
+        return "" if value is None else value
+
+
+class Passage(BaseModel):
+    """A passage returned by `KnowledgeBase.search` (snippet) or `KnowledgeBase.get` (content)."""
+
+    doc_id: str
+    source: str
+    title: str
+    snippet: str = ""
+    score: float = 0.0
+    category: str = ""
+    dataset_name: str = ""
+    content: str | None = None
+    provenance: dict[str, str] | None = None
+
+    def brief(self) -> dict[str, Any]:
+        """A compact dict for agent-facing tool results."""
+        out = {
+            "doc_id": self.doc_id,
+            "source": self.source,
+            "title": self.title,
+            "snippet": self.snippet,
+            "score": round(self.score, 4),
+        }
+        if self.category:
+            out["category"] = self.category
+        if self.dataset_name:
+            out["dataset_name"] = self.dataset_name
+        return out

@@ -1,0 +1,160 @@
+"""SQLite passage store: the passages themselves (text, metadata, provenance) keyed by row.
+
+Row ``r`` (1-based SQLite rowid) is document ``r - 1`` of both search indexes. The store is
+written once by the builder (dedup by doc_id, resumable progress per input) and then opened
+read-only and immutable by any number of processes.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from pathlib import Path
+from typing import Iterable, Iterator
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS passages(
+    rowid INTEGER PRIMARY KEY,
+    doc_id TEXT NOT NULL UNIQUE,
+    source TEXT NOT NULL,
+    title TEXT NOT NULL,
+    content TEXT NOT NULL,
+    category TEXT NOT NULL,
+    dataset_name TEXT NOT NULL,
+    prov_id INTEGER
+);
+CREATE TABLE IF NOT EXISTS provenance(id INTEGER PRIMARY KEY, json TEXT NOT NULL UNIQUE);
+CREATE TABLE IF NOT EXISTS ingest_progress(
+    input TEXT PRIMARY KEY, fingerprint TEXT NOT NULL, rows_done INTEGER NOT NULL,
+    done INTEGER NOT NULL DEFAULT 0, inserted INTEGER NOT NULL DEFAULT 0,
+    duplicates INTEGER NOT NULL DEFAULT 0, rejected INTEGER NOT NULL DEFAULT 0
+);
+"""
+
+ROW_COLUMNS = "rowid, doc_id, source, title, content, category, dataset_name, prov_id"
+
+
+class StoreWriter:
+    """Appends passages; `INSERT OR IGNORE` on the unique doc_id deduplicates (first wins)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.conn = sqlite3.connect(str(self.path))
+        self.conn.execute("PRAGMA journal_mode=WAL")
+        self.conn.execute("PRAGMA synchronous=NORMAL")
+        self.conn.executescript(SCHEMA)
+        self._prov: dict[str, int] = {j: i for i, j in self.conn.execute("SELECT id, json FROM provenance")}
+
+    def provenance_id(self, prov: dict | None) -> int | None:
+        if not prov:
+            return None
+        key = json.dumps(prov, sort_keys=True, ensure_ascii=False)
+        pid = self._prov.get(key)
+        if pid is None:
+            cur = self.conn.execute("INSERT INTO provenance(json) VALUES (?)", (key,))
+            pid = self._prov[key] = int(cur.lastrowid)
+        return pid
+
+    def insert_many(self, rows: list[tuple]) -> int:
+        """rows: (doc_id, source, title, content, category, dataset_name, prov_id). Returns inserted."""
+        before = self.conn.total_changes
+        self.conn.executemany(
+            "INSERT OR IGNORE INTO passages(doc_id, source, title, content, category, dataset_name, prov_id)"
+            " VALUES (?,?,?,?,?,?,?)",
+            rows,
+        )
+        return self.conn.total_changes - before
+
+    def progress(self, name: str) -> dict | None:
+        row = self.conn.execute(
+            "SELECT fingerprint, rows_done, done, inserted, duplicates, rejected FROM ingest_progress WHERE input=?",
+            (name,),
+        ).fetchone()
+        if row is None:
+            return None
+        keys = ("fingerprint", "rows_done", "done", "inserted", "duplicates", "rejected")
+        return dict(zip(keys, row))
+
+    def set_progress(self, name: str, fingerprint: str, rows_done: int, done: bool, inserted: int,
+                     duplicates: int, rejected: int) -> None:
+        self.conn.execute(
+            "INSERT OR REPLACE INTO ingest_progress VALUES (?,?,?,?,?,?,?)",
+            (name, fingerprint, rows_done, int(done), inserted, duplicates, rejected),
+        )
+
+    def reset_input(self, name: str) -> None:
+        self.conn.execute("DELETE FROM ingest_progress WHERE input=?", (name,))
+
+    def commit(self) -> None:
+        self.conn.commit()
+
+    def count(self) -> int:
+        return int(self.conn.execute("SELECT count(*) FROM passages").fetchone()[0])
+
+    def source_counts(self) -> dict[str, int]:
+        return dict(self.conn.execute("SELECT source, count(*) FROM passages GROUP BY source ORDER BY source"))
+
+    def iter_rows(self, batch: int = 20_000) -> Iterator[list[tuple]]:
+        """Batches of (rowid, doc_id, source, title, content, category, dataset_name, prov_id) by rowid."""
+        last = 0
+        while True:
+            rows = self.conn.execute(
+                f"SELECT {ROW_COLUMNS} FROM passages WHERE rowid > ? ORDER BY rowid LIMIT ?", (last, batch)
+            ).fetchall()
+            if not rows:
+                return
+            yield rows
+            last = rows[-1][0]
+
+    def finalize(self) -> None:
+        """Check rows are 1..N with no gaps (they are the index's document numbers), then compact."""
+        n, lo, hi = self.conn.execute("SELECT count(*), min(rowid), max(rowid) FROM passages").fetchone()
+        if n and (lo != 1 or hi != n):
+            raise RuntimeError(f"{self.path}: passage rows are not contiguous (n={n}, min={lo}, max={hi})")
+        self.conn.commit()
+        self.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        self.conn.execute("PRAGMA journal_mode=DELETE")
+        self.conn.commit()
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+class StoreReader:
+    """Read-only, immutable access from many threads and processes."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._local = threading.local()
+        conn = self._conn()
+        self.provenance = {i: json.loads(j) for i, j in conn.execute("SELECT id, json FROM provenance")}
+
+    def _conn(self) -> sqlite3.Connection:
+        conn = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = sqlite3.connect(f"file:{self.path}?mode=ro&immutable=1", uri=True, check_same_thread=False)
+            self._local.conn = conn
+        return conn
+
+    def max_rowid(self) -> int:
+        return int(self._conn().execute("SELECT coalesce(max(rowid), 0) FROM passages").fetchone()[0])
+
+    def rows_by_index(self, doc_indices: Iterable[int]) -> dict[int, tuple]:
+        """{doc index: row} for 0-based document indices."""
+        ids = [int(i) + 1 for i in doc_indices]
+        if not ids:
+            return {}
+        marks = ",".join("?" * len(ids))
+        rows = self._conn().execute(f"SELECT {ROW_COLUMNS} FROM passages WHERE rowid IN ({marks})", ids)
+        return {r[0] - 1: r for r in rows}
+
+    def row_by_doc_id(self, doc_id: str) -> tuple | None:
+        return self._conn().execute(f"SELECT {ROW_COLUMNS} FROM passages WHERE doc_id = ?", (doc_id,)).fetchone()
+
+    def close(self) -> None:
+        conn = getattr(self._local, "conn", None)
+        if conn is not None:
+            conn.close()
+            self._local.conn = None
