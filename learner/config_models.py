@@ -135,6 +135,12 @@ class HintConfig(_Strict):
     correctness_rule: Literal["correct_flag", "reward_above"] = "correct_flag"
     reward_threshold: float = 0.0
 
+    @model_validator(mode="after")
+    def _template_has_slot(self) -> "HintConfig":
+        if "{hint}" not in self.template:
+            raise ValueError("teacher.hints.template must contain the placeholder {hint}")
+        return self
+
 
 class TeacherConfig(_Strict):
     """The EMA teacher actor (Sec. 4.2 "Stability mechanisms", Algorithm 1)."""

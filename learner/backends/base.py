@@ -1,0 +1,136 @@
+"""The backend contract: model, reference, backward, optimizer step, full weights, checkpoint state.
+
+A backend owns the trainable policy (and its optimizer) for one rank. The shared `RankWorker`
+(worker.py) builds batches, calls `token_stats` on `forward_module`, computes the loss and calls
+`backward` / `step`. Everything that differs between single-process torch and ZeRO-3 sits behind
+this interface.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from pathlib import Path
+
+import torch
+
+from learner.config_models import LearnerConfig
+
+DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+
+
+class LearnerBackend(ABC):
+    """One rank's policy, optimizer and frozen reference.
+
+    Args:
+        config: Learner settings.
+        model_dir: Local model directory (config.json + model.safetensors).
+        seed: Seed for this rank's RNGs.
+        rank: Data-parallel rank.
+        world_size: Number of ranks.
+    """
+
+    name: str = "base"
+
+    def __init__(self, config: LearnerConfig, model_dir: str, seed: int, rank: int = 0, world_size: int = 1):
+        self.config = config
+        self.model_dir = str(model_dir)
+        self.seed = seed
+        self.rank = rank
+        self.world_size = world_size
+
+    # -- model access ------------------------------------------------------------------------
+    @property
+    @abstractmethod
+    def policy(self) -> torch.nn.Module:
+        """The trainable module to run forward passes on (the HF causal LM)."""
+
+    @property
+    @abstractmethod
+    def reference(self) -> torch.nn.Module | None:
+        """The frozen reference model for KL_ref, or None when kl_beta is 0."""
+
+    @property
+    def device(self) -> torch.device:
+        return torch.device(self.config.device)
+
+    # -- optimisation --------------------------------------------------------------------------
+    @abstractmethod
+    def backward(self, loss: torch.Tensor) -> None:
+        """Accumulate gradients of `loss` (already normalised as this rank's share of the batch)."""
+
+    @abstractmethod
+    def step(self) -> float:
+        """Clip, apply one optimizer update, zero the gradients; return the pre-clip global grad norm."""
+
+    @property
+    def grad_scale(self) -> float:
+        """Factor applied to this rank's loss so the cross-rank gradient reduction yields the batch gradient.
+
+        Data-parallel reductions average over ranks; our losses are already shares of the global
+        batch, so they are multiplied by the world size to turn the average back into a sum.
+        """
+        return float(self.world_size)
+
+    # -- weights --------------------------------------------------------------------------------
+    @abstractmethod
+    def iter_full_parameters(self) -> Iterator[tuple[str, torch.Tensor]]:
+        """Yield (name, full tensor) one module at a time (ZeRO-3: gathered, then released).
+
+        A yielded tensor is only valid until the next iteration; consumers copy or send it at once.
+        Every rank must iterate (gathering is collective); all ranks see the full tensors.
+        """
+
+    def full_state_dict(self) -> dict[str, torch.Tensor] | None:
+        """Full CPU weights gathered layer by layer; None on ranks other than 0."""
+        out: dict[str, torch.Tensor] = {}
+        for name, tensor in self.iter_full_parameters():
+            if self.rank == 0:
+                out[name] = tensor.detach().to("cpu", copy=True).contiguous()
+        return out if self.rank == 0 else None
+
+    @abstractmethod
+    def load_full_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Overwrite the policy weights (every rank calls it; only rank 0's `state` is read under ZeRO-3)."""
+
+    # -- checkpoint -----------------------------------------------------------------------------
+    @abstractmethod
+    def save_state(self, directory: Path) -> None:
+        """Write this rank's optimizer state (and partitions) under `directory`."""
+
+    @abstractmethod
+    def load_state(self, directory: Path) -> None:
+        """Restore what `save_state` wrote (weights-only / safetensors loading)."""
+
+    def autocast(self):
+        return contextlib.nullcontext()
+
+    def shutdown(self) -> None:
+        """Release process groups and memory."""
+
+
+def make_backend(config: LearnerConfig, model_dir: str, seed: int, rank: int = 0, world_size: int = 1,
+                 master_port: int | None = None) -> LearnerBackend:
+    """Instantiate the configured backend (imported lazily: the deepspeed one pulls in DeepSpeed)."""
+    if config.backend == "torch":
+        from learner.backends.torch_backend import TorchBackend
+
+        return TorchBackend(config, model_dir, seed, rank, world_size)
+    if config.backend == "deepspeed":
+        from learner.backends.deepspeed_backend import DeepSpeedBackend
+
+        return DeepSpeedBackend(config, model_dir, seed, rank, world_size, master_port=master_port)
+    raise ValueError(f"learner.backend={config.backend!r}: expected 'torch' or 'deepspeed'")
+
+
+def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu") -> torch.nn.Module:
+    """A causal LM from a local directory (safetensors only), without progress bars."""
+    from transformers import AutoModelForCausalLM
+    from transformers.utils import logging as hf_logging
+
+    hf_logging.disable_progress_bar()
+    if not (Path(model_dir) / "config.json").exists():
+        raise FileNotFoundError(f"no config.json in model directory {model_dir}")
+    model = AutoModelForCausalLM.from_pretrained(model_dir, dtype=dtype, local_files_only=True, use_safetensors=True)
+    return model.to(device)

@@ -1,0 +1,288 @@
+"""One rank of the learner: batch -> tensors -> L_total -> backward -> optimizer step.
+
+Every rank receives the whole batch, computes the whole-batch quantities (group advantages, token
+and sequence counts, turn weights) itself, and then trains on its round-robin shard. Because the
+losses are shares of the whole batch (losses.BatchNorms) and `grad_scale` undoes the cross-rank
+averaging, 1 rank and N ranks produce the same update for the same batch.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from actors.types import RolloutSample, TeacherOutput
+from learner.backends.base import LearnerBackend, make_backend
+from learner.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
+from learner.config_models import LearnerConfig
+from learner.losses import BatchNorms, LossInputs, compute_loss, finalize_metrics, group_advantages, turn_weights
+from learner.model import pad_batch, token_stats
+
+
+@dataclass
+class _Prepared:
+    """Whole-batch data every rank derives identically."""
+
+    samples: list[RolloutSample]
+    advantages: torch.Tensor
+    distill_weights: list[list[float]] | None
+    teacher: list[TeacherOutput | None]
+    norms: BatchNorms
+    turns_kept: int
+    turns_truncated: int
+
+
+def combine_rank_metrics(results: Sequence[dict]) -> dict[str, float]:
+    """Per-rank sums -> step metrics: shares of the loss add up, token sums become batch means.
+
+    Whole-batch quantities (turn counts, advantages) and DeepSpeed's global grad norm are the same
+    on every rank, so rank 0's are reported.
+    """
+    metrics = finalize_metrics([r["sums"] for r in results if r["sums"]])
+    metrics.update(results[0]["extra"])
+    metrics["learner_s"] = max(r["extra"]["learner_s"] for r in results)
+    return metrics
+
+
+def index_teacher_outputs(
+    teacher: Sequence[TeacherOutput] | dict[str, TeacherOutput] | None,
+) -> dict[str, TeacherOutput]:
+    """Accept the teacher's outputs as a list or a dict keyed by sample id."""
+    if teacher is None:
+        return {}
+    if isinstance(teacher, dict):
+        return dict(teacher)
+    return {t.sample_id: t for t in teacher}
+
+
+class RankWorker:
+    """Runs the shared training logic on one backend rank (in-process, or as a Ray actor).
+
+    Args:
+        config: Learner settings.
+        model_dir: Initial policy directory.
+        seed: Seed.
+        rank: This rank.
+        world_size: Number of ranks.
+        master_port: Rendezvous port for multi-rank backends.
+    """
+
+    def __init__(self, config: LearnerConfig | dict, model_dir: str, seed: int = 0, rank: int = 0,
+                 world_size: int = 1, master_port: int | None = None):
+        self.config = config if isinstance(config, LearnerConfig) else LearnerConfig.model_validate(config)
+        self.rank = rank
+        self.world_size = world_size
+        self.backend: LearnerBackend = make_backend(self.config, model_dir, seed, rank, world_size, master_port)
+        from learner.model import load_tokenizer
+
+        tokenizer = load_tokenizer(model_dir)
+        self.pad_id = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
+
+    def ready(self) -> int:
+        return self.rank
+
+    # -- batch preparation -------------------------------------------------------------------------
+    def _prepare(self, samples: list[RolloutSample], teacher) -> _Prepared:
+        if not samples:
+            raise ValueError("train_step got an empty batch")
+        cfg = self.config.loss
+        adv = group_advantages([s.reward for s in samples], [s.group_id for s in samples],
+                               scale=cfg.grpo.scale_advantages, eps=cfg.grpo.advantage_eps)
+        by_id = index_teacher_outputs(teacher)
+        outputs: list[TeacherOutput | None] = []
+        weights = None
+        kept = dropped = 0
+        if cfg.distill.enabled:
+            weights = []
+            for s in samples:
+                out = by_id.get(s.sample_id)
+                if out is None:
+                    raise ValueError(f"loss.distill.enabled but no teacher output for sample {s.sample_id!r}")
+                if out.input_length != len(s.input_ids):
+                    raise ValueError(
+                        f"teacher output for {s.sample_id!r} covers {out.input_length} positions, "
+                        f"the sample has {len(s.input_ids)}"
+                    )
+                if cfg.distill.estimator == "topk":
+                    if out.topk_ids is None or out.topk_logprobs is None:
+                        raise ValueError(f"estimator 'topk' but the teacher served no top-k for {s.sample_id!r} "
+                                         "(set teacher.serve_topk >= loss.distill.topk)")
+                outputs.append(out)
+                tw = turn_weights(s, cfg.distill)
+                weights.append(tw.weights)
+                kept += len(tw.kept_turns)
+                dropped += len(tw.dropped_turns)
+        else:
+            outputs = [None] * len(samples)
+        num_tokens = float(sum(sum(s.loss_mask) for s in samples))
+        norms = BatchNorms(num_tokens=max(num_tokens, 1.0), num_sequences=float(len(samples)))
+        return _Prepared(samples, adv, weights, outputs, norms, kept, dropped)
+
+    def _micro_batches(self, prep: _Prepared) -> list[list[int]]:
+        """This rank's sample indices split into micro-batches; every rank gets the same count."""
+        mine = list(range(self.rank, len(prep.samples), self.world_size))
+        mbs = self.config.optim.micro_batch_size
+        per_rank = math.ceil(len(prep.samples) / self.world_size)
+        count = max(1, math.ceil(per_rank / mbs))
+        batches = [mine[i * mbs:(i + 1) * mbs] for i in range(count)]
+        return batches  # may contain empty lists: padding steps that keep collectives in lockstep
+
+    def _tensors(self, prep: _Prepared, idx: list[int]) -> dict[str, torch.Tensor]:
+        dev = self.backend.device
+        samples = [prep.samples[i] for i in idx]
+        ids, attn = pad_batch([s.input_ids for s in samples], self.pad_id, side="right")
+        T = ids.shape[1]
+
+        def padded(rows: list[list[float]], dtype=torch.float32) -> torch.Tensor:
+            out = torch.zeros((len(rows), T), dtype=dtype)
+            for i, row in enumerate(rows):
+                out[i, : len(row)] = torch.tensor(row, dtype=dtype)
+            return out
+
+        t = {
+            "input_ids": ids,
+            "attention_mask": attn,
+            "loss_mask": padded([s.loss_mask for s in samples]),
+            "rollout_logprobs": padded([s.sampling_logprobs for s in samples]),
+            "advantages": prep.advantages[idx],
+        }
+        d = self.config.loss.distill
+        if d.enabled:
+            t["distill_weights"] = padded([prep.distill_weights[i] for i in idx])
+            outs = [prep.teacher[i] for i in idx]
+            if d.estimator == "topk":
+                K = d.topk
+                tid = torch.zeros((len(idx), T, K), dtype=torch.long)
+                tlp = torch.zeros((len(idx), T, K), dtype=torch.float32)
+                for b, (s, out) in enumerate(zip(samples, outs)):
+                    for p, m in enumerate(s.loss_mask):
+                        if not m:
+                            continue
+                        row_ids, row_lp = out.topk_ids[p], out.topk_logprobs[p]
+                        if len(row_ids) < K:
+                            raise ValueError(f"teacher served top-{len(row_ids)} at position {p} of "
+                                             f"{s.sample_id!r}, loss.distill.topk needs {K}")
+                        tid[b, p] = torch.tensor(row_ids[:K])
+                        tlp[b, p] = torch.tensor(row_lp[:K])
+                t["teacher_topk_ids"] = tid
+                t["teacher_topk_logprobs"] = tlp
+            else:
+                t["teacher_logprobs"] = padded([o.logprobs for o in outs])
+        return {k: v.to(dev) for k, v in t.items()}
+
+    def _dummy_loss(self) -> torch.Tensor:
+        """A zero loss through the whole model: a rank without samples still joins ZeRO-3's collectives."""
+        ids = torch.full((1, 2), self.pad_id, dtype=torch.long, device=self.backend.device)
+        stats = token_stats(self.backend.policy, ids, torch.ones_like(ids))
+        return stats.logprobs.sum() * 0.0
+
+    # -- the step ------------------------------------------------------------------------------
+    def _forward(self, t: dict[str, torch.Tensor], *, grad: bool):
+        d = self.config.loss.distill
+        with torch.set_grad_enabled(grad), self.backend.autocast():
+            return token_stats(
+                self.backend.policy, t["input_ids"], t["attention_mask"],
+                temperature=self.config.temperature, with_entropy=True,
+                gather_ids=t.get("teacher_topk_ids") if d.enabled and d.estimator == "topk" else None,
+                chunk_size=self.config.logprob_chunk_size,
+            )
+
+    def _reference_logprobs(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:
+        ref = self.backend.reference
+        if ref is None or self.config.loss.grpo.kl_beta <= 0:
+            return None
+        with torch.no_grad(), self.backend.autocast():
+            return token_stats(ref, t["input_ids"], t["attention_mask"], temperature=self.config.temperature,
+                               chunk_size=self.config.logprob_chunk_size).logprobs
+
+    def _run(self, samples: list[RolloutSample], teacher, *, update: bool) -> dict[str, float]:
+        t0 = time.perf_counter()
+        prep = self._prepare(samples, teacher)
+        batches = self._micro_batches(prep)
+        n_updates = self.config.optim.updates_per_batch if update else 1
+        cache: list[dict] = []
+        for idx in batches:
+            if not idx:
+                cache.append({})
+                continue
+            t = self._tensors(prep, idx)
+            entry = {"t": t, "ref": self._reference_logprobs(t)}
+            if n_updates > 1:  # pi_old must stay fixed across the updates of this batch
+                entry["old"] = self._forward(t, grad=False).logprobs.detach()
+            cache.append(entry)
+
+        sums: dict[str, float] = {}
+        grad_norms = []
+        for _ in range(n_updates):
+            parts = []
+            for entry in cache:
+                if not entry:
+                    if update:
+                        self.backend.backward(self._dummy_loss())
+                    continue
+                t = entry["t"]
+                stats = self._forward(t, grad=update)
+                old = entry.get("old", stats.logprobs.detach())
+                inputs = LossInputs(
+                    logprobs=stats.logprobs, old_logprobs=old, rollout_logprobs=t["rollout_logprobs"],
+                    loss_mask=t["loss_mask"], advantages=t["advantages"], ref_logprobs=entry["ref"],
+                    entropy=stats.entropy if self.config.loss.entropy_coef > 0 else stats.entropy.detach(),
+                    teacher_logprobs=t.get("teacher_logprobs"), distill_weights=t.get("distill_weights"),
+                    student_topk_logprobs=stats.gathered, teacher_topk_logprobs=t.get("teacher_topk_logprobs"),
+                )
+                out = compute_loss(inputs, self.config.loss, prep.norms)
+                if update:
+                    self.backend.backward(out.loss * self.backend.grad_scale)
+                parts.append(out.metrics)
+            if update:
+                grad_norms.append(self.backend.step())
+            # The metrics describe the last update of the batch (the only one when updates_per_batch=1).
+            sums = {}
+            for part in parts:
+                for key, value in part.items():
+                    sums[key] = sums.get(key, 0.0) + value
+        extra = {
+            "turns_truncated": float(prep.turns_truncated),
+            "turns_kept": float(prep.turns_kept),
+            "advantage_abs_mean": float(prep.advantages.abs().mean()),
+            "learner_s": time.perf_counter() - t0,
+        }
+        if update:
+            extra["grad_norm"] = float(grad_norms[-1])
+        return {"sums": sums, "extra": extra}
+
+    def train_step(self, samples: list[RolloutSample], teacher=None) -> dict:
+        """One batch: `optim.updates_per_batch` optimizer updates; returns this rank's metric sums.
+
+        Combine the ranks' results with `combine_rank_metrics`.
+        """
+        return self._run(samples, teacher, update=True)
+
+    def evaluate(self, samples: list[RolloutSample], teacher=None) -> dict:
+        """The loss and metrics of a batch without updating (replay / debugging / backend parity)."""
+        return self._run(samples, teacher, update=False)
+
+    # -- weights and checkpoints ---------------------------------------------------------------
+    def full_state_dict(self) -> dict[str, torch.Tensor] | None:
+        return self.backend.full_state_dict()
+
+    def load_full_state_dict(self, state: dict[str, torch.Tensor] | None) -> None:
+        self.backend.load_full_state_dict(state or {})
+
+    def save_rank_state(self, directory: str) -> None:
+        directory = Path(directory)
+        self.backend.save_state(directory)
+        write_json_atomic(directory / f"rng_rank{self.rank}.json", capture_rng_state())
+
+    def load_rank_state(self, directory: str) -> None:
+        directory = Path(directory)
+        self.backend.load_state(directory)
+        restore_rng_state(read_json(directory / f"rng_rank{self.rank}.json"))
+
+    def shutdown(self) -> None:
+        self.backend.shutdown()
