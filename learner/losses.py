@@ -63,7 +63,12 @@ def group_advantages(
         if len(members) < 2:
             continue
         centred = vals - vals.mean()
-        adv[idx] = centred / (vals.std(unbiased=True) + eps) if scale else centred
+        std = vals.std(unbiased=True)
+        if scale:
+            # A group without contrast carries no signal: 0, not 0/0 when eps is 0.
+            adv[idx] = centred / (std + eps) if std > 0 else torch.zeros_like(centred)
+        else:
+            adv[idx] = centred
     return adv.float()
 
 

@@ -1,0 +1,273 @@
+"""The losses against hand-computed values and closed forms (no model needed)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from actors.types import RolloutSample, TurnSpan
+from learner.config_models import DistillConfig, LossConfig
+from learner.losses import (
+    BatchNorms,
+    LossInputs,
+    compute_loss,
+    finalize_metrics,
+    group_advantages,
+    kl_estimate,
+    kl_surrogate,
+    topk_kl,
+    turn_weights,
+)
+
+# ----------------------------------------------------------------------------------------------
+# Advantages
+# ----------------------------------------------------------------------------------------------
+
+
+def test_group_advantages_hand_computed():
+    # group a: rewards 1, 0, 0.5 -> mean 0.5, sample std 0.5 -> (1, -1, 0)
+    # group b: rewards 2, 2 -> no contrast -> 0, 0; group c: a single sample -> 0
+    adv = group_advantages([1.0, 0.0, 0.5, 2.0, 2.0, 3.0], ["a", "a", "a", "b", "b", "c"], eps=0.0)
+    assert adv.tolist() == pytest.approx([1.0, -1.0, 0.0, 0.0, 0.0, 0.0])
+    # Interleaved groups are matched by id, not by position.
+    adv2 = group_advantages([1.0, 4.0, 0.0, 0.0], ["a", "b", "a", "b"], eps=0.0)
+    s = math.sqrt(0.5)  # sample std of {1, 0}
+    assert adv2.tolist() == pytest.approx([0.5 / s, 2.0 / math.sqrt(8.0), -0.5 / s, -2.0 / math.sqrt(8.0)])
+    # Dr.GRPO: centred only.
+    assert group_advantages([1.0, 0.0, 0.5], ["a"] * 3, scale=False).tolist() == pytest.approx([0.5, -0.5, 0.0])
+
+
+def test_group_advantages_rejects_mismatched_lengths():
+    with pytest.raises(ValueError, match="group_ids"):
+        group_advantages([1.0, 2.0], ["a"])
+
+
+# ----------------------------------------------------------------------------------------------
+# GRPO clipped surrogate (Eq. 1)
+# ----------------------------------------------------------------------------------------------
+
+
+def _grpo_only(**grpo) -> LossConfig:
+    return LossConfig(grpo={"kl_beta": 0.0, **grpo})
+
+
+def test_grpo_clipped_surrogate_hand_computed():
+    # Four tokens of one sample with advantage +1 and four of one with -1; ratios 1.5, 0.5, 1.0, 1.1.
+    ratios = torch.tensor([[1.5, 0.5, 1.0, 1.1], [1.5, 0.5, 1.0, 1.1]])
+    old = torch.zeros(2, 4)
+    logp = ratios.log().requires_grad_(True)
+    mask = torch.tensor([[1.0, 1.0, 1.0, 1.0], [1.0, 1.0, 1.0, 0.0]])  # last token of row 2 is a tool token
+    inputs = LossInputs(logprobs=logp, old_logprobs=old, rollout_logprobs=old, loss_mask=mask,
+                        advantages=torch.tensor([1.0, -1.0]))
+    out = compute_loss(inputs, _grpo_only(clip_eps_low=0.2, clip_eps_high=0.2), BatchNorms(7.0, 2.0))
+    # A=+1: max(-r, -clip(r)) -> -1.2, -0.5, -1.0, -1.1 ; A=-1: max(r, clip(r)) -> 1.5, 0.8, 1.0 (masked 1.1)
+    expected = (-1.2 - 0.5 - 1.0 - 1.1 + 1.5 + 0.8 + 1.0) / 7.0
+    assert out.loss.item() == pytest.approx(expected, abs=1e-6)
+    assert out.metrics["policy_loss"] == pytest.approx(expected, abs=1e-6)
+    out.loss.backward()
+    grad = logp.grad
+    # Clipped tokens carry no gradient: (A=+1, r=1.5) and (A=-1, r=0.5); so does the masked token.
+    assert grad[0, 0] == 0 and grad[1, 1] == 0 and grad[1, 3] == 0
+    # d/dlogp of -A*r = -A*r / 7 for the unclipped ones.
+    assert float(grad[0, 1]) == pytest.approx(-0.5 / 7.0)
+    assert float(grad[1, 0]) == pytest.approx(1.5 / 7.0)
+    assert out.metrics["sum/clipped"] == 2.0
+
+
+def test_grpo_sequence_mean_aggregation():
+    logp = torch.zeros(2, 3, requires_grad=True)
+    mask = torch.tensor([[1.0, 1.0, 1.0], [1.0, 0.0, 0.0]])
+    inputs = LossInputs(logprobs=logp, old_logprobs=logp.detach(), rollout_logprobs=logp.detach(), loss_mask=mask,
+                        advantages=torch.tensor([2.0, -1.0]))
+    tok = compute_loss(inputs, _grpo_only(), BatchNorms(4.0, 2.0))
+    seq = compute_loss(inputs, _grpo_only(loss_aggregation="sequence_mean"), BatchNorms(4.0, 2.0))
+    assert tok.loss.item() == pytest.approx((-2 * 3 + 1) / 4.0)   # token mean
+    assert seq.loss.item() == pytest.approx((-2.0 + 1.0) / 2.0)   # mean of per-sample means
+
+
+def test_tis_weight_caps_rollout_mismatch():
+    logp = torch.zeros(1, 2, requires_grad=True)
+    rollout = torch.tensor([[math.log(0.25), 0.0]])  # the generator was 4x less likely on token 0
+    inputs = LossInputs(logprobs=logp, old_logprobs=logp.detach(), rollout_logprobs=rollout,
+                        loss_mask=torch.ones(1, 2), advantages=torch.tensor([1.0]))
+    out = compute_loss(inputs, _grpo_only(tis_cap=2.0), BatchNorms(2.0, 1.0))
+    assert out.loss.item() == pytest.approx(-(2.0 + 1.0) / 2.0)  # weight min(4, 2) = 2 on token 0
+    assert out.metrics["sum/logprob_diff"] == pytest.approx(-math.log(0.25))
+
+
+# ----------------------------------------------------------------------------------------------
+# KL estimators
+# ----------------------------------------------------------------------------------------------
+
+P = torch.tensor([0.5, 0.3, 0.15, 0.05])
+Q = torch.tensor([0.25, 0.25, 0.25, 0.25])
+
+
+def _kl(p, q):
+    return float((p * (p / q).log()).sum())
+
+
+@pytest.mark.parametrize("estimator", ["k1", "k3"])
+def test_kl_estimators_are_unbiased_exactly(estimator):
+    # E_{x~p}[k(x)] computed exactly over the support equals the closed-form KL(p || q).
+    values = kl_estimate(P.log(), Q.log(), estimator)
+    assert float((P * values).sum()) == pytest.approx(_kl(P, Q), rel=1e-6)
+
+
+def test_kl_estimator_properties_and_monte_carlo():
+    gen = torch.Generator().manual_seed(0)
+    x = torch.multinomial(P, 200_000, replacement=True, generator=gen)
+    lp, lq = P.log()[x], Q.log()[x]
+    k1, k2, k3 = (kl_estimate(lp, lq, e) for e in ("k1", "k2", "k3"))
+    assert float(k1.mean()) == pytest.approx(_kl(P, Q), abs=0.01)
+    assert float(k3.mean()) == pytest.approx(_kl(P, Q), abs=0.01)
+    assert bool((k3 >= 0).all()) and bool((k1 < 0).any())  # k3 never negative, k1 can be
+    assert float(k3.var()) < float(k1.var())  # the point of k3: lower variance
+    assert float((P * kl_estimate(P.log(), Q.log(), "k2")).sum()) == pytest.approx(
+        float((P * 0.5 * (P / Q).log() ** 2).sum()))
+    with pytest.raises(ValueError, match="k4"):
+        kl_estimate(lp, lq, "k4")
+
+
+@pytest.mark.parametrize("estimator", ["k1", "k3"])
+def test_unbiased_surrogate_gradient_equals_reverse_kl_gradient(estimator):
+    # For p_theta = softmax(theta), sum_x p(x) * grad surrogate(x) must be grad KL(p_theta || q).
+    theta = torch.tensor([0.3, -0.2, 1.0, 0.1], requires_grad=True)
+    logq = torch.log_softmax(torch.tensor([0.0, 0.5, -0.5, 0.2]), -1)
+    logp = torch.log_softmax(theta, -1)
+    surr = kl_surrogate(logp, logp.detach(), logq, estimator, "unbiased")
+    (logp.detach().exp() * surr).sum().backward()
+    expected_theta = theta.detach().clone().requires_grad_(True)
+    lp = torch.log_softmax(expected_theta, -1)
+    (lp.exp() * (lp - logq)).sum().backward()
+    assert torch.allclose(theta.grad, expected_theta.grad, atol=1e-6)
+
+
+def test_pathwise_k3_gradient_is_the_forward_kl_gradient():
+    # Documented difference: differentiating k3's value gives grad KL(q || p_theta), not the reverse KL.
+    theta = torch.tensor([0.3, -0.2, 1.0, 0.1], requires_grad=True)
+    logq = torch.log_softmax(torch.tensor([0.0, 0.5, -0.5, 0.2]), -1)
+    logp = torch.log_softmax(theta, -1)
+    (logp.detach().exp() * kl_surrogate(logp, logp.detach(), logq, "k3", "pathwise")).sum().backward()
+    ref = theta.detach().clone().requires_grad_(True)
+    (logq.exp() * (logq - torch.log_softmax(ref, -1))).sum().backward()
+    assert torch.allclose(theta.grad, ref.grad, atol=1e-6)
+
+
+def test_topk_kl_exact_with_full_support_and_lower_bound_otherwise():
+    p = torch.tensor([0.5, 0.3, 0.15, 0.05])
+    q = torch.tensor([0.1, 0.6, 0.2, 0.1])
+    full = topk_kl(p.log(), q.log())
+    assert float(full) == pytest.approx(_kl(p, q), rel=1e-5)
+    top2 = torch.tensor([1, 2])  # the teacher's two most likely tokens
+    partial = topk_kl(p.log()[top2], q.log()[top2])
+    coarse_p = torch.tensor([0.3, 0.15, 0.55])
+    coarse_q = torch.tensor([0.6, 0.2, 0.2])
+    assert float(partial) == pytest.approx(_kl(coarse_p, coarse_q), rel=1e-5)
+    assert 0 <= float(partial) <= _kl(p, q)
+    with pytest.raises(ValueError, match="shapes"):
+        topk_kl(p.log()[:2], q.log()[:3])
+
+
+# ----------------------------------------------------------------------------------------------
+# TT-OPD turn truncation and the distillation sum (Eq. 2)
+# ----------------------------------------------------------------------------------------------
+
+
+def _sample(turn_lens, prompt=4, tool=3, truncated=()):
+    ids, mask, turns = [1] * prompt, [0] * prompt, []
+    for t, n in enumerate(turn_lens):
+        start = len(ids)
+        ids += [2] * n
+        mask += [1] * n
+        turns.append(TurnSpan(start=start, end=len(ids), truncated=t in truncated))
+        if t < len(turn_lens) - 1:
+            ids += [3] * tool
+            mask += [0] * tool
+    n = len(ids)
+    return RolloutSample(sample_id="s", task_id="t", domain="d", group_id="g", seed=0, prompt_length=prompt,
+                         input_ids=ids, loss_mask=mask, sampling_logprobs=[0.0] * n,
+                         policy_versions=[0 if m else -1 for m in mask], turns=turns)
+
+
+def test_turn_truncation_drops_turns_beyond_lmax():
+    # Turns of 2, 4, 3 generated tokens with 3 tool tokens between: they end 2, 9 and 15 tokens
+    # after the prompt (response basis); cumulative generated tokens 2, 6, 9.
+    s = _sample([2, 4, 3])
+    tw = turn_weights(s, DistillConfig(enabled=True, max_turn_tokens=10))
+    assert tw.kept_turns == [0, 1] and tw.dropped_turns == [2]
+    w = tw.weights
+    assert w[4:6] == [0.5, 0.5]                                   # turn 0: 1/|a_0| = 1/2
+    assert w[6:9] == [0.0] * 3                                    # tool tokens
+    assert w[9:13] == [0.25] * 4                                  # turn 1: 1/4
+    assert w[16:19] == [0.0] * 3                                  # turn 2 dropped
+    assert sum(w) == pytest.approx(2.0)                           # one per kept turn
+    # Generated-tokens basis: 9 <= 10 keeps all three.
+    assert turn_weights(s, DistillConfig(enabled=True, max_turn_tokens=10, truncation_basis="generated")).dropped_turns == []
+    # Context basis counts the prompt too: turn 1 ends at position 13 > 12.
+    assert turn_weights(s, DistillConfig(enabled=True, max_turn_tokens=12, truncation_basis="context")).kept_turns == [0]
+    # A turn the generator cut at its token limit is dropped even within L_max, unless configured off.
+    cut = _sample([2, 4, 3], truncated=(1,))
+    assert turn_weights(cut, DistillConfig(enabled=True)).dropped_turns == [1]
+    assert turn_weights(cut, DistillConfig(enabled=True, drop_length_truncated_turns=False)).dropped_turns == []
+    # "mean" divides by the number of kept turns.
+    assert sum(turn_weights(s, DistillConfig(enabled=True, turn_reduction="mean")).weights) == pytest.approx(1.0)
+
+
+def test_distillation_loss_hand_computed():
+    s = _sample([2, 4])  # prompt 4, turn 0 at 4-5, tools 6-8, turn 1 at 9-12
+    d = DistillConfig(enabled=True, lambda_distill=4.0, estimator="k1")
+    w = torch.tensor([turn_weights(s, d).weights])
+    logp = torch.full((1, len(s.input_ids)), -1.0, requires_grad=True)
+    teacher = torch.full((1, len(s.input_ids)), -1.0)
+    teacher[0, 4:6] = torch.tensor([-2.0, -3.0])       # k1 = 1, 2 -> turn mean 1.5
+    teacher[0, 9:13] = torch.tensor([-1.5, -1.0, -1.0, -0.5])  # k1 = 0.5, 0, 0, -0.5 -> mean 0
+    mask = torch.tensor([s.loss_mask], dtype=torch.float32)
+    cfg = LossConfig(grpo={"kl_beta": 0.0}, distill=d)
+    inputs = LossInputs(logprobs=logp, old_logprobs=logp.detach(), rollout_logprobs=logp.detach(), loss_mask=mask,
+                        advantages=torch.zeros(1), teacher_logprobs=teacher, distill_weights=w)
+    out = compute_loss(inputs, cfg, BatchNorms(6.0, 2.0))  # batch of 2 trajectories, the other contributes 0
+    assert out.metrics["distill_loss"] == pytest.approx((1.5 + 0.0) / 2.0)
+    assert out.loss.item() == pytest.approx(4.0 * 0.75)
+    m = finalize_metrics([out.metrics])
+    assert m["kl_teacher"] == pytest.approx((1 + 2 + 0.5 + 0 + 0 - 0.5) / 6.0)
+
+
+def test_micro_batches_sum_to_the_full_batch_loss_and_gradient():
+    gen = torch.Generator().manual_seed(1)
+    B, T = 4, 7
+    base = torch.randn(B, T, generator=gen) - 2.0
+    mask = (torch.rand(B, T, generator=gen) > 0.3).float()
+    ref = base + 0.1 * torch.randn(B, T, generator=gen)
+    teacher = base + 0.2 * torch.randn(B, T, generator=gen)
+    weights = mask / mask.sum(-1, keepdim=True).clamp(min=1)
+    adv = torch.tensor([1.0, -0.5, 0.2, -0.7])
+    cfg = LossConfig(grpo={"kl_beta": 0.05}, distill={"enabled": True, "estimator": "k3"})
+    norms = BatchNorms(float(mask.sum()), float(B))
+
+    def run(rows):
+        logp = base[rows].clone().requires_grad_(True)
+        inputs = LossInputs(logprobs=logp, old_logprobs=base[rows] - 0.05, rollout_logprobs=base[rows],
+                            loss_mask=mask[rows], advantages=adv[rows], ref_logprobs=ref[rows],
+                            teacher_logprobs=teacher[rows], distill_weights=weights[rows])
+        out = compute_loss(inputs, cfg, norms)
+        out.loss.backward()
+        return out.loss.item(), logp.grad
+
+    full_loss, full_grad = run([0, 1, 2, 3])
+    l1, g1 = run([0, 1])
+    l2, g2 = run([2, 3])
+    assert l1 + l2 == pytest.approx(full_loss, rel=1e-6)
+    assert torch.allclose(torch.cat([g1, g2]), full_grad, atol=1e-7)
+
+
+def test_missing_inputs_raise_named_errors():
+    logp = torch.zeros(1, 2, requires_grad=True)
+    base = dict(logprobs=logp, old_logprobs=logp.detach(), rollout_logprobs=logp.detach(),
+                loss_mask=torch.ones(1, 2), advantages=torch.zeros(1))
+    with pytest.raises(ValueError, match="kl_beta"):
+        compute_loss(LossInputs(**base), LossConfig(), BatchNorms(2.0, 1.0))
+    with pytest.raises(ValueError, match="distill"):
+        compute_loss(LossInputs(**base), LossConfig(grpo={"kl_beta": 0}, distill={"enabled": True}), BatchNorms(2.0, 1.0))
