@@ -1,0 +1,1 @@
+"""Drug interaction domain: ANSM interaction rules, dose, renal, hepatic and pregnancy checks."""

@@ -1,0 +1,456 @@
+"""The clinical computations behind the tools, as plain functions over the database.
+
+Tools (tools.py) wrap these with agent-facing errors; the task generator (taskgen.py) uses the
+same functions to compute its oracles, so a gold answer is exactly what the tools return.
+Every rule below is either read from the data or stated here explicitly (hepatic policy,
+pregnancy category meanings, renal-function formulas).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+
+from .data_model import (
+    DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, Patient, RenalProfile, RouteDose, SeverityLevel,
+)
+from .translate import SEVERITY_RANK, fold
+
+
+class LookupFailure(LookupError):
+    """A name, id or route the database does not know; the message lists what it does know."""
+
+
+# -- names ---------------------------------------------------------------------------------------
+def resolve_drug(db: DrugInteractionDB, name: str) -> Drug:
+    """A drug by generic name, brand name, synonym or ANSM French name (case/accents ignored)."""
+    key = fold(name or "")
+    drug_id = db.name_index.get(key)
+    if drug_id is None and key.endswith("s"):
+        drug_id = db.name_index.get(key[:-1])
+    if drug_id is None:
+        near = difflib.get_close_matches(key, list(db.name_index), n=5, cutoff=0.75)
+        hint = f"; did you mean: {', '.join(near)}?" if near else ""
+        raise LookupFailure(f"drug {name!r} is not in the formulary{hint}")
+    return db.drugs[drug_id]
+
+
+def resolve_class(db: DrugInteractionDB, name: str) -> DrugClass:
+    """A class by English name, id or French ANSM label."""
+    key = fold(name or "")
+    cid = db.class_index.get(key)
+    if cid is None:
+        cid = db.class_index.get(fold(key.replace(" ", "-")))
+    if cid is None:
+        near = search_classes(db, name)[:5]
+        hint = f"; matching classes: {', '.join(c.name for c in near)}" if near else ""
+        raise LookupFailure(f"drug class {name!r} not found{hint}")
+    return db.classes[cid]
+
+
+def search_classes(db: DrugInteractionDB, query: str) -> list[DrugClass]:
+    """Classes whose English or French name contains every word of the query."""
+    words = [w for w in fold(query).replace("-", " ").split() if w]
+    hits = []
+    for cls in db.classes.values():
+        text = fold(f"{cls.name} {cls.name_fr} {cls.id}").replace("-", " ")
+        if words and all(w in text for w in words):
+            hits.append(cls)
+    return sorted(hits, key=lambda c: (len(c.name), c.id))
+
+
+def resolve_party(db: DrugInteractionDB, name: str) -> tuple[str, Drug | DrugClass]:
+    """A drug, or failing that a non-drug ANSM party such as grapefruit or alcohol."""
+    try:
+        return "drug", resolve_drug(db, name)
+    except LookupFailure as drug_error:
+        key = fold(name or "")
+        for cls in db.classes.values():
+            if cls.kind != "class" and (key in (fold(cls.name), fold(cls.name_fr), cls.id)
+                                        or key == fold(cls.name).split(" (")[0]):
+                return "party", cls
+        raise drug_error
+
+
+def get_patient(db: DrugInteractionDB, patient_id: str) -> Patient:
+    patient = db.patients.get((patient_id or "").strip().upper())
+    if patient is None:
+        known = sorted(db.patients)
+        raise LookupFailure(f"patient {patient_id!r} not found; known patients: {', '.join(known[:8])}"
+                            f"{' ...' if len(known) > 8 else ''} ({len(known)} in all)")
+    return patient
+
+
+# -- interactions --------------------------------------------------------------------------------
+def party_keys(db: DrugInteractionDB, subject: Drug | DrugClass) -> list[str]:
+    """The rule keys that apply to a drug: itself and every ANSM class it belongs to."""
+    if isinstance(subject, Drug):
+        return [f"drug:{subject.id}"] + [f"class:{c}" for c in subject.class_ids]
+    return [f"class:{subject.id}"]
+
+
+def rules_between(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> list[InteractionRule]:
+    """Every ANSM rule whose two parties cover a and b (substance or class level)."""
+    if a.id == b.id and type(a) is type(b):
+        return []
+    keys_a, keys_b = party_keys(db, a), set(party_keys(db, b))
+    found: dict[str, InteractionRule] = {}
+    for key in keys_a:
+        for rule_id in db.party_index.get(key, []):
+            rule = db.interactions[rule_id]
+            ka, kb = rule.party_a.key, rule.party_b.key
+            if (ka == key and kb in keys_b) or (kb == key and ka in keys_b):
+                found[rule_id] = rule
+    return sorted(found.values(), key=lambda r: r.id)
+
+
+def applicable_level(db: DrugInteractionDB, rule: InteractionRule, a_id: str, b_id: str) -> tuple[SeverityLevel, str]:
+    """The level of a (possibly multi-level) rule that applies to the pair (a, b), and why.
+
+    ANSM rules with several levels state in French which one applies ("avec la doxazosine",
+    "pour tous les medicaments sedatifs entre eux"). The build records which thesaurus substances
+    each condition names; here:
+      1. a single level applies as is;
+      2. levels whose condition names the drug matched through a class party (directly or by one
+         of its classes) apply; within one class, a condition listing several members applies only
+         when it names both drugs;
+      3. otherwise levels whose condition names no other substance (general conditions such as
+         doses or renal function) apply, the most severe first;
+      4. otherwise (every level names other substances only) the least severe level is reported.
+    The full French conditions are always returned with the level, so the agent can check.
+    """
+    levels = rule.levels
+    if len(levels) == 1:
+        return levels[0], "single level"
+    own = {p.id for p in (rule.party_a, rule.party_b) if p.kind == "substance" and p.id}
+    party_classes = {p.id for p in (rule.party_a, rule.party_b) if p.kind != "substance" and p.id}
+    party_classes |= {db.classes[c].other_of for c in list(party_classes) if c in db.classes and db.classes[c].other_of}
+    via_class = {d for d in (a_id, b_id) if d not in own}
+    intra = rule.party_a.kind == rule.party_b.kind == "class" and any(
+        db.classes[c].other_of in party_classes for c in party_classes if c in db.classes)
+
+    def named_in(lv: SeverityLevel, drug_id: str) -> bool:
+        if drug_id in lv.mentions:
+            return True
+        drug = db.drugs.get(drug_id)
+        return bool(drug and set(lv.mentions_classes) - party_classes & set(drug.class_ids))
+
+    def names_pair(lv: SeverityLevel) -> bool:
+        hits = {d for d in via_class if named_in(lv, d)}
+        # within one class, a list of several members ("amiodarone, disopyramide, sotalol") means
+        # "between these": both drugs must be named; a single name ("avec l'oxybate") needs one
+        listed = len(lv.mentions) + len(set(lv.mentions_classes) - party_classes)
+        both = intra and listed >= 2
+        return bool(via_class) and (hits == via_class if both else bool(hits))
+
+    def general(lv: SeverityLevel) -> bool:
+        return (set(lv.mentions) <= own and set(lv.mentions_classes) <= party_classes
+                and not lv.mentions_other_substances)
+
+    by_rank = lambda lv: SEVERITY_RANK[lv.level]  # noqa: E731
+    named = [lv for lv in levels if names_pair(lv)]
+    if named:
+        chosen = max(named, key=by_rank)
+        return chosen, "condition names " + " and ".join(sorted(d for d in via_class if named_in(chosen, d)))
+    generic = [lv for lv in levels if general(lv)]
+    if generic:
+        return max(generic, key=by_rank), "general condition (doses, route, renal function...): most severe applies"
+    return min(levels, key=by_rank), "conditions name other substances or classes only: least severe level reported"
+
+
+def assess_pair(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> list[tuple[InteractionRule, SeverityLevel, str]]:
+    """(rule, applicable level, basis) for every rule covering the pair, most severe first."""
+    out = [(rule, *applicable_level(db, rule, a.id, b.id)) for rule in rules_between(db, a, b)]
+    return sorted(out, key=lambda t: (-SEVERITY_RANK[t[1].level], t[0].id))
+
+
+def pair_severity(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> str:
+    return max((lv.level for _, lv, _ in assess_pair(db, a, b)), key=lambda s: SEVERITY_RANK[s], default="none")
+
+
+def max_severity(levels) -> str:
+    return max(levels, key=lambda s: SEVERITY_RANK[s], default="none")
+
+
+def rule_brief(rule: InteractionRule, level: SeverityLevel | None = None, basis: str | None = None) -> dict:
+    out = {
+        "rule_id": rule.id,
+        "parties": [_party_text(rule.party_a), _party_text(rule.party_b)],
+        "severity": level.label if level else rule.severity,
+        "severity_level": level.level if level else rule.severity_level,
+        "summary": rule.summary.text,
+        "mechanism": rule.mechanism.model_dump(),
+        "management": [{"level": lv.label, **lv.condition.model_dump()} for lv in rule.levels if lv.condition],
+    }
+    if len(rule.levels) > 1:
+        out["listed_levels"] = [lv.label for lv in rule.levels]
+        out["level_basis"] = basis
+    return out
+
+
+def _party_text(p) -> str:
+    return f"{p.name} [class]" if p.kind == "class" else p.name
+
+
+def pair_report(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> dict:
+    assessed = assess_pair(db, a, b)
+    return {
+        "drug_a": a.id, "drug_b": b.id,
+        "interaction_found": bool(assessed),
+        "severity_level": max_severity(lv.level for _, lv, _ in assessed),
+        "rules": [rule_brief(r, lv, basis) for r, lv, basis in assessed],
+    }
+
+
+@dataclass(frozen=True)
+class PairFinding:
+    drug_a: str
+    drug_b: str
+    severity_level: str
+    rule_ids: tuple[str, ...]
+    involves_proposed: bool
+    multi_level: bool
+
+
+def _finding(db: DrugInteractionDB, a: Drug, b: Drug, proposed: bool) -> PairFinding | None:
+    assessed = assess_pair(db, a, b)
+    if not assessed:
+        return None
+    return PairFinding(a.id, b.id, max_severity(lv.level for _, lv, _ in assessed), tuple(r.id for r, _, _ in assessed),
+                       proposed, any(len(r.levels) > 1 for r, _, _ in assessed))
+
+
+def medication_list_findings(db: DrugInteractionDB, patient: Patient, proposed: Drug | None) -> list[PairFinding]:
+    """Interacting pairs among the active medications, plus the proposed drug against each."""
+    meds = list(dict.fromkeys(m.drug_id for m in patient.active_medications()))
+    drugs = [db.drugs[d] for d in meds]
+    findings = []
+    for i, a in enumerate(drugs):
+        for b in drugs[i + 1:]:
+            found = _finding(db, a, b, False)
+            if found:
+                findings.append(found)
+    if proposed is not None:
+        for a in drugs:
+            if a.id != proposed.id:
+                found = _finding(db, proposed, a, True)
+                if found:
+                    findings.append(found)
+    return sorted(findings, key=lambda f: (not f.involves_proposed, -SEVERITY_RANK[f.severity_level], f.drug_a, f.drug_b))
+
+
+# -- allergies -----------------------------------------------------------------------------------
+def allergy_conflicts(db: DrugInteractionDB, patient: Patient, drug: Drug) -> list[dict]:
+    """Direct (same drug), class (drug in an allergen ANSM class) and listed cross-reaction conflicts."""
+    out = []
+    profile = db.dose_profiles.get(drug.id)
+    cross = {fold(x) for x in (profile.allergy_cross_reactions if profile else [])}
+    for allergy in patient.allergies:
+        if allergy.drug_id == drug.id:
+            out.append({"allergen": allergy.allergen, "match": "direct", "reaction": allergy.reaction,
+                        "severity": allergy.severity})
+        elif allergy.class_id and allergy.class_id in drug.class_ids:
+            out.append({"allergen": allergy.allergen, "match": f"class: {drug.name} is a member of "
+                        f"'{db.classes[allergy.class_id].name}'", "reaction": allergy.reaction, "severity": allergy.severity})
+        elif allergy.drug_id and fold(allergy.drug_id) in cross:
+            out.append({"allergen": allergy.allergen, "match": "cross-reaction listed by drugdose",
+                        "reaction": allergy.reaction, "severity": allergy.severity})
+    return out
+
+
+# -- alternatives --------------------------------------------------------------------------------
+def alternatives(db: DrugInteractionDB, drug: Drug, patient: Patient, within: DrugClass | None = None) -> dict:
+    """Peers of `drug` in its therapeutic ANSM classes (or `within`), ranked by their worst interaction
+    with the patient's other active medications; allergy conflicts are excluded."""
+    if within is not None:
+        classes = [within]
+    else:
+        classes = [db.classes[c] for c in drug.class_ids if db.classes[c].therapeutic]
+    others = [db.drugs[m.drug_id] for m in patient.active_medications() if m.drug_id != drug.id]
+    current = max_severity(pair_severity(db, drug, o) for o in others)
+    peers: dict[str, dict] = {}
+    excluded = []
+    for cls in classes:
+        for member_id in cls.members:
+            if member_id == drug.id or member_id in peers:
+                continue
+            member = db.drugs[member_id]
+            if allergy_conflicts(db, patient, member):
+                excluded.append(member_id)
+                continue
+            severities = {o.id: pair_severity(db, member, o) for o in others if o.id != member_id}
+            peers[member_id] = {"drug": member_id, "worst_severity": max_severity(severities.values()),
+                                "interacting_with": sorted(k for k, v in severities.items() if v != "none")}
+    ranked = sorted(peers.values(), key=lambda p: (SEVERITY_RANK[p["worst_severity"]], p["drug"]))
+    safer = [p for p in ranked if SEVERITY_RANK[p["worst_severity"]] < SEVERITY_RANK[current]]
+    return {"drug": drug.id, "current_worst_severity": current, "classes_searched": [c.name for c in classes],
+            "safer_alternatives": safer, "other_candidates": [p for p in ranked if p not in safer],
+            "excluded_for_allergy": sorted(set(excluded))}
+
+
+# -- renal and hepatic ---------------------------------------------------------------------------
+def cockcroft_gault(patient: Patient) -> float:
+    """Creatinine clearance (mL/min), Cockcroft-Gault with actual body weight, x0.85 if female."""
+    crcl = (140 - patient.age) * patient.weight_kg / (72 * patient.serum_creatinine_mg_dl)
+    if patient.sex == "female":
+        crcl *= 0.85
+    return round(crcl, 1)
+
+
+def ckd_epi_2021(patient: Patient) -> float:
+    """eGFR (mL/min/1.73 m2), race-free CKD-EPI 2021 creatinine equation."""
+    scr = patient.serum_creatinine_mg_dl
+    female = patient.sex == "female"
+    kappa, alpha = (0.7, -0.241) if female else (0.9, -0.302)
+    egfr = 142 * min(scr / kappa, 1) ** alpha * max(scr / kappa, 1) ** -1.200 * 0.9938 ** patient.age
+    if female:
+        egfr *= 1.012
+    return round(egfr, 1)
+
+
+def renal_tier(profile: RenalProfile, value: float) -> dict:
+    """The tier whose lower bound is the highest one not above `value` (tiers cover 0 to infinity)."""
+    if value < 0 or not math.isfinite(value):
+        raise ValueError(f"renal function must be a non-negative number, got {value}")
+    for tier in profile.tiers:  # sorted by min, descending
+        if value >= tier.min:
+            return tier.model_dump()
+    return profile.tiers[-1].model_dump()
+
+
+# Stated policy (not a source fact): what a hepatic caution flag means for each Child-Pugh class.
+HEPATIC_POLICY = {
+    None: "no_adjustment",
+    "A": "use_with_caution",
+    "B": "reduce_dose_and_monitor",
+    "C": "avoid_or_specialist_review",
+}
+
+
+def hepatic_assessment(db: DrugInteractionDB, drug: Drug, child_pugh: str | None) -> dict:
+    flags = {}
+    if drug.id in db.dose_profiles:
+        flags["drugdose.hepatic_caution"] = db.dose_profiles[drug.id].hepatic_caution
+    if drug.id in db.renal_profiles:
+        flags["open-medicine.hepatic_interaction_flag"] = db.renal_profiles[drug.id].hepatic_flag
+    if not flags:
+        recommendation = "no_data"
+    elif not any(flags.values()):
+        recommendation = "no_flagged_concern"
+    else:
+        recommendation = HEPATIC_POLICY[child_pugh]
+    return {"drug": drug.id, "child_pugh_class": child_pugh, "hepatic_flags": flags,
+            "hepatic_caution": any(flags.values()) if flags else None, "recommendation": recommendation}
+
+
+PREGNANCY_CATEGORIES = {
+    "A": ("Adequate well-controlled studies in pregnant women have not shown a risk to the fetus.", "acceptable"),
+    "B": ("Animal studies show no risk, without adequate studies in pregnant women (or animal risk not confirmed in humans).", "acceptable"),
+    "C": ("Risk cannot be ruled out: animal studies show adverse effects or are lacking, and human data are inadequate.", "use_only_if_benefit_justifies_risk"),
+    "D": ("Positive evidence of human fetal risk; benefits may warrant use despite the risk.", "avoid_unless_no_safer_alternative"),
+    "X": ("Fetal abnormalities or risk clearly outweigh any possible benefit.", "contraindicated"),
+}
+
+
+def pregnancy_assessment(db: DrugInteractionDB, drug: Drug) -> dict:
+    profile = db.dose_profiles.get(drug.id)
+    category = profile.pregnancy_category if profile else None
+    if category not in PREGNANCY_CATEGORIES:
+        return {"drug": drug.id, "fda_category": None, "recommendation": "no_data",
+                "note": "no FDA pregnancy category in the formulary sources (drugdose covers 49 emergency drugs)"}
+    meaning, recommendation = PREGNANCY_CATEGORIES[category]
+    return {"drug": drug.id, "fda_category": category, "meaning": meaning, "recommendation": recommendation,
+            "source": profile.provenance[0].model_dump()}
+
+
+# -- dosing --------------------------------------------------------------------------------------
+_MASS_TO_MG = {"g": 1000.0, "mg": 1.0, "mcg": 0.001}
+_UNIT_ALIASES = {"µg": "mcg", "ug": "mcg", "microgram": "mcg", "micrograms": "mcg", "milligram": "mg", "milligrams": "mg",
+                 "gram": "g", "grams": "g", "unit": "units", "iu": "units", "meq": "mEq", "hour": "hr", "h": "hr"}
+
+
+def _norm_unit(unit: str) -> str:
+    parts = [p.strip() for p in unit.strip().split("/")]
+    out = []
+    for p in parts:
+        low = p.lower()
+        out.append(_UNIT_ALIASES.get(low, "mEq" if low == "meq" else low))
+    return "/".join(out)
+
+
+def find_route(profile: DoseProfile, route: str) -> RouteDose:
+    for r in profile.routes:
+        if r.route.lower() == route.strip().lower():
+            return r
+    raise LookupFailure(f"no {route!r} dose range for {profile.drug_id}; routes: {', '.join(r.route for r in profile.routes)}")
+
+
+def convert(amount: float, unit_from: str, unit_to: str) -> float:
+    """Convert between mass units (g, mg, mcg) with identical denominators; other units must match."""
+    f, t = _norm_unit(unit_from), _norm_unit(unit_to)
+    if f == t:
+        return amount
+    fn, *fd = f.split("/")
+    tn, *td = t.split("/")
+    if fd != td or fn not in _MASS_TO_MG or tn not in _MASS_TO_MG:
+        raise ValueError(f"cannot convert {unit_from!r} to {unit_to!r}")
+    return amount * _MASS_TO_MG[fn] / _MASS_TO_MG[tn]
+
+
+def dose_range(route: RouteDose, weight_kg: float | None, age_years: float | None = None) -> dict:
+    """Absolute range (per-kg doses times weight) and the single-dose cap in the dose's numerator unit."""
+    unit = route.dose_unit
+    if route.per_kg:
+        if weight_kg is None:
+            raise ValueError(f"{route.route} dose is weight-based ({unit}); give weight_kg or patient_id")
+        if weight_kg <= 0:
+            raise ValueError(f"weight_kg must be positive, got {weight_kg}")
+        parts = unit.split("/")
+        abs_unit = "/".join(p for i, p in enumerate(parts) if not (i > 0 and p == "kg"))
+        lo, hi = route.dose_min * weight_kg, route.dose_max * weight_kg
+    else:
+        abs_unit, lo, hi = unit, route.dose_min, route.dose_max
+    numerator = abs_unit.split("/")[0]
+    cap = route.max_single_dose
+    pediatric = age_years is not None and age_years < 18 and route.pediatric_max_dose is not None
+    if pediatric:
+        cap = route.pediatric_max_dose
+    cap_abs = None
+    if cap is not None and "/" not in abs_unit and not route.continuous_infusion:
+        cap_abs = convert(cap, route.cap_unit or numerator, numerator)
+    if hi > 0:
+        max_single = min(hi, cap_abs) if cap_abs is not None else hi
+    else:  # the source gives only a cap (e.g. intranasal naloxone)
+        max_single = cap_abs
+    return {
+        "route": route.route, "unit": abs_unit, "min": _r(lo), "max": _r(hi),
+        "max_single_dose_cap": _r(cap_abs) if cap_abs is not None else None,
+        "cap_applied": "pediatric" if pediatric and cap_abs is not None else ("adult" if cap_abs is not None else None),
+        "recommended_max_single_dose": _r(max_single) if max_single is not None else None,
+        "per_kg": route.per_kg, "dose_per_kg": f"{route.dose_min}-{route.dose_max} {unit}" if route.per_kg else None,
+        "frequency": route.frequency, "continuous_infusion": route.continuous_infusion, "notes": route.notes,
+    }
+
+
+def _r(x: float) -> float:
+    return round(x, 4)
+
+
+def dose_check(route: RouteDose, dose: float, unit: str, weight_kg: float | None, age_years: float | None = None) -> dict:
+    if dose <= 0 or not math.isfinite(dose):
+        raise ValueError(f"dose must be a positive number, got {dose}")
+    rng = dose_range(route, weight_kg, age_years)
+    given = convert(dose, unit, rng["unit"])
+    cap = rng["max_single_dose_cap"]
+    if cap is not None and given > cap + 1e-9:
+        status = "exceeds_max_single_dose"
+    elif rng["max"] > 0 and given > rng["max"] + 1e-9:
+        status = "above_range"
+    elif given < rng["min"] - 1e-9:
+        status = "below_range"
+    else:
+        status = "within_range"
+    reference = cap if cap is not None else (rng["max"] if rng["max"] > 0 else None)
+    return {**rng, "dose_given": _r(given), "status": status,
+            "ratio_to_max": _r(given / reference) if reference else None}
