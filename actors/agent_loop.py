@@ -59,6 +59,7 @@ class EpisodeSpec(BaseModel):
     group_index: int = 0
     seed: int
     min_version: int = 0  # the generator must hold at least this policy version
+    greedy: bool = False  # argmax decoding (validation)
 
 
 class PromptTooLongError(ValueError):
@@ -214,7 +215,7 @@ class AgentLoop:
             request = GenerationRequest(
                 request_id=f"{spec.sample_id}:t{turn}", prompt_ids=ids,
                 max_new_tokens=min(limits.max_new_tokens_per_turn, budget),
-                seed=turn_seed(spec.seed, turn), min_version=spec.min_version,
+                seed=turn_seed(spec.seed, turn), min_version=spec.min_version, greedy=spec.greedy,
             )
             t0 = time.perf_counter()
             result = await generate(request)

@@ -26,6 +26,16 @@ from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finished_info,
 from actors.types import RolloutSample
 
 
+def register_domains(domain_modules: dict[str, str] | None) -> None:
+    """Register extra domain modules (name -> module path) in this process's registry."""
+    from envs import registry
+
+    for name, module in (domain_modules or {}).items():
+        if registry.DOMAINS.get(name, module) != module:
+            raise ValueError(f"domain {name!r} is already registered as {registry.DOMAINS[name]!r}, not {module!r}")
+        registry.DOMAINS[name] = module
+
+
 class EpisodeNotFoundError(KeyError):
     """The actor does not know the episode (it was restarted since the episode's reset)."""
 
@@ -45,8 +55,10 @@ class EnvActor:
     """
 
     def __init__(self, actor_index: int, max_turns: int, slots: int = 4,
-                 env_kwargs: dict[str, Any] | None = None) -> None:
+                 env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None) -> None:
         import envs  # noqa: F401  (registers HealthcareGym-v0)
+
+        register_domains(domain_modules)
 
         self.actor_index = actor_index
         self.max_turns = max_turns
@@ -157,19 +169,21 @@ class EnvPool:
         slots_per_actor: Episodes in flight per actor.
         max_turns: Passed to every environment.
         env_kwargs: Extra environment arguments.
+        domain_modules: Extra domains to register in every actor (name -> module path).
         max_restarts: Ray restarts per actor (-1 = unlimited).
         num_cpus: CPU reservation per actor (fractional is fine: tools are light).
     """
 
     def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
-                 env_kwargs: dict[str, Any] | None = None, max_restarts: int = -1, num_cpus: float = 0.0) -> None:
+                 env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
+                 max_restarts: int = -1, num_cpus: float = 0.0) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
             raise ValueError(f"env pool needs num_actors >= 1 and slots_per_actor >= 1, got "
                              f"{num_actors} and {slots_per_actor}")
         cls = ray.remote(EnvActor).options(max_restarts=max_restarts, max_task_retries=0, num_cpus=num_cpus)
-        self.actors = [cls.remote(i, max_turns, slots_per_actor, env_kwargs) for i in range(num_actors)]
+        self.actors = [cls.remote(i, max_turns, slots_per_actor, env_kwargs, domain_modules) for i in range(num_actors)]
         self.slots = slots_per_actor
         self.in_flight: list[set[str]] = [set() for _ in range(num_actors)]
         self.lost: list[int] = [0] * num_actors

@@ -53,6 +53,8 @@ class GenerationRequest(BaseModel):
     # The generator refuses to sample with weights older than this (after a restart it comes back
     # with its initial weights; the caller then re-sends the current ones and retries).
     min_version: int = 0
+    # Argmax instead of sampling (validation); the log-probs are still the sampling distribution's.
+    greedy: bool = False
 
 
 class GenerationResult(BaseModel):
@@ -224,7 +226,10 @@ class HFGenerator(Generator):
                 for i in range(B):
                     if finish[i] is not None:
                         continue
-                    token = int(torch.multinomial(probs[i], 1, generator=rngs[i]).item())
+                    if requests[i].greedy:
+                        token = int(torch.argmax(logp[i]).item())
+                    else:
+                        token = int(torch.multinomial(probs[i], 1, generator=rngs[i]).item())
                     out_ids[i].append(token)
                     out_lp[i].append(float(logp[i, token]))
                     step_tokens[i, 0] = token
@@ -362,3 +367,105 @@ def generator_actor_class():
     import ray
 
     return ray.remote(GeneratorService)
+
+
+def _is_generator_failure(exc: BaseException) -> bool:
+    from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError
+
+    return isinstance(exc, (RayActorError, ActorDiedError, ActorUnavailableError, GeneratorBehindError))
+
+
+class GeneratorClient:
+    """The agent loop's `generate` coroutine over a set of generator actors.
+
+    Sends each request to the generator with the fewest outstanding requests. A generator that
+    died (Ray restarts it with its initial weights) or holds weights older than the request's
+    `min_version` gets the latest published weights pushed and the request is retried: generation
+    is a pure function of (ids, weights, seed), so a retried turn changes nothing in the episode.
+
+    Args:
+        handles: Generator actor handles (`generator_actor_class()` instances).
+        max_attempts: Tries per request across failures.
+        sync_timeout_s: Limit for one weight push; a generator that misses it is named in the error.
+    """
+
+    def __init__(self, handles: list, max_attempts: int = 5, sync_timeout_s: float = 120.0) -> None:
+        if not handles:
+            raise ValueError("GeneratorClient needs at least one generator handle")
+        self.handles = list(handles)
+        self.max_attempts = max_attempts
+        self.sync_timeout_s = sync_timeout_s
+        self.outstanding = [0] * len(handles)
+        self.weights_ref = None   # latest published weights (an ObjectRef), None = initial weights
+        self.version = 0
+        self.failures = 0         # requests that hit a dead or stale generator
+        self.resyncs = 0
+        self._locks: list[asyncio.Lock] | None = None
+
+    def publish(self, weights_ref, version: int) -> None:
+        """Record the newest weights; `sync_all` pushes them, failed generators get them on retry."""
+        self.weights_ref, self.version = weights_ref, int(version)
+
+    async def __call__(self, request: GenerationRequest) -> GenerationResult:
+        last: BaseException | None = None
+        for _ in range(self.max_attempts):
+            index = min(range(len(self.handles)), key=lambda i: self.outstanding[i])
+            self.outstanding[index] += 1
+            try:
+                return await self.handles[index].generate.remote(request)
+            except Exception as exc:
+                if not _is_generator_failure(exc):
+                    raise
+                self.failures += 1
+                last = exc
+            finally:
+                self.outstanding[index] -= 1
+            await self._resync(index)
+        raise RuntimeError(f"generate {request.request_id}: failed {self.max_attempts} times; last: {last!r}")
+
+    async def _resync(self, index: int) -> None:
+        if self._locks is None:
+            self._locks = [asyncio.Lock() for _ in self.handles]
+        async with self._locks[index]:
+            for _ in range(self.max_attempts):
+                try:
+                    current = await asyncio.wait_for(self.handles[index].version.remote(), self.sync_timeout_s)
+                    if current >= self.version or self.weights_ref is None:
+                        return
+                    await asyncio.wait_for(self.handles[index].update_weights.remote(self.weights_ref, self.version),
+                                           self.sync_timeout_s)
+                    self.resyncs += 1
+                    return
+                except Exception as exc:  # still restarting: wait and try again
+                    if not _is_generator_failure(exc) and not isinstance(exc, asyncio.TimeoutError):
+                        raise
+                    await asyncio.sleep(0.5)
+
+    async def sync_all(self, weights_ref, version: int) -> float:
+        """Push new weights to every generator (in parallel); returns the seconds it took.
+
+        Raises:
+            TimeoutError: naming the generators that did not confirm within `sync_timeout_s`.
+        """
+        self.publish(weights_ref, version)
+        started = time.perf_counter()
+        tasks = [asyncio.ensure_future(self._push(i)) for i in range(len(self.handles))]
+        done, pending = await asyncio.wait(tasks, timeout=self.sync_timeout_s)
+        if pending:
+            for task in pending:
+                task.cancel()
+            late = [i for i, t in enumerate(tasks) if t in pending]
+            raise TimeoutError(f"weight sync to policy version {version}: generator(s) {late} did not confirm "
+                               f"within {self.sync_timeout_s:.0f}s")
+        for task in done:
+            task.result()
+        return time.perf_counter() - started
+
+    async def _push(self, index: int) -> None:
+        try:
+            await self.handles[index].update_weights.remote(self.weights_ref, self.version)
+        except Exception as exc:
+            if not _is_generator_failure(exc):
+                raise
+            # Restarting: its next request fails with GeneratorBehindError and `_resync` catches up.
+            self.failures += 1

@@ -134,7 +134,8 @@ class VLLMGenerator(Generator):
         from vllm import SamplingParams
 
         return SamplingParams(
-            temperature=self.sampling.temperature,
+            # temperature 0 is vLLM's greedy mode.
+            temperature=0.0 if request.greedy else self.sampling.temperature,
             top_p=self.sampling.top_p,
             top_k=self.sampling.top_k if self.sampling.top_k > 0 else -1,
             max_tokens=request.max_new_tokens,

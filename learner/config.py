@@ -81,6 +81,9 @@ class SFTConfig(_Strict):
 
 class DataConfig(_Strict):
     domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
+    # Domains outside envs/domains to register first (name -> module with get_environment/get_tasks),
+    # in the driver and in every env actor.
+    domain_modules: dict[str, str] = Field(default_factory=dict)
     train_split: str = "train"
     val_split: str = "test"
     max_train_tasks: int | None = Field(default=None, ge=1)
@@ -145,7 +148,7 @@ class TrainerConfig(_Strict):
     val_interval: int = Field(default=5, ge=0, description="steps between validations; 0 = off")
     val_at_start: bool = True
     val_group_size: int = Field(default=1, ge=1)
-    val_temperature: float | None = Field(default=None, gt=0, description="None = generator.sampling.temperature")
+    val_greedy: bool = Field(default=True, description="argmax decoding for validation (less noise than sampling)")
     save_trajectories: bool = True
     weight_sync_timeout_s: float = Field(default=120.0, gt=0)
     teacher_timeout_s: float = Field(default=600.0, gt=0)

@@ -1,0 +1,59 @@
+"""`hcgym train`, `hcgym plot` and `hcgym replay` (registered by `envs.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def _train(args: argparse.Namespace) -> int:
+    from learner.train import config_from_args, train
+
+    summary = train(config_from_args(args), resume=args.resume)
+    print(json.dumps({"steps": summary["steps"], "wall_s": round(summary["wall_s"], 1), "run_dir": summary["run_dir"],
+                      "last_validation": summary["last_validation"]}, indent=1))
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from learner.plot import plot_runs
+
+    out = plot_runs(args.run_dirs, output=args.output, labels=args.label or None)
+    print(out)
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from learner.config import load_config
+    from learner.train import replay_loss
+
+    cfg = load_config(args.config, args.set)
+    metrics = replay_loss(args.trajectories, args.model_dir, cfg)
+    print(json.dumps(metrics, indent=1, sort_keys=True))
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add the training subcommands to the `hcgym` parser."""
+    from learner.train import build_arg_parser
+
+    train = subparsers.add_parser("train", help="train a policy with GRPO / TT-OPD on local or remote Ray",
+                                  description="Train from a run config (configs/*.yaml).")
+    build_arg_parser(train)
+    train.set_defaults(func=_train)
+
+    plot = subparsers.add_parser("plot", help="training-dynamics figure of one or more runs",
+                                 description="Write RUN_DIR/training_dynamics.png (validation accuracy, KL, "
+                                             "response length, turns per episode); several runs are overlaid.")
+    plot.add_argument("run_dirs", nargs="+", metavar="RUN_DIR")
+    plot.add_argument("--output", default=None, help="PNG path (default: FIRST_RUN_DIR/training_dynamics.png)")
+    plot.add_argument("--label", action="append", default=[], help="legend label per run (repeatable, in order)")
+    plot.set_defaults(func=_plot)
+
+    replay = subparsers.add_parser("replay", help="recompute the loss of stored trajectories (debugging)",
+                                   description="Replay a trajectories Parquet file into the learner's loss.")
+    replay.add_argument("trajectories", help="RUN_DIR/trajectories/step_XXXXXX.parquet")
+    replay.add_argument("--config", required=True)
+    replay.add_argument("--model-dir", required=True, help="weights to evaluate (e.g. RUN_DIR/model/sft)")
+    replay.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
+    replay.set_defaults(func=_replay)

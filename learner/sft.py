@@ -1,0 +1,201 @@
+"""The initial policy: build the tiny model (or point at a pretrained one), then warm-start it.
+
+`prepare_policy(cfg, run_dir)` returns the directory the learner, the generators and the teacher
+all load. For `model.kind: tiny` it trains a BPE tokenizer on the task corpus and builds a
+Qwen-architecture model from a config (nothing is downloaded); with `sft.enabled` it then runs
+supervised fine-tuning on gold-replay trajectories, so that RL starts from a policy that emits
+valid tool calls.
+
+Gold replay: for each training task, the scripted `GoldReplayPolicy` "generates" the task's
+expected tool calls and finally `submit_answer` with the gold answer; the real environment
+executes them, so the tool results are real, and the same TITO agent loop that RL uses lays out
+the tokens. SFT trains on exactly the assistant tokens (loss mask 1) of those episodes: the
+warm start sees the very token layout RL will sample in.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from actors.agent_loop import AgentLoop, EpisodeSpec, GoldReplayPolicy, LocalEnv, RolloutLimits, gold_turn_actions
+from actors.types import RolloutSample
+
+POLICY_RECORD = "policy.json"
+
+
+def task_corpus(domains: list[str], split: str | None) -> list[str]:
+    """Text for the tokenizer: each domain's system prompt (policy + tool schemas), the tickets,
+    the gold actions and the real tool results of gold replays."""
+    from envs import registry
+    from envs.core.env import build_system_prompt, render_ticket
+    from envs.core.validate import gold_replay
+
+    texts: list[str] = []
+    for domain in domains:
+        texts.append(build_system_prompt(registry.get_environment(domain)))
+        for task in registry.get_tasks(domain, split):
+            texts.append(render_ticket(task))
+            trajectory, _ = gold_replay(task, domain)
+            for turn in trajectory.turns:
+                texts.append(turn.action)
+                texts.append(turn.observation)
+    return texts
+
+
+def gold_replay_samples(tokenizer, refs: list[tuple[str, str, str | None]], limits: RolloutLimits,
+                        *, log: Callable[[str], None] = print) -> list[RolloutSample]:
+    """Run the gold solution of each (domain, task_id, split) through the TITO agent loop.
+
+    Returns only the episodes the grader counts as correct (a gold answer the env rejects would
+    teach the wrong thing; such tasks are reported).
+    """
+    from envs import registry
+
+    loop = AgentLoop(tokenizer, limits)
+    tasks = {}
+    for domain, task_id, split in refs:
+        key = (domain, split)
+        if key not in tasks:
+            tasks[key] = {t.id: t for t in registry.get_tasks(domain, split)}
+    actions = {task_id: gold_turn_actions(tasks[(d, s)][task_id], limits.max_turns) for d, task_id, s in refs}
+    policy = GoldReplayPolicy(tokenizer, actions)
+    env = LocalEnv(limits.max_turns)
+
+    async def run_all() -> list[RolloutSample]:
+        out = []
+        for index, (domain, task_id, split) in enumerate(refs):
+            spec = EpisodeSpec(sample_id=f"{task_id}:0:{index}", task_id=task_id, domain=domain, split=split,
+                               group_id=f"sft:{task_id}", seed=index)
+            out.append(await loop.run(spec, env, policy))
+        return out
+
+    samples = asyncio.run(run_all())
+    good = [s for s in samples if s.correct]
+    if len(good) < len(samples):
+        bad = [s.task_id for s in samples if not s.correct]
+        log(f"[sft] {len(bad)} gold replays were not graded correct and are left out: {bad[:5]}")
+    return good
+
+
+def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[RolloutSample], *, epochs: float,
+            lr: float, batch_size: int, seed: int, weight_decay: float = 0.0, warmup_frac: float = 0.05,
+            max_grad_norm: float = 1.0, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Next-token cross-entropy on the assistant tokens (loss mask 1) of `samples`.
+
+    AdamW with linear warmup and cosine decay; the model and tokenizer are saved to `output_dir`.
+
+    Returns:
+        {"steps", "first_loss", "last_loss", "seconds"}.
+    """
+    import numpy as np
+    import torch
+
+    from learner.model import load_policy, pad_batch, per_token_logprobs
+
+    if not samples:
+        raise ValueError("run_sft: no training samples (no gold replay was graded correct)")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model, tokenizer = load_policy(model_dir)
+    model.train()
+    optim = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=weight_decay)
+    batches_per_epoch = math.ceil(len(samples) / batch_size)
+    total = max(1, int(round(epochs * batches_per_epoch)))
+    warmup = int(warmup_frac * total)
+
+    def lr_at(step: int) -> float:
+        if step < warmup:
+            return lr * (step + 1) / warmup
+        progress = (step - warmup) / max(1, total - warmup)
+        return lr * 0.5 * (1 + math.cos(math.pi * progress))
+
+    pad = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
+    started = time.perf_counter()
+    losses: list[float] = []
+    order: list[int] = []
+    for step in range(total):
+        if not order:
+            order = rng.permutation(len(samples)).tolist()
+        batch = [samples[i] for i in order[:batch_size]]
+        order = order[batch_size:]
+        ids, mask = pad_batch([s.input_ids for s in batch], pad, side="right")
+        loss_mask, _ = pad_batch([s.loss_mask for s in batch], 0, side="right")
+        logp = per_token_logprobs(model, ids, mask)
+        weight = loss_mask.float()
+        loss = -(logp * weight).sum() / weight.sum().clamp(min=1.0)
+        for group in optim.param_groups:
+            group["lr"] = lr_at(step)
+        optim.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), max_grad_norm)
+        optim.step()
+        losses.append(float(loss))
+        if step == 0 or (step + 1) % max(1, total // 10) == 0 or step + 1 == total:
+            log(f"[sft] step {step + 1}/{total} loss {losses[-1]:.4f} lr {lr_at(step):.2e} "
+                f"({time.perf_counter() - started:.0f}s)")
+    model.eval()
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    model.save_pretrained(str(out), safe_serialization=True)
+    tokenizer.save_pretrained(str(out))
+    return {"steps": total, "first_loss": losses[0], "last_loss": losses[-1],
+            "seconds": time.perf_counter() - started, "samples": len(samples)}
+
+
+def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = print) -> Path:
+    """The initial policy directory of a run (built once; a resumed run finds the record).
+
+    Args:
+        cfg: `RunConfig`.
+        run_dir: The run directory; everything is written under `run_dir/model/`.
+    """
+    from actors.env_actor import register_domains
+    from learner.model import build_tiny_model, load_tokenizer, train_tokenizer
+    from learner.train import load_task_refs
+
+    register_domains(cfg.data.domain_modules)
+    root = Path(run_dir) / "model"
+    record = root / POLICY_RECORD
+    if record.exists():
+        path = Path(json.loads(record.read_text())["policy_dir"])
+        if (path / "config.json").exists():
+            log(f"[model] reusing {path}")
+            return path
+    root.mkdir(parents=True, exist_ok=True)
+    info: dict[str, Any] = {}
+    if cfg.model.kind == "pretrained":
+        base = Path(cfg.model.path)
+        if not (base / "config.json").exists():
+            raise FileNotFoundError(f"model.path: {base} has no config.json")
+    else:
+        t0 = time.perf_counter()
+        tiny = cfg.model.tiny
+        corpus = task_corpus(cfg.data.domains, cfg.data.train_split)
+        tok_dir = train_tokenizer(corpus, tiny.vocab_size, root / "tokenizer",
+                                  include_stdlib=tiny.include_stdlib_corpus, max_stdlib_files=tiny.max_stdlib_files)
+        base = build_tiny_model(root / "init", tok_dir, architecture=tiny.architecture, seed=cfg.seed,
+                                **tiny.overrides)
+        info["build_s"] = time.perf_counter() - t0
+        log(f"[model] tokenizer ({len(load_tokenizer(tok_dir))} tokens, {len(corpus)} corpus texts) and tiny "
+            f"{tiny.architecture} model built in {info['build_s']:.1f}s")
+    policy = base
+    if cfg.sft.enabled:
+        tokenizer = load_tokenizer(base)
+        limits = RolloutLimits(**{k: getattr(cfg.rollout, k) for k in RolloutLimits.model_fields})
+        refs = [(r.domain, r.task_id, r.split)
+                for r in load_task_refs(cfg.data.domains, cfg.data.train_split, cfg.sft.max_tasks)]
+        t0 = time.perf_counter()
+        samples = gold_replay_samples(tokenizer, refs, limits, log=log)
+        log(f"[sft] {len(samples)} gold-replay trajectories in {time.perf_counter() - t0:.1f}s")
+        s = cfg.sft
+        info["sft"] = run_sft(base, root / "sft", samples, epochs=s.epochs, lr=s.lr, batch_size=s.batch_size,
+                              seed=cfg.seed, weight_decay=s.weight_decay, warmup_frac=s.warmup_frac,
+                              max_grad_norm=s.max_grad_norm, log=log)
+        policy = root / "sft"
+    record.write_text(json.dumps({"policy_dir": str(policy.resolve()), **info}, indent=1))
+    return policy.resolve()

@@ -1,0 +1,39 @@
+"""Fixtures of the training tests: one local Ray cluster per session, and a tiny policy built on
+the ward test domain (tokenizer trained on its corpus, Qwen3 with hidden 64, 2 layers)."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+
+import envs  # noqa: F401  (CPU runtime defaults before torch/ray load)
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """`ray.init(num_cpus=2)` once per test session (about 5 s), shut down at the end."""
+    import ray
+
+    started = False
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, namespace="hcgym-tests", log_to_driver=False)
+        started = True
+    yield ray
+    if started:
+        ray.shutdown()
+
+
+@pytest.fixture(scope="session")
+def ward_policy_dir() -> str:
+    """A tiny ChatML policy whose tokenizer was trained on the ward domain's corpus (built once)."""
+    from learner.model import build_tiny_model, train_tokenizer
+    from learner.sft import task_corpus
+
+    root = Path(tempfile.mkdtemp(prefix="t2_ward_policy_"))
+    corpus = task_corpus(["ward"], None) * 20
+    tok = train_tokenizer(corpus, 1024, root / "tok", max_stdlib_files=40)
+    out = build_tiny_model(root / "model", tok, seed=0, hidden_size=64, intermediate_size=128, num_hidden_layers=2,
+                           num_attention_heads=4, num_key_value_heads=2, head_dim=16)
+    return str(out)
