@@ -341,10 +341,10 @@ class Highlighter:
         for j in range(lo, hi):
             if j in mset:
                 s, e, _ = words[j]
-                parts.append(text[pos:s])
+                parts.append(text[pos:s].replace(self.start, "").replace(self.end, ""))
                 parts.append(f"{self.start}{text[s:e]}{self.end}")
                 pos = e
-        parts.append(text[pos:end_char])
+        parts.append(text[pos:end_char].replace(self.start, "").replace(self.end, ""))
         out = "".join(parts).strip()
         out = " ".join(out.split())
         if start_char > 0:

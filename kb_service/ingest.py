@@ -427,9 +427,16 @@ def _provenance_by_source(writer) -> dict[str, list[dict]]:
     )
     for source, js in rows:
         prov = json.loads(js)
-        slim = {k: prov[k] for k in ("package", "version", "license") if k in prov} or prov
-        if slim not in out.setdefault(source, []):
-            out[source].append(slim)
+        packages = [p.strip() for p in prov.get("package", "").split(",")]
+        versions = [v.strip() for v in prov.get("version", "").split(",")]
+        licenses = [x.strip() for x in prov.get("license", "").split(" | ")]
+        if not prov.get("package") or not (len(packages) == len(versions) == len(licenses)):
+            entries = [prov]  # free-form provenance of user data: keep as given
+        else:
+            entries = [{"package": p, "version": v, "license": x} for p, v, x in zip(packages, versions, licenses)]
+        for entry in entries:
+            if entry not in out.setdefault(source, []):
+                out[source].append(entry)
     return out
 
 
