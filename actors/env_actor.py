@@ -172,17 +172,22 @@ class EnvPool:
         domain_modules: Extra domains to register in every actor (name -> module path).
         max_restarts: Ray restarts per actor (-1 = unlimited).
         num_cpus: CPU reservation per actor (fractional is fine: tools are light).
+        kb_service: Name of a running knowledge-base service (kb_service.service) the actors' knowledge
+            tools share, instead of each opening the KB.
     """
 
     def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
-                 max_restarts: int = -1, num_cpus: float = 0.0) -> None:
+                 max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
             raise ValueError(f"env pool needs num_actors >= 1 and slots_per_actor >= 1, got "
                              f"{num_actors} and {slots_per_actor}")
-        cls = ray.remote(EnvActor).options(max_restarts=max_restarts, max_task_retries=0, num_cpus=num_cpus)
+        options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": num_cpus}
+        if kb_service:
+            options["runtime_env"] = {"env_vars": {"HCGYM_KB_SERVICE": kb_service}}
+        cls = ray.remote(EnvActor).options(**options)
         self.actors = [cls.remote(i, max_turns, slots_per_actor, env_kwargs, domain_modules) for i in range(num_actors)]
         self.slots = slots_per_actor
         self.in_flight: list[set[str]] = [set() for _ in range(num_actors)]

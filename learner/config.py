@@ -166,6 +166,17 @@ class RayConfig(_Strict):
     teacher_max_restarts: int = Field(default=-1, ge=-1)
 
 
+class KBConfig(_Strict):
+    """The knowledge-base service env actors share (kb_service.service); off = each process opens
+    the KB itself when a tool needs it."""
+
+    service: bool = False
+    replicas: int = Field(default=1, ge=1)
+    path: str | None = Field(default=None, description="KB directory; None = the default build location")
+    num_cpus: float = Field(default=0.0, ge=0)
+    name: str = "hcgym-kb"
+
+
 class MetricsConfig(_Strict):
     tensorboard: bool = True
     ray_metrics: bool = True
@@ -187,6 +198,7 @@ class RunConfig(_Strict):
     teacher: TeacherConfig = Field(default_factory=TeacherConfig)
     weight_sync: WeightSyncConfig = Field(default_factory=WeightSyncConfig)
     ray: RayConfig = Field(default_factory=RayConfig)
+    kb: KBConfig = Field(default_factory=KBConfig)
     metrics: MetricsConfig = Field(default_factory=MetricsConfig)
 
     @model_validator(mode="after")

@@ -266,6 +266,13 @@ class Trainer:
         self.pool_args = dict(num_actors=cfg.rollout.num_env_actors, slots_per_actor=cfg.rollout.slots_per_env_actor,
                               max_turns=cfg.rollout.max_turns, max_restarts=cfg.rollout.env_actor_max_restarts,
                               domain_modules=cfg.data.domain_modules)
+        self.kb_client = None
+        if cfg.kb.service:
+            from kb_service.service import start_kb_service
+
+            self.kb_client = start_kb_service(cfg.kb.replicas, cfg.kb.path, cfg.kb.name, cfg.kb.num_cpus)
+            self.pool_args["kb_service"] = cfg.kb.name
+            self.log(f"[setup] knowledge-base service {cfg.kb.name!r} with {cfg.kb.replicas} replica(s)")
         stop_ids = [self.tokenizer.convert_tokens_to_ids(t) for t in (IM_END, ENDOFTEXT)]
         g = cfg.generator
         gen_cls = generator_actor_class().options(num_cpus=g.num_cpus, num_gpus=g.num_gpus, max_restarts=g.max_restarts,
@@ -731,6 +738,8 @@ class Trainer:
     def shutdown(self) -> None:
         import ray
 
+        if getattr(self, "kb_client", None) is not None:
+            self.kb_client.shutdown()
         for handle in [getattr(self, "learner", None), self.teacher, *getattr(self, "generators", []),
                        *(self.pool.actors if hasattr(self, "pool") else [])]:
             if handle is not None:

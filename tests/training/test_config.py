@@ -91,8 +91,8 @@ def test_inconsistent_sections_are_named(tmp_path):
 
 
 def test_yaml_syntax_error_names_line(tmp_path):
-    with pytest.raises(ConfigError, match=r"line 2"):
-        load_config(_write(tmp_path, "trainer:\n  batch_size: [1,\n"))
+    with pytest.raises(ConfigError, match=r"not valid YAML at line 2, column 16"):
+        load_config(_write(tmp_path, "trainer:\n  batch_size: 4: 5\n"))
 
 
 def test_extends_and_overrides(tmp_path):
