@@ -1,0 +1,144 @@
+"""Text helpers shared by the reward dimensions: normalisation, tokens, numbers, negation."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import unicodedata
+from functools import lru_cache
+from typing import Any
+
+_NON_ALNUM = re.compile(r"[^0-9a-z]+")
+_TOKEN = re.compile(r"[a-z0-9]+(?:\.[0-9]+)?")
+_SENTENCE_SPLIT = re.compile(r"(?<=[.!?;])\s+|\n+")
+
+STOPWORDS = frozenset(
+    "a an the of to in on for with and or but is are was were be been being at by from as that this "
+    "these those it its into than then there their they them he she his her him we our you your i "
+    "me my do does did so if not no nor can could should would will may might must has have had "
+    "which who whom what when where why how all any both each few more most other some such only "
+    "own same too very just also about over under again further once per via".split()
+)
+
+
+def normalise_text(text: str) -> str:
+    """Lower case, NFKC, every run of non-alphanumerics one space."""
+    text = unicodedata.normalize("NFKC", text).lower()
+    return _NON_ALNUM.sub(" ", text).strip()
+
+
+def tokens(text: str) -> list[str]:
+    """Lower-case word/number tokens ("0.5" stays one token)."""
+    return _TOKEN.findall(text.lower())
+
+
+def content_tokens(text: str) -> list[str]:
+    return [t for t in tokens(text) if t not in STOPWORDS]
+
+
+def stem(word: str) -> str:
+    """A tiny suffix stripper so that recommend/recommends/recommended compare equal."""
+    for suffix in ("ations", "ation", "ings", "ing", "edly", "ed", "ies", "es", "s", "ly"):
+        if len(word) > len(suffix) + 3 and word.endswith(suffix):
+            return word[: -len(suffix)] + ("y" if suffix == "ies" else "")
+    return word
+
+
+def stemmed_tokens(text: str) -> list[str]:
+    """Content tokens, lightly stemmed: what keyword graders compare."""
+    return [stem(t) for t in tokens(text) if t not in STOPWORDS]
+
+
+def sentences(text: str) -> list[str]:
+    return [s for s in _SENTENCE_SPLIT.split(text) if s.strip()]
+
+
+# -- numbers -------------------------------------------------------------------------------------
+def as_number(value: Any) -> float | None:
+    """A float for numbers and numeric strings ("1,000", " 5e2 ", "500.0"), else None."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return float(value) if math.isfinite(float(value)) else None
+    if isinstance(value, str):
+        text = value.strip().replace(",", "")
+        if not text or len(text) > 40:
+            return None
+        try:
+            number = float(text)
+        except ValueError:
+            return None
+        return number if math.isfinite(number) else None
+    return None
+
+
+def norm_value(value: Any) -> Any:
+    """Canonical form for comparing tool arguments: case, whitespace and number formatting
+    ("500", 500, "500.0", "5e2" are equal) do not matter; lists compare as multisets."""
+    number = as_number(value)
+    if number is not None:
+        return ("n", round(number, 9))
+    if isinstance(value, str):
+        text = " ".join(unicodedata.normalize("NFKC", value).lower().split())
+        return ("s", text)
+    if isinstance(value, (list, tuple, set)):
+        return ("l", tuple(sorted((norm_value(v) for v in value), key=repr)))
+    if isinstance(value, dict):
+        return ("d", tuple(sorted((str(k).lower(), norm_value(v)) for k, v in value.items())))
+    if value is None:
+        return ("none",)
+    return ("o", repr(value))
+
+
+def signature(name: str, arguments: dict[str, Any]) -> str:
+    """A tool call's identity for counting repeats: its name and normalised arguments."""
+    try:
+        args = json.dumps(norm_value(arguments), sort_keys=True, default=repr)
+    except (TypeError, ValueError):
+        args = repr(arguments)
+    return f"{name.lower()}|{args}"
+
+
+# -- negation ------------------------------------------------------------------------------------
+_NEGATION = re.compile(
+    r"\b(?:no|not|never|without|avoid|avoiding|avoided|don't|do not|does not|doesn't|did not|didn't|"
+    r"no need|unnecessary|rather than|instead of|rule out|ruled out|rules out|denies|denied|"
+    r"negative for|no longer|stop|stopped|discontinue|discontinued|hold|withhold|contraindicated|"
+    r"allergic|allergy|allergies|unless|nor|refrain|decline|declined|defer|cannot|can't|shouldn't|"
+    r"should not|must not|won't|will not)\b"
+)
+_HISTORY = re.compile(r"\b(?:history of|h/o|hx of|prior|previous|previously|family history|past)\b")
+_BOUNDARY = re.compile(r"[.!?;\n]|\bbut\b|\bhowever\b")
+
+
+def negated(text: str, start: int, window: int = 60, *, history: bool = False) -> bool:
+    """True when a negation/avoidance cue precedes position `start` in the same clause
+    (with `history=True`, also "history of", "prior", "previous": a past, not a current, event)."""
+    left = text[max(0, start - window):start]
+    cut = None
+    for cut in _BOUNDARY.finditer(left):
+        pass
+    if cut is not None:
+        left = left[cut.end():]
+    left = left.lower()
+    return _NEGATION.search(left) is not None or (history and _HISTORY.search(left) is not None)
+
+
+@lru_cache(maxsize=4096)
+def word_regex(phrase: str) -> re.Pattern[str]:
+    """A case-insensitive whole-word regex for a phrase (cached)."""
+    return re.compile(r"(?<![a-z0-9])" + re.escape(phrase.lower()) + r"(?![a-z0-9])")
+
+
+def contains_phrase(text_lower: str, phrase: str) -> bool:
+    return bool(phrase) and word_regex(phrase.lower()).search(text_lower) is not None
+
+
+def clip01(value: float) -> float:
+    return 0.0 if value < 0 else 1.0 if value > 1 else float(value)
+
+
+def short(text: str, limit: int = 160) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 1] + "…"
