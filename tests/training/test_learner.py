@@ -1,0 +1,159 @@
+"""The torch learner backend end to end on the tiny model: GRPO and TT-OPD steps, weights, errors."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from actors.teacher import Teacher
+from learner.config_models import LearnerConfig, TeacherConfig
+from learner.learner_actor import Learner
+from learner.model import load_policy, pad_batch, per_token_logprobs
+from tests.training.learner_fixtures import make_batch, tiny_model_dir
+
+REQUIRED_KEYS = {"policy_loss", "distill_loss", "kl_ref", "kl_teacher", "entropy", "grad_norm", "logprob_diff",
+                 "turns_truncated", "policy_version", "loss", "clip_frac"}
+
+
+@pytest.fixture(scope="module")
+def model_dir():
+    return tiny_model_dir()
+
+
+@pytest.fixture(scope="module")
+def batch(model_dir):
+    return make_batch(seed=0, groups=2, group_size=3, model_dir=model_dir)
+
+
+def _logprobs(weights, model_dir, samples):
+    model, tok = load_policy(model_dir)
+    model.load_state_dict(weights)
+    ids, mask = pad_batch([s.input_ids for s in samples], tok.pad_token_id)
+    with torch.no_grad():
+        return per_token_logprobs(model, ids, mask)
+
+
+def test_grpo_step_moves_probability_toward_positive_advantages(model_dir, batch):
+    learner = Learner(LearnerConfig(optim={"lr": 2e-3}), model_dir)
+    before = learner.get_state_dict()
+    m = learner.train_step(batch, step=1)
+    assert REQUIRED_KEYS <= set(m)
+    assert m["policy_version"] == 1.0 and learner.policy_version() == 1
+    assert abs(m["logprob_diff"]) < 1e-5  # the samples' log-probs came from these weights
+    assert m["kl_ref"] == pytest.approx(0.0, abs=1e-6) and m["grad_norm"] > 0 and m["entropy"] > 0
+    after = learner.get_state_dict()
+    lp0, lp1 = _logprobs(before, model_dir, batch), _logprobs(after, model_dir, batch)
+    rewards = {}
+    for s in batch:
+        rewards.setdefault(s.group_id, []).append(s.reward)
+    for i, s in enumerate(batch):
+        mask = torch.tensor(s.loss_mask, dtype=torch.bool)
+        delta = float((lp1[i, : len(s.input_ids)] - lp0[i, : len(s.input_ids)])[mask].mean())
+        mean = sum(rewards[s.group_id]) / len(rewards[s.group_id])
+        if s.reward > mean:
+            assert delta > 0, s.sample_id
+        elif s.reward < mean:
+            assert delta < 0, s.sample_id
+    # The second step sees a moved policy: positive KL to the frozen reference.
+    m2 = learner.train_step(batch, step=2)
+    assert m2["kl_ref"] > 0 and m2["policy_version"] == 2.0 and abs(m2["logprob_diff"]) > 0
+
+
+def test_micro_batch_size_does_not_change_the_update(model_dir, batch):
+    results = []
+    for mbs in (1, 4, 6):
+        learner = Learner(LearnerConfig(optim={"lr": 1e-3, "micro_batch_size": mbs}), model_dir)
+        learner.train_step(batch)
+        learner.train_step(batch)
+        results.append(learner.get_state_dict())
+    initial = load_policy(model_dir)[0].state_dict()
+    moved = max(float((results[0][k] - initial[k]).abs().max()) for k in initial)
+    assert moved > 1e-3
+    # Equal up to float noise that Adam's normalisation amplifies on near-zero gradients (< 1 % of a step).
+    for other in results[1:]:
+        for k, v in results[0].items():
+            assert torch.allclose(v, other[k], atol=2e-5), k
+
+
+def test_multi_update_batches_use_a_fixed_old_policy_and_clip(model_dir, batch):
+    learner = Learner(LearnerConfig(optim={"lr": 5e-2, "updates_per_batch": 3},
+                                    loss={"grpo": {"clip_eps_low": 0.05, "clip_eps_high": 0.05}}), model_dir)
+    m = learner.train_step(batch)
+    # By the last of three large updates against a fixed pi_old some ratios leave [0.95, 1.05].
+    assert m["clip_frac"] > 0
+    assert learner.policy_version() == 1
+
+
+def _teacher_outputs(model_dir, samples, drift: float = 0.0, **cfg):
+    """Teacher outputs; `drift` perturbs the teacher's weights (a teacher the student has moved away from)."""
+    t = Teacher(TeacherConfig(**cfg), model_dir, start_worker=False)
+    if drift:
+        gen = torch.Generator().manual_seed(7)
+        t.hard_copy({k: v + drift * torch.randn(v.shape, generator=gen) for k, v in t.get_weights().items()})
+    return t.compute(samples)
+
+
+def test_ttopd_step_reports_truncation_and_pulls_toward_the_teacher(model_dir, batch):
+    outs = _teacher_outputs(model_dir, batch)
+    cfg = LearnerConfig(optim={"lr": 5e-3},
+                        loss={"grpo": {"kl_beta": 0.0}, "distill": {"enabled": True, "max_turn_tokens": 20}})
+    learner = Learner(cfg, model_dir)
+    total_turns = sum(len(s.turns) for s in batch)
+    m = learner.train_step(batch, outs)
+    assert m["turns_truncated"] > 0 and m["turns_truncated"] + m["turns_kept"] == total_turns
+    assert m["kl_teacher"] != 0 and m["distill_loss"] != 0
+    # With equal rewards (no policy gradient) repeated steps shrink KL(student || hinted teacher).
+    flat = [s.model_copy(update={"reward": 0.0}) for s in batch]
+    far = _teacher_outputs(model_dir, batch, drift=0.05)
+    learner2 = Learner(cfg.model_copy(update={"loss": cfg.loss.model_copy(
+        update={"distill": cfg.loss.distill.model_copy(update={"max_turn_tokens": 10_000, "estimator": "k3"})})}),
+        model_dir)
+    kls = [learner2.train_step(flat, far)["kl_teacher"] for _ in range(6)]
+    assert kls[0] > 0.05 and kls[-1] < kls[0] * 0.7, kls
+
+
+def test_topk_estimator_step(model_dir, batch):
+    outs = _teacher_outputs(model_dir, batch, drift=0.05, serve_topk=8)
+    cfg = LearnerConfig(optim={"lr": 5e-3},
+                        loss={"grpo": {"kl_beta": 0.0}, "distill": {"enabled": True, "estimator": "topk", "topk": 8}})
+    learner = Learner(cfg, model_dir)
+    flat = [s.model_copy(update={"reward": 0.0}) for s in batch]
+    kls = [learner.train_step(flat, outs)["kl_teacher"] for _ in range(6)]
+    # Over 8 of 2048 tokens of a near-uniform tiny model the coarsened KL is small, but it must shrink.
+    assert kls[0] > 1e-3 and kls[-1] < kls[0] * 0.7, kls
+    too_big = cfg.model_copy(update={"loss": cfg.loss.model_copy(
+        update={"distill": cfg.loss.distill.model_copy(update={"topk": 16})})})
+    with pytest.raises(ValueError, match="top-8"):
+        Learner(too_big, model_dir).train_step(flat, outs)
+
+
+def test_weights_roundtrip_and_evaluate_does_not_update(model_dir, batch):
+    learner = Learner(LearnerConfig(optim={"lr": 1e-3}), model_dir)
+    w0 = learner.get_state_dict()
+    model, _ = load_policy(model_dir)
+    assert set(w0) == set(model.state_dict())
+    m = learner.evaluate_loss(batch)
+    assert "policy_loss" in m and learner.policy_version() == 0
+    assert all(torch.equal(w0[k], v) for k, v in learner.get_state_dict().items())
+    shifted = {k: v + 0.01 for k, v in w0.items()}
+    learner.set_weights(shifted)
+    assert all(torch.equal(shifted[k], v) for k, v in learner.get_state_dict().items())
+
+
+def test_bad_inputs_fail_with_named_errors(model_dir, batch):
+    cfg = LearnerConfig(loss={"distill": {"enabled": True}})
+    learner = Learner(cfg, model_dir)
+    with pytest.raises(ValueError, match=batch[0].sample_id):
+        learner.train_step(batch, teacher=None)
+    outs = _teacher_outputs(model_dir, batch)
+    wrong = [o.model_copy(update={"input_length": o.input_length + 1, "logprobs": o.logprobs + [0.0]}) for o in outs]
+    with pytest.raises(ValueError, match="positions"):
+        learner.train_step(batch, wrong)
+    with pytest.raises(ValueError, match="empty"):
+        learner.train_step([])
+    with pytest.raises(ValueError, match="world_size"):
+        LearnerConfig(backend="torch", deepspeed={"world_size": 2})
+    with pytest.raises(ValueError, match="lr"):
+        LearnerConfig(optim={"lr": -1})
+    with pytest.raises(ValueError, match="extra|learning_rate"):
+        LearnerConfig(optim={"learning_rate": 1e-3})
