@@ -8,12 +8,11 @@ toolkit's pre-WRITE snapshot cheap, and `content_hash()` reuses the reference pa
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import json
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, TypeAdapter
 
 from envs.core.db import DB
 
@@ -48,6 +47,7 @@ class Drug(_Record):
     brand_names: list[str] = Field(default_factory=list)
     synonyms: list[str] = Field(default_factory=list)
     drugbank_id: str | None = None
+    medline_plus_id: str | None = None
     mesh_id: str | None = None
     mesh_tree_numbers: list[str] = Field(default_factory=list)
     names_fr: list[str] = Field(default_factory=list, description="ANSM thesaurus substance names")
@@ -247,14 +247,20 @@ class DrugInteractionDB(DB):
     _reference_hash: str | None = PrivateAttr(default=None)
 
     # -- cheap copies and hashes -----------------------------------------------------------------
-    def fork(self) -> "DrugInteractionDB":
-        """A new database sharing the read-only reference tables and owning a copy of the state."""
+    def state_json(self) -> bytes:
+        """The episode state (patients, medication changes) as JSON, in a fixed field order."""
+        return _STATE.dump_json((self.patients, self.medication_changes))
+
+    def with_state(self, state_json: bytes) -> "DrugInteractionDB":
+        """A new database sharing the read-only reference tables, with its own copy of the state."""
+        patients, changes = _STATE.validate_json(state_json)
         data: dict[str, Any] = {name: getattr(self, name) for name in REFERENCE_FIELDS}
-        for name in STATE_FIELDS:
-            data[name] = copy.deepcopy(getattr(self, name))
-        clone = type(self).model_construct(**data)
+        clone = type(self).model_construct(**data, patients=patients, medication_changes=changes)
         clone._reference_hash = self._reference_hash
         return clone
+
+    def fork(self) -> "DrugInteractionDB":
+        return self.with_state(self.state_json())
 
     def __deepcopy__(self, memo: dict | None = None) -> "DrugInteractionDB":
         return self.fork()
@@ -265,9 +271,11 @@ class DrugInteractionDB(DB):
         return self._reference_hash
 
     def content_hash(self) -> str:
-        """SHA-256 over the reference hash and the canonical JSON of the patient state."""
-        state = {name: _dump(getattr(self, name)) for name in STATE_FIELDS}
-        return _hash({"reference": self.reference_hash(), "state": state})
+        """SHA-256 over the reference tables' hash and the state JSON (patients are keyed in build
+        order and tools never add or reorder them, so equal states serialise identically)."""
+        digest = hashlib.sha256(self.reference_hash().encode())
+        digest.update(self.state_json())
+        return digest.hexdigest()
 
 
 def _dump(value: Any) -> Any:
@@ -283,3 +291,6 @@ def _dump(value: Any) -> Any:
 def _hash(payload: Any) -> str:
     canonical = json.dumps(payload, sort_keys=True, ensure_ascii=False, separators=(",", ":"))
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+_STATE = TypeAdapter(tuple[dict[str, Patient], list[MedicationChange]])

@@ -122,7 +122,8 @@ class Builder:
                 id=drug_id, name=data.get("name") or drug_id,
                 brand_names=[v for v in variants if v in self.vocab.brands],
                 synonyms=[v for v in variants if v not in self.vocab.brands],
-                drugbank_id=data.get("drugbank_id"), mesh_id=data.get("mesh_id"),
+                drugbank_id=data.get("drugbank_id"), medline_plus_id=data.get("medline_plus_id"),
+                mesh_id=data.get("mesh_id"),
                 mesh_tree_numbers=list(data.get("mesh_tree") or []),
                 provenance=[self.prov(self.sources.vocabulary, VOCAB_MEMBER, drug_id)],
             )
