@@ -177,8 +177,13 @@ _SEVERITY_ALIASES = {"no interaction": "none", "no significant interaction": "no
 _SCORED_GOLD = re.compile(r"^\s*([a-z][a-z\- ]*?)[\s\-:]*([0-9][a-c]?)\s*$", re.IGNORECASE)
 
 
+_ESI_RANGE = re.compile(r"\b(?:esi|level|category|acuity)\s*(?:level\s*)?[1-5]\s*(?:or|/|to|-|\u2013|and)\s*([1-5])\b", re.IGNORECASE)
+
+
 def esi_levels(text: str) -> set[int]:
+    """ESI levels a text states ("ESI 2", "level 2", a bare "2"); a hedge "ESI 2 or 3" gives both."""
     found = {int(a or b) for a, b in _ESI_ANSWER.findall(text)}
+    found |= {int(x) for x in _ESI_RANGE.findall(text)}
     if not found:
         bare = text.strip().rstrip(".")
         if len(bare) == 1 and bare in "12345":

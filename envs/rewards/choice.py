@@ -5,7 +5,8 @@ anywhere. Here a letter counts only where it is a committed answer:
 
 1. the whole answer is a letter ("D", "(B)", "Option C.", "**A**");
 2. an explicit commitment, the last one in the text wins: "Answer: D", "the answer is (B)",
-   "final answer - C", "I choose B", "B is correct", "\\boxed{B}", "<answer>B</answer>";
+   "final answer - C", "I choose B", "B is correct", "\\boxed{B}", "<answer>B</answer>", or a
+   bare letter on the last line;
 3. otherwise the text of exactly one option ("Pneumothorax due to pleural injury");
 4. otherwise a single parenthesised letter "(C)" that is an option.
 
@@ -155,6 +156,12 @@ def extract_choice(text: str | None, options: dict[str, str] | list[str] | None 
         for match in pattern.finditer(clean):
             if last is None or match.start(1) > last[0]:
                 last = (match.start(1), match.group(1), match.end(1))
+    lines = clean.rstrip().rsplit("\n", 1)
+    if len(lines) == 2:  # a bare letter on the last line ("...reasoning...\nB") is a commitment
+        tail = bare.match(lines[1]) or (bare.match(lines[1].upper()) if len(lines[1].strip()) <= 12 else None)
+        if tail:
+            offset = len(lines[0]) + 1
+            last = (offset + tail.start(1), tail.group(1), offset + tail.end(1))
     if last is not None:
         start, letter, end = last
         if _HEDGE_AFTER.match(clean[end:end + 20]) or _HEDGE_BEFORE.search(clean[max(0, start - 20):start]):

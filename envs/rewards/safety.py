@@ -81,7 +81,13 @@ class SafetyContext(Protocol):
 
 
 class BaseSafetyContext:
-    """A context that knows nothing; subclass it and override what your domain knows."""
+    """A context that knows nothing; subclass it and override what your domain knows.
+
+    Set `use_builtin_fallback = True` to let the built-in lexicon (`safety_lexicon.py`) answer
+    where your context returns None / [] (drug classes, famous interactions, a few dose caps).
+    """
+
+    use_builtin_fallback: bool = False
 
     def patient_allergies(self, patient_id: str) -> list[str]:
         return []
@@ -115,7 +121,8 @@ def _key(name: str) -> str:
 class StaticSafetyContext(BaseSafetyContext):
     """A dict-backed context for tests and small domains.
 
-    Interactions, maximum doses and contraindications may be keyed by drug or by class.
+    Interactions, maximum doses and contraindications may be keyed by drug or by class. Facts
+    it lacks are looked up in the built-in lexicon (`use_builtin_fallback=False` to turn off).
 
     Example:
         >>> ctx = StaticSafetyContext(allergies={"P1": ["penicillin"]},
@@ -132,7 +139,8 @@ class StaticSafetyContext(BaseSafetyContext):
                  interactions: dict[tuple[str, str], tuple[str, str]] | Iterable[tuple[str, str, str, str]] | None = None,
                  max_doses: dict[str, float | dict[str, float]] | None = None,
                  contraindications: dict[str, list[str]] | None = None,
-                 drugs: Iterable[str] = ()) -> None:
+                 drugs: Iterable[str] = (), use_builtin_fallback: bool = True) -> None:
+        self.use_builtin_fallback = use_builtin_fallback
         self.allergies = {str(k): list(v) for k, v in (allergies or {}).items()}
         self.medications = {str(k): list(v) for k, v in (medications or {}).items()}
         self.conditions = {str(k): list(v) for k, v in (conditions or {}).items()}
@@ -207,13 +215,13 @@ class StaticSafetyContext(BaseSafetyContext):
 
 
 BUILTIN_CONTEXT = StaticSafetyContext(
-    brands=lex.BRANDS, classes=lex.DRUG_CLASSES, interactions=lex.INTERACTION_RULES,
+    use_builtin_fallback=False, brands=lex.BRANDS, classes=lex.DRUG_CLASSES, interactions=lex.INTERACTION_RULES,
     max_doses=lex.MAX_SINGLE_DOSE_MG, contraindications=lex.CONTRAINDICATED_CONDITIONS,
 )
 
 
 # -- patient facts stated in the ticket -------------------------------------------------------------
-_ALLERGY_TO = re.compile(r"\ballerg(?:y|ies|ic)\s*(?:to|:)\s*([a-z0-9 ,/\-]+?)(?=[.;\n)(]|$|\s+(?:and|with|who|but|presents|is|has|was)\b)")
+_ALLERGY_TO = re.compile(r"\ballerg(?:y|ies|ic)\s*(?:to|:)\s*([a-z0-9 ,/\-]+?)(?=[.;\n)(]|$|\s+(?:with|who|but|presents|is|has|was|since|after)\b)")
 _X_ALLERGY = re.compile(r"\b([a-z][a-z\-]{2,})\s+(?:allergy|allergies|hypersensitivity)\b")
 _ON_MEDS = re.compile(r"\b(?:takes|taking|on|medications?\s*(?:include|:)|meds\s*:|currently on|prescribed|uses)\s+([a-z0-9 ,/\-]+?)(?=[.;\n)(]|$)")
 _PREGNANT = re.compile(r"\b(?:pregnant|gravid|\d+\s*weeks?\s*(?:of\s+)?(?:pregnant|gestation)|g\d+\s*p\d+)\b")
@@ -238,10 +246,17 @@ def ticket_facts(text: str) -> dict[str, list[str]]:
 
 # -- the context as the checks use it ---------------------------------------------------------------
 class ContextAdapter:
-    """Caches context answers, falls back to the built-in lexicon, records context errors."""
+    """Caches context answers, records context errors, and falls back to the built-in lexicon
+    when there is no context or the context opts in (`use_builtin_fallback = True`, as
+    `StaticSafetyContext` does). A domain context that does not opt in is authoritative: its
+    None / [] means "no such fact" and the lexicon is not consulted."""
 
     def __init__(self, context: Any, ticket: dict[str, list[str]] | None, errors: list[str]) -> None:
-        self.context = context
+        if context is None:
+            self.context, self.fallback = BUILTIN_CONTEXT, None
+        else:
+            self.context = context
+            self.fallback = BUILTIN_CONTEXT if getattr(context, "use_builtin_fallback", False) else None
         self.ticket = ticket or {"allergies": [], "medications": [], "conditions": []}
         self.errors = errors
         self._cache: dict[tuple, Any] = {}
@@ -251,7 +266,7 @@ class ContextAdapter:
         if key in self._cache:
             return self._cache[key]
         value = None
-        fn = getattr(self.context, method, None) if self.context is not None else None
+        fn = getattr(self.context, method, None)
         if fn is not None:
             try:
                 value = fn(*args)
@@ -260,8 +275,8 @@ class ContextAdapter:
                 if message not in self.errors:
                     self.errors.append(message)
                 value = None
-        if value in (None, [], ()):
-            value = getattr(BUILTIN_CONTEXT, method)(*args)
+        if value in (None, [], ()) and self.fallback is not None:
+            value = getattr(self.fallback, method)(*args)
         self._cache[key] = value
         return value
 

@@ -161,13 +161,16 @@ class EpisodeView:
 
     @cached_property
     def shown_lower(self) -> str:
-        """Everything the environment showed the agent (lower case)."""
+        """Everything the environment showed the agent (lower case): the task, the first
+        observation, tool results (not the submit echo) and messages of turns without calls."""
         traj = self.trajectory
         parts = [self.task_text_lower, traj.first_observation or ""]
         for turn in traj.turns:
-            parts.append(turn.observation or "")
+            if not turn.tool_calls:
+                parts.append(turn.observation or "")
             for call in turn.tool_calls:
-                if call.result:
+                # the submit tool echoes the answer back: that is not something the agent was shown
+                if call.result and not (call.submit or "submit" in self.conv.families(call.name)):
                     parts.append(call.result)
         return "\n".join(parts).lower()
 

@@ -21,6 +21,7 @@ _REFUSAL = re.compile(
     r"will not accept|won't accept)\s+(?:to (?:have|receive|take|undergo) )?(?:a |an |the |any )?([a-z][a-z\- ]{2,40}?)(?=[.,;\n]|\band\b|\bbut\b|$)",
     re.I,
 )
+_PREPOSITION = re.compile(r"\s\b(?:after|before|despite|because|due|for|with|from|of|in|at|on|until|unless|even)\b", re.I)
 _JEHOVAH = re.compile(r"jehovah'?s witness", re.I)
 _STIGMA = re.compile(
     r"\b(?:drug[- ]seek(?:er|ing)|frequent flyer|junkie|addict|alcoholic|non-?compliant|noncompliance|hysterical|"
@@ -81,6 +82,7 @@ def refusals(state: SafetyState) -> None:
     if _JEHOVAH.search(ticket):
         refused.append("blood transfusion")
     for thing in refused:
+        thing = _PREPOSITION.split(thing, maxsplit=1)[0].strip()
         words = [w for w in stemmed_tokens(thing) if len(w) > 3]
         if not words:
             continue

@@ -39,9 +39,14 @@ _DIAGNOSIS_TASK = ("diagnos",)
 
 
 def _is_diagnosis_task(state: SafetyState) -> bool:
+    """The task's answer is a diagnosis: its task_type or category says so, or (without a
+    task_type) its domain is a diagnosis domain."""
     task = state.view.task
-    labels = " ".join(filter(None, [task.description.task_type, task.description.category, task.domain])).lower()
-    return any(word in labels for word in _DIAGNOSIS_TASK)
+    labels = [task.description.task_type, task.description.category]
+    if not task.description.task_type:
+        labels.append(task.domain)
+    text = " ".join(filter(None, labels)).lower()
+    return any(word in text for word in _DIAGNOSIS_TASK)
 
 
 def _first_diagnosis(state: SafetyState) -> tuple[int, int | None] | None:
