@@ -7,11 +7,15 @@ chat endpoint judges instead. A judge failure (network, HTTP status, unparseable
 verdicts) is recorded in `RewardBreakdown.grader_errors` and the affected criteria are graded by
 the rules instead: a failure is never silently scored as "not met".
 
-Rule grading of a criterion against everything the agent wrote and called:
+Rule grading of a criterion against everything the agent wrote and called (its sentences, its
+submitted answer, and its successful tool calls rendered as "check drug interactions drug x"):
   keyword = clip((recall of the criterion's content words - 0.2) / 0.6)
   semantic = calibrated max cosine between the criterion and the agent's sentences (if available)
-  score = max(keyword, semantic); a negative criterion ("does not prescribe NSAIDs") scores
-  1 - score of its positive part, measured on sentences without negation.
+  score = max(keyword, semantic)
+Polarity must match: a criterion without a negation cue is matched only against sentences
+without one ("recommends ibuprofen" is not met by "avoid ibuprofen"). A negative criterion
+("does not recommend NSAIDs such as ibuprofen") scores 1 - presence of its positive part in
+sentences without negation, where naming half of its content words counts as full presence.
 
 Rubric (HealthBench style): required elements and required tools earn their points times their
 score; forbidden elements (and any item with negative points) subtract |points| times their
@@ -35,7 +39,7 @@ from typing import Any, Protocol
 
 from envs.core.task import RubricItem
 from envs.rewards.similarity import calibrate, grading_tokens, similarity_matrix
-from envs.rewards.text import clip01, negated, sentences, short
+from envs.rewards.text import clip01, has_negation, sentences, short
 from envs.rewards.view import EpisodeView
 
 MET_THRESHOLD = 0.5
@@ -85,30 +89,30 @@ class RuleGrader:
     def grade(self, criteria: list[str], view: EpisodeView) -> list[CriterionResult]:
         evidence = _evidence_sentences(view)
         all_tokens = set(grading_tokens(" ".join(evidence)))
-        plain = [s for s in evidence if not _has_negation(s)]
+        plain = [s for s in evidence if not has_negation(s)]
         plain_tokens = set(grading_tokens(" ".join(plain)))
         positives = [(_NEGATIVE.sub("", c, count=1), bool(_NEGATIVE.match(c))) for c in criteria]
         sims = similarity_matrix([p for p, _ in positives], evidence) if evidence else None
-        plain_idx = [i for i, s in enumerate(evidence) if not _has_negation(s)]
+        plain_idx = [i for i, s in enumerate(evidence) if not has_negation(s)]
         results = []
         for i, (positive, is_negative) in enumerate(positives):
             words = [w for w in grading_tokens(positive) if w not in _FILLER] or grading_tokens(positive)
-            pool = plain_tokens if is_negative else all_tokens
+            # polarity must match: "recommends ibuprofen" is not met by "avoid ibuprofen", while
+            # "recommends avoiding NSAIDs" is
+            plain_only = is_negative or not has_negation(positive)
+            pool = plain_tokens if plain_only else all_tokens
             recall = sum(w in pool for w in words) / len(words) if words else 0.0
-            keyword = clip01((recall - 0.2) / 0.6)
+            # a negative criterion is broken by naming half of what it forbids ("NSAIDs such as ibuprofen")
+            keyword = clip01(recall / 0.5) if is_negative else clip01((recall - 0.2) / 0.6)
             semantic = None
             if sims is not None:
-                row = sims[i, plain_idx] if is_negative else sims[i]
+                row = sims[i, plain_idx] if plain_only else sims[i]
                 semantic = calibrate(float(row.max())) if len(row) else 0.0
             present = max(keyword, semantic or 0.0)
             score = 1.0 - present if is_negative else present
             reason = f"keyword recall {recall:.2f}" + (f", semantic {semantic:.2f}" if semantic is not None else "")
             results.append(CriterionResult(criteria[i], round(score, 4), "rule", reason))
         return results
-
-
-def _has_negation(sentence: str) -> bool:
-    return negated(sentence + " x", len(sentence) + 1, window=len(sentence) + 1)
 
 
 def _evidence_sentences(view: EpisodeView) -> list[str]:

@@ -125,6 +125,11 @@ def negated(text: str, start: int, window: int = 60, *, history: bool = False) -
     return _NEGATION.search(left) is not None or (history and _HISTORY.search(left) is not None)
 
 
+def has_negation(sentence: str) -> bool:
+    """True when a sentence contains any negation/avoidance cue."""
+    return _NEGATION.search(sentence.lower()) is not None
+
+
 @lru_cache(maxsize=4096)
 def word_regex(phrase: str) -> re.Pattern[str]:
     """A case-insensitive whole-word regex for a phrase (cached)."""
