@@ -132,6 +132,12 @@ class Builder:
             drug.provenance.append(provenance)
         return drug
 
+    def add_source_name(self, drug: Drug, name: str) -> None:
+        """Keep a source's own spelling ("piperacillin_tazobactam") as a searchable synonym."""
+        spelled = name.replace("_", " ").lower()
+        if spelled != drug.id and spelled not in drug.synonyms and spelled not in drug.brand_names:
+            drug.synonyms.append(spelled)
+
     def resolve_english(self, name: str) -> str | None:
         """An English source name (drugdose, open-medicine, patients.json) -> vocabulary drug id."""
         key = fold(name.replace("_", " "))
@@ -333,6 +339,7 @@ def ingest_drugdose(b: Builder, archive: Archive) -> dict[str, DoseProfile]:
             continue
         prov = b.prov(src, member, item["name"])
         drug = b.ensure_drug(drug_id, prov)
+        b.add_source_name(drug, item["name"])
         if item.get("drug_class") and item["drug_class"] not in drug.descriptive_classes:
             drug.descriptive_classes.append(item["drug_class"])
         routes = []
@@ -374,6 +381,7 @@ def ingest_renal(b: Builder, archive: Archive) -> dict[str, RenalProfile]:
             raise DataSourceError(f"open-medicine renal drug {key!r} is not in the vocabulary; add an english alias")
         prov = b.prov(src, member, key)
         drug = b.ensure_drug(drug_id, prov)
+        b.add_source_name(drug, key)
         if item.get("drug_class") and item["drug_class"] not in drug.descriptive_classes:
             drug.descriptive_classes.append(item["drug_class"])
         tiers = sorted((RenalTier(min=float(t["min"]), max=None if t["max"] is None else float(t["max"]), dose=t["dose"],

@@ -43,7 +43,10 @@ def resolve_class(db: DrugInteractionDB, name: str) -> DrugClass:
     if cid is None:
         cid = db.class_index.get(fold(key.replace(" ", "-")))
     if cid is None:
-        near = search_classes(db, name)[:5]
+        hits = search_classes(db, name)
+        if len(hits) == 1:  # "statins" -> "HMG-CoA reductase inhibitors (statins)"
+            return hits[0]
+        near = hits[:5]
         hint = f"; matching classes: {', '.join(c.name for c in near)}" if near else ""
         raise LookupFailure(f"drug class {name!r} not found{hint}")
     return db.classes[cid]

@@ -465,8 +465,9 @@ class DrugInteractionTools(BaseDomainTools):
                 "active_medications": [m.drug_id for m in p.active_medications()]}
 
     @is_tool(ToolType.WRITE)
-    def adjust_medication_dose(self, patient_id: str, drug: str, dose: float, unit: str, reason: str) -> dict:
-        """Change the dose of one of the patient's active medications (blocked above the maximum single dose).
+    def adjust_medication_dose(self, patient_id: str, drug: str, dose: float, unit: str, reason: str,
+                               frequency: str | None = None) -> dict:
+        """Change the dose (and optionally the frequency) of an active medication; blocked above the maximum single dose.
 
         Args:
             patient_id: The patient identifier.
@@ -474,6 +475,7 @@ class DrugInteractionTools(BaseDomainTools):
             dose: New dose amount per administration.
             unit: Dose unit.
             reason: Why the dose changes (e.g. "CrCl 25 mL/min").
+            frequency: New frequency, e.g. "twice daily"; unchanged when omitted.
         """
         p, d = self._patient(patient_id), self._drug(drug)
         order = self._active(p, d.id)
@@ -481,9 +483,14 @@ class DrugInteractionTools(BaseDomainTools):
             raise ToolError(f"{d.id} is not an active medication of {p.patient_id}")
         if dose <= 0:
             raise ToolError(f"dose must be positive, got {dose}")
+        if not reason.strip():
+            raise ToolError("a reason is required to change a dose")
         self._dose_guard(d, dose, unit, order.route, p)
-        before = {"dose": order.dose, "unit": order.unit}
+        before = {"dose": order.dose, "unit": order.unit, "frequency": order.frequency}
         order.dose, order.unit = dose, unit
-        change_id = self._log(p, "dose_change", d.id, {"from": before, "to": {"dose": dose, "unit": unit}}, reason)
+        if frequency and frequency.strip():
+            order.frequency = frequency.strip()
+        after = {"dose": order.dose, "unit": order.unit, "frequency": order.frequency}
+        change_id = self._log(p, "dose_change", d.id, {"from": before, "to": after}, reason)
         return {"status": "dose changed", "change_id": change_id, "patient_id": p.patient_id, "drug": d.id,
-                "from": before, "to": {"dose": dose, "unit": unit}}
+                "from": before, "to": after}
