@@ -1,0 +1,307 @@
+"""Generated triage tasks.
+
+* `esi_handbook_tasks`: the 50 ED triage cases of medeval-harness (ESI Implementation Handbook
+  practice cases) become patients `ESI-0nn`; the gold level is the case's, with its tolerance.
+* `esi_vignette_tasks`: vignettes built from complaint templates whose ESI decision points are
+  stated (life-saving need, high-risk features, expected resources) with sampled vital signs; the
+  gold level is `envs.calculators.calculate_esi_level` on those inputs (danger-zone up-triage).
+* `calculator_tasks`: GCS, qSOFA, NEWS2, HEART, CURB-65, Revised Trauma Score, Parkland, shock
+  index and Centor vignettes with sampled inputs; the gold value is the calculator's.
+"""
+
+from __future__ import annotations
+
+import random
+
+from envs.calculators import (
+    calculate_centor,
+    calculate_curb65,
+    calculate_esi_level,
+    calculate_gcs,
+    calculate_heart_score,
+    calculate_news2,
+    calculate_parkland,
+    calculate_qsofa,
+    calculate_revised_trauma_score,
+    calculate_shock_index,
+)
+from envs.core.task import Task
+
+T0 = "2025-03-01T13:50"
+EMERGENCY_BY_TAG = {"stroke": "stroke", "sepsis": "sepsis", "overdose": "other", "trauma": "major_trauma",
+                    "psychiatric": "suicidality", "obstetric": "postpartum_hemorrhage", "cardiac": "other"}
+
+
+def handbook_patient(case: dict) -> dict:
+    """A medeval-harness case -> an EDPatient record (nothing from the case's notes or rules leaks)."""
+    inp = case["input"]
+    vit = {"time": T0}
+    for src, dst in (("heart_rate", "heart_rate"), ("systolic_bp", "systolic_bp"), ("diastolic_bp", "diastolic_bp"),
+                     ("respiratory_rate", "respiratory_rate"), ("oxygen_saturation", "spo2"),
+                     ("temperature_celsius", "temperature_c")):
+        if inp.get(src) is not None:
+            vit[dst] = inp[src]
+    return {
+        "patient_id": case["case_id"], "age": inp["patient_age"], "age_months": inp.get("patient_age_months"),
+        "sex": inp["patient_sex"], "arrival_mode": "walk-in", "chief_complaint": inp["complaint"],
+        "history": f"Patient-reported severity {inp['severity']}/10.",
+        "medical_history": inp.get("medical_history", []), "vitals": [vit] if len(vit) > 1 else [],
+        "source": "medeval-harness 0.1.0", "source_case_id": case["case_id"],
+    }
+
+
+def _handbook_emergency(case: dict) -> str | None:
+    tags = set(case.get("tags", []))
+    title = case["title"].lower()
+    if "stroke" in title or "facial droop" in title:
+        return "stroke"
+    if "hemorrhage" in title and "postpartum" in title:
+        return "postpartum_hemorrhage"
+    if "psychosis" in title:
+        return "other"
+    if case["expected"]["esi_level"] == 1:
+        return "major_trauma" if "trauma" in tags else "other"
+    return None
+
+
+def esi_handbook_tasks(cases: list[dict], source: dict) -> list[Task]:
+    tasks = []
+    for case in cases:
+        pid = case["case_id"]
+        level = case["expected"]["esi_level"]
+        tol = case["expected"].get("tolerance", 0)
+        ticket = (f"Patient {pid} has just arrived at the emergency department triage desk. Review the presentation "
+                  f"and vital signs, assign an Emergency Severity Index (ESI v4) level with assign_triage_level, and "
+                  f"answer with the level (1-5).")
+        tasks.append(Task(
+            id=f"tr_esi_handbook_{pid.lower().replace('-', '_')}", ticket=ticket, answer_type="numeric",
+            correct_answer=str(level), answer_tolerance=float(tol), answer_unit="ESI level", patient_id=pid,
+            emergency=_handbook_emergency(case),
+            description={"purpose": "ESI triage of a handbook case", "difficulty": "medium", "source": "medeval_esi",
+                         "category": "esi_triage", "task_type": "esi_handbook",
+                         "provenance": {**source, "case_id": pid, "handbook_source": case.get("source", "")}},
+            evaluation_criteria={"actions": [
+                {"action_id": "present", "name": "get_patient_presentation", "arguments": {"patient_id": pid},
+                 "compare_args": ["patient_id"]},
+                {"action_id": "vitals", "name": "get_vital_signs", "arguments": {"patient_id": pid},
+                 "compare_args": ["patient_id"]},
+                {"action_id": "assign", "name": "assign_triage_level",
+                 "arguments": {"patient_id": pid, "esi_level": level, "rationale": "ESI v4 algorithm"},
+                 "compare_args": ["patient_id"]}],
+                "reward_basis": ["ACTION", "ANSWER"]},
+            metadata={"decision_path": case["expected"]["decision_path"], "title": case["title"]},
+        ))
+    return tasks
+
+
+# (complaint, lifesaving, high_risk, confused, severe_pain, resources description, n_resources, age range)
+TEMPLATES: list[tuple[str, bool, bool, bool, bool, str, int, tuple[int, int]]] = [
+    ("cardiac arrest with CPR in progress", True, True, True, False, "resuscitation, airway, IV drugs, labs", 5, (40, 85)),
+    ("apnoeic after an opioid overdose, pinpoint pupils", True, True, True, False, "airway support, IV naloxone, labs", 3, (18, 60)),
+    ("massive haematemesis and pale, clammy", True, True, True, False, "IV fluids, blood transfusion, labs, endoscopy", 4, (45, 85)),
+    ("anaphylaxis with stridor after a bee sting", True, True, False, True, "IM adrenaline, IV fluids, nebulisers", 3, (12, 70)),
+    ("chest pain typical of acute coronary syndrome", False, True, False, False, "ECG, labs, IV medication, chest X-ray", 4, (45, 85)),
+    ("sudden severe headache, 'worst ever'", False, True, False, True, "CT head, labs, IV analgesia", 3, (25, 70)),
+    ("new confusion and fever in an elderly patient", False, False, True, False, "labs, urine culture, chest X-ray, IV fluids", 4, (70, 95)),
+    ("kidney stone pain, writhing, pain 9/10", False, False, False, True, "labs, CT, IV analgesia", 3, (25, 65)),
+    ("suicidal ideation with a plan", False, True, False, False, "psychiatric consult, labs", 2, (16, 70)),
+    ("testicular pain of sudden onset in an adolescent", False, True, False, True, "ultrasound, urology consult", 2, (12, 18)),
+    ("abdominal pain and vomiting for a day", False, False, False, False, "labs, IV fluids, CT abdomen", 3, (18, 75)),
+    ("cough and fever, likely pneumonia", False, False, False, False, "labs, chest X-ray, IV antibiotics", 3, (25, 80)),
+    ("asthma, wheezy, needs several nebulisers", False, False, False, False, "nebulised medication, chest X-ray", 2, (12, 60)),
+    ("cellulitis of the leg needing IV antibiotics", False, False, False, False, "labs, IV antibiotics", 2, (30, 80)),
+    ("forearm deformity after a fall (suspected fracture needing reduction)", False, False, False, False, "X-ray, procedural sedation and reduction", 2, (8, 80)),
+    ("ankle injury after a twist, able to bear weight with a limp", False, False, False, False, "ankle X-ray", 1, (12, 60)),
+    ("simple laceration of the forearm needing sutures", False, False, False, False, "laceration repair", 1, (5, 70)),
+    ("dysuria and frequency in a young woman", False, False, False, False, "urine dipstick and culture", 1, (18, 45)),
+    ("sore throat for 2 days", False, False, False, False, "no tests; examination only", 0, (12, 50)),
+    ("request for a repeat prescription", False, False, False, False, "none", 0, (20, 80)),
+    ("insect bite with local redness, no systemic symptoms", False, False, False, False, "none", 0, (5, 70)),
+    ("splinter in the finger", False, False, False, False, "simple procedure (removal)", 1, (5, 70)),
+]
+
+
+def _vitals(rng: random.Random, age: int, danger: bool) -> dict:
+    if danger:
+        hr = rng.choice([rng.randint(112, 135), None])
+        rr = rng.randint(24, 32) if hr is None or rng.random() < 0.5 else rng.randint(14, 20)
+        spo2 = rng.choice([rng.randint(88, 91), rng.randint(95, 99)]) if hr is not None or rr > 20 else rng.randint(88, 91)
+        hr = hr or rng.randint(80, 98)
+    else:
+        hr, rr, spo2 = rng.randint(64, 96), rng.randint(12, 20), rng.randint(95, 100)
+    sbp = rng.randint(108, 150)
+    return {"heart_rate": hr, "respiratory_rate": rr, "spo2": spo2, "systolic_bp": sbp,
+            "diastolic_bp": rng.randint(62, 92), "temperature_c": round(rng.uniform(36.2, 38.4), 1)}
+
+
+def esi_vignette_tasks(n: int, seed: int = 41) -> list[Task]:
+    rng = random.Random(seed)
+    tasks, seen = [], set()
+    while len(tasks) < n:
+        complaint, a, b, conf, pain, res_text, res, (lo, hi) = rng.choice(TEMPLATES)
+        age = rng.randint(lo, hi)
+        sex = rng.choice(["man", "woman"])
+        v = _vitals(rng, age, danger=rng.random() < 0.35)
+        result = calculate_esi_level(a, b, conf, pain, res, age, v["heart_rate"], v["respiratory_rate"], v["spo2"])
+        key = (complaint, age, sex, tuple(sorted(v.items())))
+        if key in seen:
+            continue
+        seen.add(key)
+        pain_text = " Pain is 9/10 and the patient is in obvious distress." if pain else ""
+        ticket = (f"A {age}-year-old {sex} presents to triage with {complaint}.{pain_text} Vital signs: HR {v['heart_rate']}, "
+                  f"BP {v['systolic_bp']}/{v['diastolic_bp']}, RR {v['respiratory_rate']}, SpO2 {v['spo2']}% on room air, "
+                  f"T {v['temperature_c']} C. Anticipated ED resources: {res_text}. Assign the ESI v4 level (1-5), "
+                  f"applying the danger-zone vital signs at decision point D. Answer with the level.")
+        args = {"requires_immediate_lifesaving_intervention": a, "high_risk_situation": b,
+                "confused_lethargic_or_disoriented": conf, "severe_pain_or_distress": pain, "expected_resources": res,
+                "age_years": age, "heart_rate": v["heart_rate"], "respiratory_rate": v["respiratory_rate"], "spo2": v["spo2"]}
+        tasks.append(Task(
+            id=f"tr_esi_vignette_{len(tasks):03d}", ticket=ticket, answer_type="numeric", correct_answer=str(result.score),
+            answer_tolerance=0.0, answer_unit="ESI level",
+            emergency="other" if result.score == 1 else None,
+            description={"purpose": "ESI triage vignette", "difficulty": "medium", "source": "generated_esi",
+                         "category": "esi_triage", "task_type": "esi_vignette",
+                         "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": "calculate_esi_level"}},
+            evaluation_criteria={"actions": [{"action_id": "esi", "name": "calculate_esi_level", "arguments": args,
+                                              "compare_args": ["expected_resources"]}],
+                                 "reward_basis": ["ACTION", "ANSWER"]},
+            metadata={"inputs": args, "category": result.category},
+        ))
+    return tasks
+
+
+def _task(kind: str, idx: int, ticket: str, tool: str, args: dict, value: float, tol: float, unit: str,
+          compare: list[str]) -> Task:
+    return Task(
+        id=f"tr_calc_{kind}_{idx:03d}", ticket=ticket, answer_type="numeric", correct_answer=f"{value:g}",
+        answer_tolerance=tol, answer_unit=unit,
+        description={"purpose": f"{kind} calculation", "difficulty": "easy", "source": "generated_calculator",
+                     "category": "calculator", "task_type": f"calc_{kind}",
+                     "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": f"envs.calculators.{tool}"}},
+        evaluation_criteria={"actions": [{"action_id": kind, "name": tool, "arguments": args, "compare_args": compare}],
+                             "reward_basis": ["ACTION", "ANSWER"]},
+        metadata={"inputs": args},
+    )
+
+
+EYE = {4: "opens eyes spontaneously", 3: "opens eyes to voice", 2: "opens eyes only to pressure", 1: "no eye opening"}
+VERBAL = {5: "is oriented", 4: "is confused", 3: "says inappropriate words", 2: "makes only sounds", 1: "makes no sound"}
+MOTOR = {6: "obeys commands", 5: "localises to pain", 4: "withdraws from pain", 3: "flexes abnormally to pain",
+         2: "extends to pain", 1: "has no motor response"}
+
+
+def calculator_tasks(per_kind: int, seed: int = 43) -> list[Task]:
+    rng = random.Random(seed)
+    out: list[Task] = []
+
+    def unique(kind: str, make) -> None:
+        seen, made, tries = set(), 0, 0
+        while made < per_kind and tries < per_kind * 30:
+            tries += 1
+            key, task = make(made)
+            if key in seen:
+                continue
+            seen.add(key)
+            out.append(task)
+            made += 1
+
+    def gcs(i):
+        e, v, m = rng.randint(1, 4), rng.randint(1, 5), rng.randint(1, 6)
+        r = calculate_gcs(e, v, m)
+        t = (f"After a head injury a patient {EYE[e]}, {VERBAL[v]} and {MOTOR[m]}. Calculate the Glasgow Coma Scale "
+             f"total. Answer with the number.")
+        return (e, v, m), _task("gcs", i, t, "calculate_gcs", {"eye": e, "verbal": v, "motor": m}, r.score, 0, "points",
+                                ["eye", "verbal", "motor"])
+
+    def qsofa(i):
+        rr, sbp, am = rng.randint(12, 34), rng.randint(76, 140), rng.random() < 0.4
+        r = calculate_qsofa(rr, sbp, am)
+        t = (f"A patient with suspected pneumonia has RR {rr}/min, BP {sbp}/{rng.randint(45, 85)} mmHg and is "
+             f"{'newly confused (GCS 13)' if am else 'alert and oriented (GCS 15)'}. What is the qSOFA score?")
+        return (rr, sbp, am), _task("qsofa", i, t, "calculate_qsofa",
+                                    {"respiratory_rate": rr, "systolic_bp": sbp, "altered_mentation": am}, r.score, 0,
+                                    "points", ["respiratory_rate", "systolic_bp", "altered_mentation"])
+
+    def news2(i):
+        rr, spo2 = rng.randint(8, 30), rng.randint(86, 100)
+        o2, temp = rng.random() < 0.3, round(rng.uniform(34.8, 39.6), 1)
+        sbp, hr = rng.randint(85, 225), rng.randint(38, 135)
+        cons = rng.choice(["alert"] * 4 + ["new_confusion", "voice"])
+        r = calculate_news2(rr, spo2, o2, temp, sbp, hr, cons)
+        t = (f"Ward observations: RR {rr}/min, SpO2 {spo2}% {'on 2 L/min oxygen' if o2 else 'on room air'}, "
+             f"temperature {temp} C, BP {sbp}/{rng.randint(50, 95)} mmHg, pulse {hr}/min, consciousness: "
+             f"{cons.replace('_', ' ')}. Calculate NEWS2 (SpO2 scale 1).")
+        args = {"respiratory_rate": rr, "spo2": spo2, "on_supplemental_oxygen": o2, "temperature_c": temp,
+                "systolic_bp": sbp, "heart_rate": hr, "consciousness": cons}
+        return tuple(args.values()), _task("news2", i, t, "calculate_news2", args, r.score, 0, "points",
+                                           ["respiratory_rate", "spo2", "heart_rate"])
+
+    def heart(i):
+        hist = rng.choice(["slightly", "moderately", "highly"])
+        ecg = rng.choice(["normal", "nonspecific", "st_deviation"])
+        age, rf = rng.randint(30, 85), rng.randint(0, 4)
+        ath = rng.random() < 0.25
+        trop = rng.choice([round(rng.uniform(0.2, 0.9), 2), round(rng.uniform(1.2, 2.8), 2), round(rng.uniform(3.5, 12), 1)])
+        r = calculate_heart_score(hist, ecg, age, rf, ath, trop)
+        ecg_text = {"normal": "a normal ECG", "nonspecific": "non-specific repolarisation changes",
+                    "st_deviation": "significant ST depression"}[ecg]
+        t = (f"A {age}-year-old with chest pain: history {hist} suspicious for ACS, {ecg_text}, {rf} cardiovascular risk "
+             f"factor(s), {'known' if ath else 'no known'} atherosclerotic disease, initial troponin {trop} x the upper "
+             f"reference limit. Calculate the HEART score.")
+        args = {"history": hist, "ecg": ecg, "age": age, "risk_factor_count": rf, "atherosclerotic_disease": ath,
+                "troponin_x_uln": trop}
+        return tuple(args.values()), _task("heart", i, t, "calculate_heart_score", args, r.score, 0, "points",
+                                           ["history", "ecg"])
+
+    def curb(i):
+        conf, bun = rng.random() < 0.3, rng.randint(8, 45)
+        rr, sbp, dbp, age = rng.randint(14, 36), rng.randint(78, 150), rng.randint(45, 90), rng.randint(25, 92)
+        r = calculate_curb65(conf, bun, rr, sbp, dbp, age)
+        t = (f"A {age}-year-old with community-acquired pneumonia: {'new confusion' if conf else 'no confusion'}, BUN "
+             f"{bun} mg/dL, RR {rr}/min, BP {sbp}/{dbp} mmHg. Calculate CURB-65.")
+        args = {"confusion": conf, "bun_mg_dl": bun, "respiratory_rate": rr, "systolic_bp": sbp, "diastolic_bp": dbp,
+                "age": age}
+        return tuple(args.values()), _task("curb65", i, t, "calculate_curb65", args, r.score, 0, "points",
+                                           ["bun_mg_dl", "age"])
+
+    def rts(i):
+        g, sbp, rr = rng.randint(3, 15), rng.choice([0, rng.randint(40, 75), rng.randint(76, 89), rng.randint(90, 150)]), \
+            rng.choice([0, rng.randint(4, 9), rng.randint(10, 29), rng.randint(30, 44)])
+        r = calculate_revised_trauma_score(g, sbp, rr)
+        t = (f"Trauma patient on arrival: GCS {g}, systolic BP {sbp} mmHg, respiratory rate {rr}/min. Calculate the "
+             f"weighted Revised Trauma Score (4 decimal places).")
+        return (g, sbp, rr), _task("rts", i, t, "calculate_revised_trauma_score",
+                                   {"gcs": g, "systolic_bp": sbp, "respiratory_rate": rr}, round(r.score, 4), 0.001,
+                                   "points", ["gcs", "systolic_bp", "respiratory_rate"])
+
+    def parkland(i):
+        w, tbsa = rng.randint(45, 120), rng.choice(range(10, 75, 5))
+        r = calculate_parkland(w, tbsa)
+        t = (f"An adult weighing {w} kg has partial- and full-thickness burns over {tbsa}% of the total body surface area. "
+             f"Using the Parkland formula, how many mL of crystalloid are given in the first 24 hours?")
+        return (w, tbsa), _task("parkland", i, t, "calculate_parkland", {"weight_kg": w, "tbsa_percent": tbsa},
+                                round(r.score), 1, "mL", ["weight_kg", "tbsa_percent"])
+
+    def shock(i):
+        hr, sbp = rng.randint(60, 150), rng.randint(70, 150)
+        r = calculate_shock_index(hr, sbp)
+        t = f"A patient has a heart rate of {hr}/min and a systolic BP of {sbp} mmHg. What is the shock index (2 decimals)?"
+        return (hr, sbp), _task("shock_index", i, t, "calculate_shock_index", {"heart_rate": hr, "systolic_bp": sbp},
+                                round(r.score, 2), 0.01, "bpm/mmHg", ["heart_rate", "systolic_bp"])
+
+    def centor(i):
+        age = rng.randint(4, 70)
+        ex, nodes, cough_absent = rng.random() < 0.5, rng.random() < 0.5, rng.random() < 0.5
+        temp = round(rng.uniform(36.5, 39.8), 1)
+        r = calculate_centor(age, ex, nodes, temp, cough_absent)
+        t = (f"A {age}-year-old with sore throat: tonsillar exudate {'present' if ex else 'absent'}, tender anterior "
+             f"cervical nodes {'present' if nodes else 'absent'}, temperature {temp} C, "
+             f"{'no cough' if cough_absent else 'has a cough'}. Calculate the modified Centor (McIsaac) score.")
+        args = {"age": age, "tonsillar_exudate_or_swelling": ex, "tender_anterior_cervical_nodes": nodes,
+                "temperature_c": temp, "cough_absent": cough_absent}
+        return tuple(args.values()), _task("centor", i, t, "calculate_centor", args, r.score, 0, "points", ["age"])
+
+    for kind, make in (("gcs", gcs), ("qsofa", qsofa), ("news2", news2), ("heart", heart), ("curb65", curb),
+                       ("rts", rts), ("parkland", parkland), ("shock_index", shock), ("centor", centor)):
+        unique(kind, make)
+    return out
