@@ -159,6 +159,7 @@ class BM25Searcher:
         self.vocab: dict[str, int] = self.retriever.vocab_dict
         self.indptr = self.retriever.scores["indptr"]
         self.num_docs = int(self.retriever.scores["num_docs"])
+        self.scale = float(self.retriever.k1) + 1.0
 
     def validate(self) -> None:
         scores = self.retriever.scores
@@ -190,7 +191,9 @@ class BM25Searcher:
             )
         docs, scores = np.asarray(docs[0]), np.asarray(scores[0])
         keep = scores > 0
-        return docs[keep], scores[keep]
+        # bm25s's Lucene variant leaves out BM25's constant (k1 + 1) numerator; tantivy keeps it.
+        # Multiply it back so both engines report scores on one scale (ranking is unchanged).
+        return docs[keep], scores[keep] * self.scale
 
     def warmup(self) -> None:
         """Compile the numba kernel now (first call otherwise pays ~1-2 s)."""

@@ -106,13 +106,15 @@ class KnowledgeBase:
     def open(cls, path: str | Path | None = None, *, warmup: bool = True) -> "KnowledgeBase":
         """Open the KB at `path` (default: the one `hcgym data build` writes). Fails loudly."""
         path = Path(path) if path is not None else default_kb_path()
+        building = path.with_name(path.name + ".building").exists()
         if not path.exists():
-            raise _fail(KBNotBuiltError, path, "does not exist")
+            hint = " (a build is in progress or was interrupted; rerun the build to resume it)" if building else ""
+            raise _fail(KBNotBuiltError, path, f"does not exist{hint}")
         if not path.is_dir():
             raise _fail(KBCorruptError, path, "is not a directory")
         mpath = path / "manifest.json"
         if not mpath.is_file():
-            hint = " (a build is in progress or was interrupted)" if path.with_name(path.name + ".building").exists() else ""
+            hint = " (a build is in progress or was interrupted; rerun the build to resume it)" if building else ""
             raise _fail(KBNotBuiltError, path, f"has no manifest.json{hint}")
         try:
             manifest = json.loads(mpath.read_text(encoding="utf-8"))
