@@ -103,6 +103,9 @@ class LearnerBackend(ABC):
     def load_state(self, directory: Path) -> None:
         """Restore what `save_state` wrote (weights-only / safetensors loading)."""
 
+    def begin_forward(self) -> None:
+        """Called before every forward on `policy` (DeepSpeed counts micro-steps there)."""
+
     def autocast(self):
         return contextlib.nullcontext()
 

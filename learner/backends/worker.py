@@ -178,12 +178,14 @@ class RankWorker:
     def _dummy_loss(self) -> torch.Tensor:
         """A zero loss through the whole model: a rank without samples still joins ZeRO-3's collectives."""
         ids = torch.full((1, 2), self.pad_id, dtype=torch.long, device=self.backend.device)
+        self.backend.begin_forward()
         stats = token_stats(self.backend.policy, ids, torch.ones_like(ids))
         return stats.logprobs.sum() * 0.0
 
     # -- the step ------------------------------------------------------------------------------
     def _forward(self, t: dict[str, torch.Tensor], *, grad: bool):
         d = self.config.loss.distill
+        self.backend.begin_forward()
         with torch.set_grad_enabled(grad), self.backend.autocast():
             return token_stats(
                 self.backend.policy, t["input_ids"], t["attention_mask"],
