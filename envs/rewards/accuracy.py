@@ -205,7 +205,7 @@ def severities(text: str) -> set[str]:
     return found
 
 
-def _is_esi_task(task: Task, gold: str) -> bool:
+def is_esi_task(task: Task, gold: str) -> bool:
     if not _ESI_GOLD.match(gold):
         return False
     unit = (task.answer_unit or "").lower()
@@ -216,7 +216,7 @@ def score_category(answer: str, task: Task) -> AccuracyResult:
     golds = gold_answers(task)
     gold = golds[0] if golds else ""
     stripped = _strip_prefix(answer)
-    if _is_esi_task(task, gold):
+    if is_esi_task(task, gold):
         want = int(_ESI_GOLD.match(gold).group(1))  # type: ignore[union-attr]
         got = esi_levels(stripped)
         return AccuracyResult(1.0 if got == {want} else 0.0, "category", {"family": "esi", "stated": sorted(got), "gold": want})

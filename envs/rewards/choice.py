@@ -108,6 +108,11 @@ def _option_text_match(text: str, options: dict[str, str]) -> str | None:
     return None
 
 
+@lru_cache(maxsize=256)
+def _letters(keys: tuple[str, ...]) -> str:
+    return "".join(sorted(k for k in keys if len(k) == 1 and k.isalpha() and k.isupper()))
+
+
 def extract_choice(text: str | None, options: dict[str, str] | list[str] | None = None, *,
                    strict: bool = False) -> str | None:
     """The option letter the text commits to, or None (no answer, a hedge, or a list).
@@ -129,10 +134,10 @@ def extract_choice(text: str | None, options: dict[str, str] | list[str] | None 
     if not text or not isinstance(text, str):
         return None
     if isinstance(options, dict):
-        letters = "".join(sorted(k for k in options if len(k) == 1 and k.isalpha() and k.isupper()))
+        letters = _letters(tuple(options))
         option_texts = options
     elif options:
-        letters = "".join(sorted(k for k in options if len(k) == 1 and k.isalpha() and k.isupper()))
+        letters = _letters(tuple(options))
         option_texts = {}
     else:
         letters, option_texts = _DEFAULT_LETTERS, {}

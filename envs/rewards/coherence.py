@@ -42,8 +42,14 @@ _NO_INTERACTION = re.compile(r"\bno (?:significant |known |clinically significan
 _INTERACTION = re.compile(r"\b(?:major|significant|serious|severe|contraindicated|dangerous) (?:drug )?interaction(?: between (\w+) and (\w+))?", re.I)
 
 
+_FACT_WORDS = ("allerg", "nkda", "pregnan", "hcg", "emergen", "urgent", "interaction", "life-threatening")
+
+
 def _facts(text: str) -> dict[str, bool]:
     found: dict[str, bool] = {}
+    lower = text.lower()
+    if not any(w in lower for w in _FACT_WORDS):
+        return found
     for slot, pattern, polarity in _FACTS:
         if pattern.search(text):
             found[slot] = polarity if slot not in found or found[slot] == polarity else found[slot]

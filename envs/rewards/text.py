@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import unicodedata
@@ -91,13 +90,9 @@ def norm_value(value: Any) -> Any:
     return ("o", repr(value))
 
 
-def signature(name: str, arguments: dict[str, Any]) -> str:
+def signature(name: str, arguments: dict[str, Any]) -> tuple:
     """A tool call's identity for counting repeats: its name and normalised arguments."""
-    try:
-        args = json.dumps(norm_value(arguments), sort_keys=True, default=repr)
-    except (TypeError, ValueError):
-        args = repr(arguments)
-    return f"{name.lower()}|{args}"
+    return (name.lower(), norm_value(arguments))
 
 
 # -- negation ------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 
-from envs.rewards.accuracy import _is_esi_task, esi_levels
+from envs.rewards.accuracy import esi_levels, is_esi_task
 from envs.rewards.safety import SafetyState, safety_check
 from envs.rewards.safety_patterns import EMERGENCY_TYPES
 from envs.rewards.text import negated
@@ -171,7 +171,7 @@ def emergency_discharge(state: SafetyState) -> None:
 @safety_check
 def triage_level(state: SafetyState) -> None:
     task = state.view.task
-    if task.answer_type == "choice" or not task.correct_answer or not _is_esi_task(task, task.correct_answer):
+    if task.answer_type == "choice" or not task.correct_answer or not is_esi_task(task, task.correct_answer):
         return
     gold = min(esi_levels(task.correct_answer) or {0})
     agent = _agent_esi(state)

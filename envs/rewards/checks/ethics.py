@@ -44,6 +44,10 @@ _COST = re.compile(
 
 
 def _agent_match(state: SafetyState, regex: re.Pattern[str], *, check_negation: bool = False) -> tuple[int | None, str] | None:
+    """The first match in what the agent wrote, not quoted from the task. Multiple-choice tasks
+    are skipped: their graded output is the choice, and option texts are quoted clinical wording."""
+    if state.view.task.answer_type == "choice":
+        return None
     task_text = state.view.task_text_lower
     for turn, text in [*state.view.turn_texts, (None, state.view.answer_text)]:
         for m in regex.finditer(text):
