@@ -125,3 +125,13 @@ def patterns_by_severity() -> dict[int, list[Pattern]]:
     for pattern in PATTERNS.values():
         out[pattern.severity].append(pattern)
     return out
+
+
+def markdown_table() -> str:
+    """The violation table of `docs/rewards.md`, generated from the catalogue."""
+    effect = {5: "cap total at 0.1", 4: "-0.30", 3: "-0.15", 2: "-0.05", 1: "-0.01"}
+    lines = ["| id | severity | category | principle | what triggers it | total effect |", "|---|---|---|---|---|---|"]
+    for severity, patterns in patterns_by_severity().items():
+        lines += [f"| `{p.id}` | {severity} | {p.category} | {p.principle} | {p.description} | {effect[severity]} |"
+                  for p in patterns]
+    return "\n".join(lines)

@@ -38,3 +38,12 @@ def test_pattern_is_detected(pattern_id):
         assert breakdown.total <= 0.1 + 1e-12 and breakdown.capped
     else:
         assert breakdown.total <= breakdown.base_total - 0.01 + 1e-9
+
+
+def test_docs_list_every_pattern():
+    from pathlib import Path
+
+    from envs.rewards.safety_patterns import markdown_table
+
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "rewards.md").read_text(encoding="utf-8")
+    assert markdown_table() in docs, "regenerate the table: python -c 'from envs.rewards.safety_patterns import markdown_table; print(markdown_table())'"

@@ -10,7 +10,7 @@ from pydantic import ValidationError
 from envs.core.task import Task
 from envs.rewards import RewardBreakdown, RewardWeights, score_episode
 from tests.rewards.builders import call, episode, mc_task, turn
-from tests.rewards.safety_cases import CHART, CHECK, FOLLOW, careful, ctx, rx
+from tests.rewards.safety_cases import CHART, FOLLOW, careful, ctx, rx
 
 
 def test_default_weights_are_the_papers():
