@@ -350,6 +350,48 @@ class Teacher:
         self._history[-1]["step"] = step
         return out
 
+    def join_weight_sync(self, config: dict, rank: int, world_size: int, peer_names: list[str]) -> None:
+        """Join the learner's collective weight-sync group as a receiver (GPU path)."""
+        from learner.config_models import WeightSyncConfig
+        from learner.weight_sync import WeightSyncGroup
+
+        self._sync_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,
+                                           device=self.config.device)
+
+    def receive_update(self, version: int, step: int) -> dict[str, Any]:
+        """Apply the step's scheduled update from weights streamed bucket by bucket (never a full copy).
+
+        Must be called when the learner broadcasts, also on steps whose action is "none" only if the
+        learner broadcasts then (the driver broadcasts to the teacher only at EMA / hard-copy steps).
+        """
+        group = getattr(self, "_sync_group", None)
+        if group is None:
+            raise RuntimeError("receive_update before join_weight_sync")
+        action = teacher_update_action(step, self.config)
+        a = self.config.ema_alpha
+        with self._weights_lock, torch.no_grad():
+            state = self.model.state_dict()
+            targets = self._shadow or state
+            for name, tensor in group.receive(version):
+                if name not in targets:
+                    raise ValueError(f"streamed tensor {name!r} is not a teacher weight")
+                target = targets[name]
+                src = tensor.to(device=target.device, dtype=target.dtype)
+                if action == "ema":
+                    target.lerp_(src, 1.0 - a)
+                elif action == "hard_copy":
+                    target.copy_(src)
+                if self._shadow is not None and action != "none":
+                    state[name].copy_(target)
+            if action != "none":
+                self._version += 1
+        if action == "none":
+            return {"action": "none", "step": step, "teacher_version": self._version}
+        out = self._record(action, **({"alpha": a} if action == "ema" else {}))
+        self._history[-1]["step"] = step
+        out["step"] = step
+        return out
+
     def _record(self, action: str, **extra) -> dict[str, Any]:
         entry = {"action": action, "teacher_version": self._version, **extra}
         self._history.append(entry)

@@ -136,6 +136,24 @@ class Learner:
         """Overwrite the policy weights (the optimizer state is kept)."""
         self._all("load_full_state_dict", state)
 
+    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> None:
+        """Join a collective weight-sync group as its sender (call while the receivers join theirs).
+
+        Args:
+            config: `WeightSyncConfig` fields (backend, bucket_mb, timeout_s, master_addr, master_port).
+            world_size: 1 + number of receivers.
+            peer_names: Readable names for error messages, rank 0 (this learner) first.
+        """
+        self._all("join_weight_sync", dict(config), world_size, list(peer_names))
+
+    def broadcast_weights(self) -> dict[str, float]:
+        """Send the current weights (version = policy_version) through the group; receivers call
+        `WeightSyncGroup.receive_into(model, version)` at the same time."""
+        results = self._all("broadcast_weights", self._version)
+        out = dict(results[0])
+        out["version"] = float(self._version)
+        return out
+
     # -- checkpoints ---------------------------------------------------------------------------
     def save_checkpoint(self, directory: str) -> str:
         """Write weights (safetensors), optimizer and RNG states of every rank, step and version.

@@ -82,6 +82,13 @@ class LearnerBackend(ABC):
         Every rank must iterate (gathering is collective); all ranks see the full tensors.
         """
 
+    def parameter_specs(self) -> list[tuple[str, list[int], torch.dtype]]:
+        """(name, full shape, dtype) of what `iter_full_parameters` yields, in the same order, without gathering."""
+        out = []
+        for name, p in self.policy.named_parameters():
+            out.append((name, list(getattr(p, "ds_shape", p.shape)), p.dtype))
+        return out
+
     def full_state_dict(self) -> dict[str, torch.Tensor] | None:
         """Full CPU weights gathered layer by layer; None on ranks other than 0."""
         out: dict[str, torch.Tensor] = {}

@@ -62,6 +62,9 @@ class TorchBackend(LearnerBackend):
     def iter_full_parameters(self) -> Iterator[tuple[str, torch.Tensor]]:
         yield from self._model.state_dict().items()
 
+    def parameter_specs(self) -> list[tuple[str, list[int], torch.dtype]]:
+        return [(k, list(v.shape), v.dtype) for k, v in self._model.state_dict().items()]
+
     def load_full_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         missing, unexpected = self._model.load_state_dict(state, strict=False)
         if missing or unexpected:

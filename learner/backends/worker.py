@@ -276,6 +276,33 @@ class RankWorker:
     def load_full_state_dict(self, state: dict[str, torch.Tensor] | None) -> None:
         self.backend.load_full_state_dict(state or {})
 
+    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> bool:
+        """Rank 0 joins the private weight-sync group as its sender (blocks until every member joined)."""
+        if self.rank != 0:
+            return False
+        from learner.config_models import WeightSyncConfig
+        from learner.weight_sync import WeightSyncGroup
+
+        device = "cuda" if self.config.device == "cuda" else "cpu"
+        self._sync_group = WeightSyncGroup(0, world_size, WeightSyncConfig.model_validate(config), peer_names,
+                                           device=device)
+        return True
+
+    def broadcast_weights(self, version: int) -> dict[str, float] | None:
+        """Every rank walks the model module by module (ZeRO-3 gathers are collective); rank 0 sends."""
+        if self.rank != 0:
+            for _ in self.backend.iter_full_parameters():
+                pass
+            return None
+        group = getattr(self, "_sync_group", None)
+        if group is None:
+            raise RuntimeError("broadcast_weights before join_weight_sync")
+        from learner.weight_sync import manifest_from_tensors
+
+        manifest = manifest_from_tensors(self.backend.parameter_specs(), version,
+                                         int(group.config.bucket_mb * 2**20))
+        return group.send(manifest, self.backend.iter_full_parameters())
+
     def save_rank_state(self, directory: str) -> None:
         directory = Path(directory)
         self.backend.save_state(directory)
