@@ -16,6 +16,9 @@ from envs.core.task import Task
 # Every domain folder under envs/domains/ with an environment.py. Add a line to register one.
 DOMAINS: dict[str, str] = {
     "drug_interaction": "envs.domains.drug_interaction.environment",
+    "clinical_diagnosis": "envs.domains.clinical_diagnosis.environment",
+    "triage_emergency": "envs.domains.triage_emergency.environment",
+    "ehr_management": "envs.domains.ehr_management.environment",
 }
 
 

@@ -27,4 +27,4 @@ def shared_toolkits() -> list[Toolkit]:
     cls = _knowledge_toolkit_class()
     if cls is None:
         return []
-    return [cls.default()]
+    return [cls()]

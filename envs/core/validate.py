@@ -89,7 +89,7 @@ def validate_task(task: Task, domain: str, toolkit_definitions: dict, *, replay:
                 report.problems.append(f"gold replay: call {call.name!r} failed: {call.error}")
     details = info.get("reward_breakdown") or {}
     report.reward_components = info.get("reward_components", {})
-    coverage = details.get("action_coverage")
+    coverage = (details.get("details") or {}).get("process", {}).get("coverage")
     if task.evaluation_criteria.actions and coverage is not None and coverage < 1.0 - 1e-9:
         report.problems.append(f"gold replay: action coverage {coverage:.3f} < 1")
     accuracy = report.reward_components.get("accuracy")

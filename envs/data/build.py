@@ -12,6 +12,10 @@ import time
 
 BUILDERS: list[str] = [
     "envs.domains.drug_interaction.build",
+    "envs.domains.clinical_diagnosis.build",   # before ehr_management, which reuses its ICD-10 index
+    "envs.domains.triage_emergency.build",
+    "envs.domains.ehr_management.build",
+    "kb_service.build_default",
 ]
 
 

@@ -50,18 +50,12 @@ class Pathway(BaseModel):
     emergency: str | None = None
 
 
-def _norm(value: Any) -> Any:
-    if isinstance(value, str):
-        return " ".join(value.lower().split())
-    if isinstance(value, float) and value.is_integer():
-        return int(value)
-    return value
-
-
 def action_matches(expected: ExpectedAction, name: str, arguments: dict[str, Any]) -> bool:
-    if expected.name != name:
-        return False
-    return all(_norm(arguments.get(k)) == _norm(v) for k, v in expected.compared_arguments.items())
+    """The reward's matching rule (name plus normalised compare_args), so phases and the process
+    score agree on what counts as done."""
+    from envs.rewards.process import call_matches
+
+    return call_matches(expected, name, arguments)
 
 
 @dataclass
