@@ -123,8 +123,8 @@ def test_authored_answers_agree_with_the_tools(authored):
             assert by_tool["check_patient_interactions"][0][1]["pair_count"] == int(gold), task.id
         elif task.options:
             drug = task.options[gold]
-            assert all(not r["allergy_conflict"] for args, r in by_tool["check_allergy"] if args["drug"] == drug)
-            assert any(r["allergy_conflict"] for _, r in by_tool["check_allergy"]), task.id
+            assert all(not r["conflict"] for args, r in by_tool["check_allergy"] if args["drug"] == drug)
+            assert any(r["conflict"] for _, r in by_tool["check_allergy"]), task.id
         else:
             raise AssertionError(f"{task.id}: no rule to re-derive its answer")
         checked += 1

@@ -167,6 +167,7 @@ def test_patient_medication_list_plus_proposed_drug(env):
     assert [(p["drug_a"], p["drug_b"], p["severity_level"]) for p in existing] == [("warfarin", "atorvastatin", "moderate")]
     ci = call(env, "check_patient_interactions", patient_id="P009", drug="iohexol")
     assert ci["contraindicated_with_proposed_drug"] == ["metformin"]
+    assert "contraindicated_with_proposed_drug" not in out and "allergy_conflicts_of_proposed_drug" not in out
     assert "not found" in fails(env, "check_patient_interactions", patient_id="P999")
 
 
@@ -184,9 +185,12 @@ def test_safer_alternatives(env):
 # -- allergies and patients ----------------------------------------------------------------------
 def test_allergy_by_class(env):
     out = call(env, "check_allergy", patient_id="P013", drug="amoxicillin")
-    assert out["allergy_conflict"] and out["conflicts"][0]["allergen"] == "penicillins"
-    assert not call(env, "check_allergy", patient_id="P013", drug="azithromycin")["allergy_conflict"]
-    assert call(env, "check_allergy", patient_id="P003", drug="sulfamethoxazole")["allergy_conflict"]
+    assert out["conflict"] and out["matches"][0]["allergen"] == "penicillins"
+    clean = call(env, "check_allergy", patient_id="P013", drug="azithromycin")
+    assert not clean["conflict"] and clean["chart_entries_checked"] == 1
+    assert call(env, "check_allergy", patient_id="P003", drug="sulfamethoxazole")["conflict"]
+    proposal = call(env, "check_patient_interactions", patient_id="P013", drug="amoxicillin")
+    assert proposal["allergy_conflicts_of_proposed_drug"][0]["allergen"] == "penicillins"
 
 
 def test_patient_details_and_medications_match_the_authored_file(env):
@@ -319,7 +323,7 @@ def test_discontinue_and_adjust(env):
     after_stop = env.db_hash()
     assert after_stop != before
     assert "metformin" not in call(env, "get_patient_medications", patient_id="P009")["active"]
-    assert call(env, "check_patient_interactions", patient_id="P009", drug="iohexol")["contraindicated_with_proposed_drug"] == []
+    assert "contraindicated_with_proposed_drug" not in call(env, "check_patient_interactions", patient_id="P009", drug="iohexol")
     out = call(env, "adjust_medication_dose", patient_id="P028", drug="gabapentin", dose=300, unit="mg",
                frequency="twice daily", reason="CrCl 33")
     assert out["to"] == {"dose": 300, "unit": "mg", "frequency": "twice daily"}

@@ -278,7 +278,7 @@ class Generator:
             self.add(Spec(
                 id=spec_id, task_type="patient_contraindicated_combination", ticket=ticket, patient_id=pid,
                 calls=[("check_patient_interactions", {"patient_id": pid, "drug": drug}, ["patient_id", "drug"])],
-                answer=lambda r: "yes" if r[0]["contraindicated_with_proposed_drug"] else "no", answer_type="category",
+                answer=lambda r: "yes" if r[0].get("contraindicated_with_proposed_drug") else "no", answer_type="category",
                 source="generated:ansm+authored-patients", provenance=_prov(self.ansm), category="medication review",
                 challenges=["Contraindications can come from class rules."],
             ))
@@ -316,7 +316,7 @@ class Generator:
             self.add(Spec(
                 id=f"di-gen-allergy_conflict-{pid}-{_slug(drug)}", task_type="allergy_conflict", ticket=ticket,
                 patient_id=pid, calls=[("check_allergy", {"patient_id": pid, "drug": drug}, ["patient_id", "drug"])],
-                answer=lambda r: "yes" if r[0]["allergy_conflict"] else "no", answer_type="category",
+                answer=lambda r: "yes" if r[0]["conflict"] else "no", answer_type="category",
                 source="generated:ansm+authored-patients", provenance=_prov(self.ansm), category="allergies",
                 difficulty="easy", challenges=["Class allergies (penicillins, sulfonamides) cover member drugs."],
             ))

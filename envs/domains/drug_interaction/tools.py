@@ -90,8 +90,9 @@ class DrugInteractionTools(BaseDomainTools):
         """
         p, d = self._patient(patient_id), self._drug(drug)
         conflicts = L.allergy_conflicts(self.db, p, d)
-        return {"patient_id": p.patient_id, "drug": d.id, "allergy_conflict": bool(conflicts), "conflicts": conflicts,
-                "recorded_allergies": [a.allergen for a in p.allergies]}
+        # Key names avoid warning words when nothing conflicts, so a clean check reads as clean.
+        return {"patient_id": p.patient_id, "drug": d.id, "conflict": bool(conflicts), "matches": conflicts,
+                "chart_entries_checked": len(p.allergies)}
 
     # -- drugs and classes -------------------------------------------------------------------------
     @is_tool(ToolType.READ)
@@ -156,9 +157,7 @@ class DrugInteractionTools(BaseDomainTools):
         a, b = self._party(drug_a), self._party(drug_b)
         if a.id == b.id:
             raise ToolError(f"{drug_a!r} and {drug_b!r} are the same drug ({a.id}); give two different drugs")
-        report = L.pair_report(self.db, a, b)
-        report["severity_scale"] = "contraindicated > major (not recommended) > moderate (precaution for use) > minor (take into account) > none"
-        return report
+        return L.pair_report(self.db, a, b)
 
     @is_tool(ToolType.READ)
     def get_interaction_rule(self, rule_id: str) -> dict:
@@ -196,8 +195,13 @@ class DrugInteractionTools(BaseDomainTools):
         if proposed is not None:
             mine = [f for f in findings if f.involves_proposed]
             out["highest_severity_with_proposed_drug"] = L.max_severity(f.severity_level for f in mine)
-            out["contraindicated_with_proposed_drug"] = sorted(f.drug_b for f in mine if f.severity_level == "contraindicated")
-            out["allergy_conflicts_of_proposed_drug"] = L.allergy_conflicts(self.db, p, proposed)
+            blocking = sorted(f.drug_b for f in mine if f.severity_level == "contraindicated")
+            # present only when non-empty: an empty "contraindicated" list next to a drug name reads as a warning
+            if blocking:
+                out["contraindicated_with_proposed_drug"] = blocking
+            allergy = L.allergy_conflicts(self.db, p, proposed)
+            if allergy:
+                out["allergy_conflicts_of_proposed_drug"] = allergy
         return out
 
     @is_tool(ToolType.READ)
