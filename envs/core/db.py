@@ -52,6 +52,11 @@ class DB(BaseModel):
             encoding="utf-8",
         )
 
+    def __deepcopy__(self, memo: dict | None = None) -> Self:
+        # The toolkit snapshots the database before every WRITE call; a JSON round trip through
+        # pydantic's Rust core is several times faster than a generic deepcopy of nested models.
+        return type(self).model_validate_json(self.model_dump_json())
+
     def content_hash(self) -> str:
         """SHA-256 of the canonical JSON: equal states hash equal, whatever the insertion order."""
         canonical = json.dumps(self.model_dump(mode="json"), sort_keys=True, ensure_ascii=False, separators=(",", ":"))

@@ -137,11 +137,6 @@ class FormularyDrug(_Strict):
 class ClinicalDiagnosisDB(DB):
     patients: dict[str, Patient]
 
-    def __deepcopy__(self, memo: dict) -> "ClinicalDiagnosisDB":
-        # The toolkit snapshots the database before every WRITE call; a JSON round trip is
-        # several times faster than a generic deepcopy of nested pydantic models.
-        return type(self).model_validate_json(self.model_dump_json())
-
     formulary: dict[str, FormularyDrug] = Field(default_factory=dict)
     clock: str = "2025-03-01T09:00"
     next_order_number: int = 1

@@ -122,6 +122,3 @@ class EHRDB(DB):
     clock: str = "2025-03-05T08:00"
     next_order_number: int = 1
 
-    def __deepcopy__(self, memo: dict) -> "EHRDB":
-        # WRITE calls snapshot the database; a JSON round trip is much faster than deepcopy.
-        return type(self).model_validate_json(self.model_dump_json())

@@ -82,6 +82,3 @@ class TriageDB(DB):
     clock: str = "2025-03-01T14:00"
     next_order_number: int = 1
 
-    def __deepcopy__(self, memo: dict) -> "TriageDB":
-        # WRITE calls snapshot the database; a JSON round trip is much faster than deepcopy.
-        return type(self).model_validate_json(self.model_dump_json())
