@@ -90,15 +90,18 @@ class Learner:
 
         Args:
             samples: The batch.
-            teacher: Teacher outputs for the samples (list or dict by sample id); required when
-                `loss.distill.enabled`.
+            teacher: Teacher outputs for the samples (list, dict by sample id, or `TeacherFetch`);
+                required when `loss.distill.enabled`. May also be `[ref]`, a one-element list holding
+                the Ray ref of `teacher.fetch.remote(...)`: the learner then runs its reference (and
+                pi_old) forwards first and blocks on the teacher only afterwards, reporting the time
+                as `teacher_wait_s`.
             step: The driver's step number, echoed into the metrics (defaults to the learner's count).
 
         Returns:
             Metrics: policy_loss, kl_ref_loss, distill_loss, loss, kl_ref, kl_teacher, entropy,
             clip_frac, grad_norm, logprob_diff (train minus rollout log-prob on sampled tokens),
             logprob_abs_diff, turns_truncated, turns_kept, train_tokens, distill_tokens,
-            learner_s, policy_version.
+            learner_s, teacher_wait_s, policy_version.
         """
         t0 = time.perf_counter()
         metrics = combine_rank_metrics(self._all("train_step", samples, teacher))

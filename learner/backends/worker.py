@@ -37,6 +37,14 @@ class _Prepared:
     turns_truncated: int
 
 
+def _padded(T: int, rows: list[list[float]], dtype=torch.float32) -> torch.Tensor:
+    """Right-pad per-position rows to [B, T]."""
+    out = torch.zeros((len(rows), T), dtype=dtype)
+    for i, row in enumerate(rows):
+        out[i, : len(row)] = torch.tensor(row, dtype=dtype)
+    return out
+
+
 def combine_rank_metrics(results: Sequence[dict]) -> dict[str, float]:
     """Per-rank sums -> step metrics: shares of the loss add up, token sums become batch means.
 
@@ -55,9 +63,27 @@ def index_teacher_outputs(
     """Accept the teacher's outputs as a list or a dict keyed by sample id."""
     if teacher is None:
         return {}
+    if hasattr(teacher, "outputs"):  # actors.teacher.TeacherFetch
+        teacher = teacher.outputs
     if isinstance(teacher, dict):
         return dict(teacher)
     return {t.sample_id: t for t in teacher}
+
+
+def resolve_teacher(teacher) -> tuple[object, float]:
+    """Teacher outputs given directly, or a Ray ref to them in a one-element list (resolved here, timed).
+
+    Passing `[teacher.fetch.remote(ids, timeout)]` lets the learner start its reference and
+    old-policy forwards before the teacher's last results exist: Ray only resolves top-level refs,
+    so the list keeps the ref unresolved until this call.
+    """
+    if isinstance(teacher, (list, tuple)) and len(teacher) == 1 and type(teacher[0]).__name__ == "ObjectRef":
+        import ray
+
+        t0 = time.perf_counter()
+        value = ray.get(teacher[0])
+        return value, time.perf_counter() - t0
+    return teacher, 0.0
 
 
 class RankWorker:
@@ -87,41 +113,47 @@ class RankWorker:
         return self.rank
 
     # -- batch preparation -------------------------------------------------------------------------
-    def _prepare(self, samples: list[RolloutSample], teacher) -> _Prepared:
+    def _prepare(self, samples: list[RolloutSample]) -> _Prepared:
+        """Whole-batch quantities that do not need the teacher."""
         if not samples:
             raise ValueError("train_step got an empty batch")
         cfg = self.config.loss
         adv = group_advantages([s.reward for s in samples], [s.group_id for s in samples],
                                scale=cfg.grpo.scale_advantages, eps=cfg.grpo.advantage_eps)
-        by_id = index_teacher_outputs(teacher)
-        outputs: list[TeacherOutput | None] = []
         weights = None
         kept = dropped = 0
         if cfg.distill.enabled:
             weights = []
             for s in samples:
-                out = by_id.get(s.sample_id)
-                if out is None:
-                    raise ValueError(f"loss.distill.enabled but no teacher output for sample {s.sample_id!r}")
-                if out.input_length != len(s.input_ids):
-                    raise ValueError(
-                        f"teacher output for {s.sample_id!r} covers {out.input_length} positions, "
-                        f"the sample has {len(s.input_ids)}"
-                    )
-                if cfg.distill.estimator == "topk":
-                    if out.topk_ids is None or out.topk_logprobs is None:
-                        raise ValueError(f"estimator 'topk' but the teacher served no top-k for {s.sample_id!r} "
-                                         "(set teacher.serve_topk >= loss.distill.topk)")
-                outputs.append(out)
                 tw = turn_weights(s, cfg.distill)
                 weights.append(tw.weights)
                 kept += len(tw.kept_turns)
                 dropped += len(tw.dropped_turns)
-        else:
-            outputs = [None] * len(samples)
         num_tokens = float(sum(sum(s.loss_mask) for s in samples))
         norms = BatchNorms(num_tokens=max(num_tokens, 1.0), num_sequences=float(len(samples)))
-        return _Prepared(samples, adv, weights, outputs, norms, kept, dropped)
+        return _Prepared(samples, adv, weights, [None] * len(samples), norms, kept, dropped)
+
+    def _attach_teacher(self, prep: _Prepared, teacher) -> None:
+        """Check the teacher's outputs against the samples and keep them in batch order."""
+        cfg = self.config.loss
+        if not cfg.distill.enabled:
+            return
+        by_id = index_teacher_outputs(teacher)
+        outputs: list[TeacherOutput | None] = []
+        for s in prep.samples:
+            out = by_id.get(s.sample_id)
+            if out is None:
+                raise ValueError(f"loss.distill.enabled but no teacher output for sample {s.sample_id!r}")
+            if out.input_length != len(s.input_ids):
+                raise ValueError(
+                    f"teacher output for {s.sample_id!r} covers {out.input_length} positions, "
+                    f"the sample has {len(s.input_ids)}"
+                )
+            if cfg.distill.estimator == "topk" and (out.topk_ids is None or out.topk_logprobs is None):
+                raise ValueError(f"estimator 'topk' but the teacher served no top-k for {s.sample_id!r} "
+                                 "(set teacher.serve_topk >= loss.distill.topk)")
+            outputs.append(out)
+        prep.teacher = outputs
 
     def _micro_batches(self, prep: _Prepared) -> list[list[int]]:
         """This rank's sample indices split into micro-batches; every rank gets the same count."""
@@ -138,22 +170,25 @@ class RankWorker:
         ids, attn = pad_batch([s.input_ids for s in samples], self.pad_id, side="right")
         T = ids.shape[1]
 
-        def padded(rows: list[list[float]], dtype=torch.float32) -> torch.Tensor:
-            out = torch.zeros((len(rows), T), dtype=dtype)
-            for i, row in enumerate(rows):
-                out[i, : len(row)] = torch.tensor(row, dtype=dtype)
-            return out
-
         t = {
             "input_ids": ids,
             "attention_mask": attn,
-            "loss_mask": padded([s.loss_mask for s in samples]),
-            "rollout_logprobs": padded([s.sampling_logprobs for s in samples]),
+            "loss_mask": _padded(T, [s.loss_mask for s in samples]),
+            "rollout_logprobs": _padded(T, [s.sampling_logprobs for s in samples]),
             "advantages": prep.advantages[idx],
         }
+        if self.config.loss.distill.enabled:
+            t["distill_weights"] = _padded(T, [prep.distill_weights[i] for i in idx])
+        return {k: v.to(dev) for k, v in t.items()}
+
+    def _teacher_tensors(self, prep: _Prepared, idx: list[int], T: int) -> dict[str, torch.Tensor]:
+        """The teacher's outputs for a micro-batch, padded to [B, T] (or [B, T, K] for top-k)."""
+        dev = self.backend.device
+        samples = [prep.samples[i] for i in idx]
+        t: dict[str, torch.Tensor] = {}
+
         d = self.config.loss.distill
         if d.enabled:
-            t["distill_weights"] = padded([prep.distill_weights[i] for i in idx])
             outs = [prep.teacher[i] for i in idx]
             if d.estimator == "topk":
                 K = d.topk
@@ -172,7 +207,7 @@ class RankWorker:
                 t["teacher_topk_ids"] = tid
                 t["teacher_topk_logprobs"] = tlp
             else:
-                t["teacher_logprobs"] = padded([o.logprobs for o in outs])
+                t["teacher_logprobs"] = _padded(T, [o.logprobs for o in outs])
         return {k: v.to(dev) for k, v in t.items()}
 
     def _dummy_loss(self) -> torch.Tensor:
@@ -204,7 +239,7 @@ class RankWorker:
 
     def _run(self, samples: list[RolloutSample], teacher, *, update: bool) -> dict[str, float]:
         t0 = time.perf_counter()
-        prep = self._prepare(samples, teacher)
+        prep = self._prepare(samples)
         batches = self._micro_batches(prep)
         n_updates = self.config.optim.updates_per_batch if update else 1
         cache: list[dict] = []
@@ -213,10 +248,16 @@ class RankWorker:
                 cache.append({})
                 continue
             t = self._tensors(prep, idx)
-            entry = {"t": t, "ref": self._reference_logprobs(t)}
+            entry = {"t": t, "idx": idx, "ref": self._reference_logprobs(t)}
             if n_updates > 1:  # pi_old must stay fixed across the updates of this batch
                 entry["old"] = self._forward(t, grad=False).logprobs.detach()
             cache.append(entry)
+        # Only now wait for the teacher: its last results had the forwards above to arrive.
+        teacher, teacher_wait = resolve_teacher(teacher)
+        self._attach_teacher(prep, teacher)
+        for entry in cache:
+            if entry:
+                entry["t"].update(self._teacher_tensors(prep, entry["idx"], entry["t"]["input_ids"].shape[1]))
 
         sums: dict[str, float] = {}
         grad_norms = []
@@ -253,6 +294,7 @@ class RankWorker:
             "turns_kept": float(prep.turns_kept),
             "advantage_abs_mean": float(prep.advantages.abs().mean()),
             "learner_s": time.perf_counter() - t0,
+            "teacher_wait_s": teacher_wait,
         }
         if update:
             extra["grad_norm"] = float(grad_norms[-1])
