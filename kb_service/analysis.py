@@ -282,7 +282,7 @@ def _simplify(node: Node) -> Node | None:
 # --------------------------------------------------------------------------------------------
 
 _WORD = re.compile(r"[^\W_]+")
-SNIPPET_TOKENS = 36
+SNIPPET_CHARS = 240
 SNIPPET_SCAN_CHARS = 50_000
 
 
@@ -290,11 +290,12 @@ class Highlighter:
     """Builds a snippet of the best window of a text with the matched terms highlighted.
 
     A word matches when its analysed form (same analyzer as the index) is a query term, so
-    "Coughing" is highlighted for the query "cough".
+    "Coughing" is highlighted for the query "cough". Word -> term results are cached, so each
+    distinct word is analysed once per process. The window is the ~240-character span with the most distinct terms.
     """
 
-    def __init__(self, start: str = "**", end: str = "**", window: int = SNIPPET_TOKENS) -> None:
-        self.start, self.end, self.window = start, end, window
+    def __init__(self, start: str = "**", end: str = "**", chars: int = SNIPPET_CHARS) -> None:
+        self.start, self.end, self.chars = start, end, chars
         self._cache: dict[str, str | None] = {}
         self._lock = threading.Lock()
 
@@ -310,45 +311,86 @@ class Highlighter:
         self._cache[word] = term
         return term
 
+    def matches(self, text: str, terms: set[str]) -> list[tuple[int, int, str]]:
+        """(start, end, term) of every word of `text` whose analysed form is one of `terms`."""
+        if not terms:
+            return []
+        out = []
+        low = text.lower()
+        if text.isascii() and len(low) == len(text):
+            # Fast path: the distinct words (regex in C), their terms from the cache, then the
+            # positions of just the matching words with str.find.
+            cache = self._cache
+            hit = {}
+            for w in set(_WORD.findall(low)):
+                t = cache.get(w, "")
+                if t == "":
+                    t = self._term(w)
+                if t is not None and t in terms:
+                    hit[w] = t
+            n = len(low)
+            for w, t in hit.items():
+                i = low.find(w)
+                while i >= 0:
+                    j = i + len(w)
+                    if (i == 0 or not low[i - 1].isalnum()) and (j == n or not low[j].isalnum()):
+                        out.append((i, j, t))
+                    i = low.find(w, j)
+            out.sort()
+            return out
+        for m in _WORD.finditer(text):
+            t = self._term(m.group().lower())
+            if t in terms:
+                out.append((m.start(), m.end(), t))
+        return out
+
     def snippet(self, text: str, terms: set[str]) -> str:
         if not text:
             return ""
         scan = text[:SNIPPET_SCAN_CHARS]
-        words = [(m.start(), m.end(), m.group()) for m in _WORD.finditer(scan)]
-        if not words:
-            return scan[:240]
-        matched = [i for i, (_, _, w) in enumerate(words) if terms and self._term(w.lower()) in terms]
-        W = self.window
-        if matched:
-            best, best_key = 0, (-1, -1)
-            for m in matched:
-                lo = max(0, m - 4)
-                inside = [j for j in matched if lo <= j < lo + W]
-                key = (len({self._term(words[j][2].lower()) for j in inside}), len(inside))
-                if key > best_key:
-                    best, best_key = lo, key
-            lo = best
-        else:
-            lo = 0
-        hi = min(len(words), lo + W)
-        if hi - lo < W:
-            lo = max(0, hi - W)
-        mset = set(matched)
-        start_char = 0 if lo == 0 else words[lo][0]
-        end_char = len(text) if hi == len(words) and len(scan) == len(text) else words[hi - 1][1]
+        found = self.matches(scan, terms)
+        L = self.chars
+        ws = 0
+        if found:  # sliding window over the matches: most distinct terms, then most matches
+            best = (-1, -1)
+            counts: dict[str, int] = {}
+            n, j = len(found), 0
+            for i, (s, _e, t) in enumerate(found):
+                lo = max(0, s - 40)
+                if j < i:
+                    j = i
+                while j < n and found[j][1] <= lo + L:
+                    tj = found[j][2]
+                    counts[tj] = counts.get(tj, 0) + 1
+                    j += 1
+                key = (len(counts), j - i)
+                if key > best:
+                    best, ws = key, lo
+                if j > i:
+                    c = counts[t] - 1
+                    if c:
+                        counts[t] = c
+                    else:
+                        del counts[t]
+        we = min(len(text), ws + L)
+        if ws > 0:  # snap to word boundaries, widening the window
+            cut = text.rfind(" ", max(0, ws - 30), ws)
+            ws = cut + 1 if cut >= 0 else ws
+        if we < len(text):
+            cut = text.find(" ", we, we + 30)
+            we = cut if cut >= 0 else we
         parts: list[str] = []
-        pos = start_char
-        for j in range(lo, hi):
-            if j in mset:
-                s, e, _ = words[j]
-                parts.append(text[pos:s].replace(self.start, "").replace(self.end, ""))
-                parts.append(f"{self.start}{text[s:e]}{self.end}")
-                pos = e
-        parts.append(text[pos:end_char].replace(self.start, "").replace(self.end, ""))
-        out = "".join(parts).strip()
-        out = " ".join(out.split())
-        if start_char > 0:
+        pos = ws
+        for s, e, _t in found:
+            if s < ws or e > we:
+                continue
+            parts.append(text[pos:s].replace(self.start, "").replace(self.end, ""))
+            parts.append(f"{self.start}{text[s:e]}{self.end}")
+            pos = e
+        parts.append(text[pos:we].replace(self.start, "").replace(self.end, ""))
+        out = " ".join("".join(parts).split())
+        if ws > 0:
             out = "… " + out
-        if end_char < len(text):
+        if we < len(text):
             out = out + " …"
         return out

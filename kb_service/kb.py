@@ -259,10 +259,11 @@ class KnowledgeBase:
             if row is None:  # cannot happen with a validated KB; never hide it
                 raise KBCorruptError(f"knowledge base at {self.path}: document {d} is in the index but not in the store")
             _, doc_id, source, title, content, category, dataset_name, prov_id = row
-            out.append(Passage(doc_id=doc_id, source=source, title=title, category=category,
-                               dataset_name=dataset_name, score=float(s),
-                               snippet=self.highlighter.snippet(content, terms),
-                               provenance=self.store.provenance.get(prov_id)))
+            # Trusted, already-typed values from our own store: skip pydantic validation.
+            out.append(Passage.model_construct(doc_id=doc_id, source=source, title=title, category=category,
+                                               dataset_name=dataset_name, score=float(s),
+                                               snippet=self.highlighter.snippet(content, terms), content=None,
+                                               provenance=self.store.provenance.get(prov_id)))
         return out
 
     # ---------------------------------------------------------------------------- lookups

@@ -1,0 +1,529 @@
+"""Knowledge-base benchmark: our KB vs SQLite FTS5 (the paper's design), tantivy and bm25s.
+
+    python bench/kb.py                          # the paper's size: 828,473 passages, 1,000 queries
+    python bench/kb.py --n-passages 50000       # a quick run
+
+A seeded generator writes a synthetic medical corpus (60-250 words per passage: Zipf-distributed
+English, a few thousand generated medical terms clustered by topic, and a rare-token tail) and
+1,000 queries of 3-12 words. Each engine is built in its own process (build time, peak RSS of
+that process, size on disk) and queried by 1 and then 2 processes (top-10, single-threaded per
+process): p50/p99 latency, queries/s, and overlap@10 with bm25s. All engines rank with BM25
+(k1=1.2, b=0.75) over an OR of the query's words with English stop words dropped:
+
+* ours     -- kb_service.KnowledgeBase.search (bm25s kernel + SQLite passages + highlighted
+              snippets: the full call an agent tool makes)
+* fts5     -- SQLite FTS5, the paper's table and tokenizer, `MATCH` of quoted OR-ed words,
+              `ORDER BY bm25()` (the safe query builder); timed on a seeded sample of queries
+* tantivy  -- tantivy-py, English stemming, stored text, boolean OR of term queries
+* bm25s    -- bm25s with its own tokenizer (English stop words), numba backend
+
+Results go to stdout (a markdown table and target checks) and to <workdir>/results-<n>.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+PAPER_N = 828_473
+K = 10
+STOPWORDS = {"a", "an", "and", "are", "as", "at", "be", "but", "by", "for", "if", "in", "into", "is", "it", "no",
+             "not", "of", "on", "or", "such", "that", "the", "their", "then", "there", "these", "they", "this",
+             "to", "was", "will", "with"}
+
+# ---------------------------------------------------------------------------------------------
+# Synthetic corpus
+# ---------------------------------------------------------------------------------------------
+
+COMMON_ENGLISH = """the of and to a in is that for it as was with be by on not he this are or his from at which
+but have an they you were her she there been one all we their has would when if so can no more out up what
+its about into than them only other time new some could these two may first then do any like my now over
+such our man me even most made after also did many before must through back years where much your way well
+down should because each just those people how too little state good very make world still own see men work
+long get here between both life being under never day same another know while last might us great old year
+off come since against go came right used take three states himself few house use during without again place
+around however home small found thought went say part once general high upon school every does got united left
+number course war until always away something fact though water less public put think almost hand enough far
+took head yet government system better set told nothing night end why called didn't eyes find going look asked
+later knew point next program city business give group toward young days let room president side social given
+present several order national possible rather second face per among form important often things looked early
+white case john become large big need four within felt along children saw best church ever least power development
+light thing family interest want members mind country area others done turned although open god service certain
+kind problem began different door thus help means sense whole matter perhaps itself york times law human line above
+name example action company hands local show whether five history gave today either act feet across taken past
+quite anything seen having death week experience body word half really field am car words already themselves
+information tell together college shall money period held keep sure probably free seems real behind cannot miss
+political air question making office brought whose special heard major problems ago became federal study available
+known result street economic boy position reason change south board individual job areas society west close turn
+love community true court force full seem am policy process patient patients clinical treatment dose therapy
+risk blood pain test level levels rate normal acute chronic disease care daily hospital""".split()
+
+# Pseudo-words are consonant-vowel syllables ending in a, o or u: no English stemmer changes
+# them, so every engine sees the same vocabulary whatever its stemming (a fair comparison).
+SYLLABLES = ("ba be bi bo bu ca ce ci co cu da de di do du fa fe fi fo fu ga ge gi go gu ha he hi ho hu ja je ji "
+             "jo ju ka ke ki ko ku la le li lo lu ma me mi mo mu na ne ni no nu pa pe pi po pu ra re ri ro ru sa "
+             "se si so su ta te ti to tu va ve vi vo vu wa we wi wo za ze zi zo zu bra cre dri flo gru pla sto "
+             "tri").split()
+FINAL_SYLLABLES = [s for s in SYLLABLES if s[-1] in "aou"]
+
+MED_ROOTS = ("cardi hepat nephr neur gastr pulmon derm oste arthr my hemat lymph angi encephal mening thyr aden "
+             "cyst col rect esophag pancreat splen ur pyel ren cholecyst chondr fibr lip leuk erythr thromb vas "
+             "phleb bronch trache laryng pharyng rhin ot ophthalm retin kerat blephar gingiv gloss stomat sial "
+             "mast metr salping oophor orchi prostat vesic hyster cephal crani spondyl myel radicul tendin "
+             "ten burs synov glomerul tubul cortic adren pituit gonad ovar placent amni fet sarc carcin melan").split()
+MED_SUFFIXES = ("itis opathy algia ectomy otomy ostomy oma osis emia uria plasty scopy graphy megaly penia cytosis "
+                "rrhea rrhage sclerosis stenosis trophy plasia genesis lysis").split()
+MED_PREFIXES = "hyper hypo peri endo epi intra sub poly dys neo".split()
+MED_TERMS = ("warfarin heparin apixaban rivaroxaban metformin insulin lisinopril amlodipine metoprolol atorvastatin "
+             "simvastatin aspirin clopidogrel ibuprofen naproxen acetaminophen morphine fentanyl oxycodone "
+             "amoxicillin ceftriaxone vancomycin azithromycin doxycycline ciprofloxacin levofloxacin prednisone "
+             "dexamethasone hydrocortisone levothyroxine furosemide spironolactone hydrochlorothiazide digoxin "
+             "amiodarone diltiazem verapamil sertraline fluoxetine citalopram lithium haloperidol quetiapine "
+             "olanzapine lorazepam diazepam midazolam propofol ketamine epinephrine norepinephrine dopamine "
+             "sepsis pneumonia asthma diabetes hypertension hypotension tachycardia bradycardia fibrillation "
+             "infarction ischemia stroke embolism thrombosis anemia leukemia lymphoma melanoma carcinoma "
+             "adenocarcinoma metastasis dyspnea orthopnea edema ascites jaundice cirrhosis hepatitis "
+             "pancreatitis appendicitis cholecystitis diverticulitis colitis gastroenteritis meningitis "
+             "encephalitis seizure epilepsy migraine dementia delirium depression anxiety schizophrenia "
+             "troponin creatinine bilirubin albumin lactate procalcitonin ferritin hemoglobin platelet "
+             "neutrophil lymphocyte potassium sodium magnesium calcium phosphate bicarbonate glucose "
+             "echocardiogram electrocardiogram tomography ultrasound radiograph biopsy endoscopy colonoscopy "
+             "bronchoscopy catheterization dialysis intubation ventilation tracheostomy transfusion").split()
+
+
+def _pseudo_words(rng: np.random.Generator, n: int, taken: set[str]) -> list[str]:
+    out: list[str] = []
+    syl, fin = np.array(SYLLABLES), np.array(FINAL_SYLLABLES)
+    while len(out) < n:
+        k = int(rng.integers(1, 4))
+        w = "".join(syl[rng.integers(0, len(syl), k)]) + fin[int(rng.integers(0, len(fin)))]
+        if w not in taken:
+            taken.add(w)
+            out.append(w)
+    return out
+
+
+def _one_per_stem(words: list[str]) -> list[str]:
+    """Keep the first word of each stem ("state"/"states" -> "state") so no stemmer merges words."""
+    from kb_service.analysis import build_analyzer
+
+    an = build_analyzer()
+    seen, out = set(), []
+    for w in dict.fromkeys(words):
+        key = tuple(an.analyze(w)) or (w,)
+        if key not in seen:
+            seen.add(key)
+            out.append(w)
+    return out
+
+
+def _medical_terms() -> list[str]:
+    terms = list(MED_TERMS)
+    for r in MED_ROOTS:
+        for s in MED_SUFFIXES:
+            terms.append(r + s)
+    for p in MED_PREFIXES:
+        for r in MED_ROOTS[:40]:
+            terms.append(p + r + "ia")
+    return _one_per_stem(terms)
+
+
+class Generator:
+    def __init__(self, seed: int = 0, n_english: int = 30_000, n_topics: int = 2_000) -> None:
+        self.rng = np.random.default_rng(seed)
+        taken = set(COMMON_ENGLISH)
+        common = _one_per_stem(COMMON_ENGLISH)
+        self.english = np.array(common + _pseudo_words(self.rng, n_english - len(common), taken), dtype=object)
+        ranks = np.arange(1, len(self.english) + 1)
+        w = 1.0 / (ranks + 2.7) ** 1.0
+        self.eng_cdf = np.cumsum(w / w.sum())
+        self.medical = np.array(_medical_terms(), dtype=object)
+        mw = 1.0 / np.arange(1, len(self.medical) + 1) ** 0.8
+        self.rng.shuffle(mw)
+        self.med_cdf = np.cumsum(mw / mw.sum())
+        self.topics = self.rng.integers(0, len(self.medical), size=(n_topics, 8))
+        self.sources = np.array(["medcpt_evidence", "biomedical_qa", "generator", "medinstruct"], dtype=object)
+        self.source_cdf = np.cumsum([0.70, 0.15, 0.10, 0.05])
+
+    def _draw(self, cdf: np.ndarray, n: int) -> np.ndarray:
+        return np.minimum(np.searchsorted(cdf, self.rng.random(n)), len(cdf) - 1)
+
+    def _words(self, topic: np.ndarray, n: int, med_frac: float) -> list[str]:
+        eng = self.english[self._draw(self.eng_cdf, n)]
+        is_med = self.rng.random(n) < med_frac
+        n_med = int(is_med.sum())
+        if n_med:
+            from_topic = self.rng.random(n_med) < 0.7
+            med_ids = np.where(from_topic, topic[self.rng.integers(0, topic.shape[0], n_med)],
+                               self._draw(self.med_cdf, n_med))
+            eng[is_med] = self.medical[med_ids]
+        return eng.tolist()
+
+    def passages(self, n: int):
+        for i in range(n):
+            topic = self.topics[int(self.rng.integers(0, len(self.topics)))]
+            length = int(self.rng.integers(60, 251))
+            words = self._words(topic, length, 0.15)
+            n_tail = int(self.rng.poisson(1.0))
+            for _ in range(n_tail):  # rare-token tail: codes, misspellings, identifiers
+                words[int(self.rng.integers(0, length))] = "x" + np.base_repr(int(self.rng.integers(0, 36 ** 6)), 36).lower()
+            title = " ".join(self.medical[topic[:3]].tolist() + self._words(topic, 2, 0.0)).capitalize()
+            src = self.sources[int(np.searchsorted(self.source_cdf, self.rng.random()))]
+            yield {"doc_id": f"syn{i:07d}", "source": src, "title": title, "content": " ".join(words) + ".",
+                   "category": f"topic{int(topic[0]) % 50}", "dataset_name": "synthetic"}
+
+    def queries(self, n: int) -> list[str]:
+        out = []
+        for _ in range(n):
+            topic = self.topics[int(self.rng.integers(0, len(self.topics)))]
+            total = int(self.rng.integers(3, 13))
+            n_med = int(self.rng.integers(1, min(5, total) + 1))
+            words = self.medical[topic[self.rng.integers(0, topic.shape[0], n_med)]].tolist()
+            words += self._words(topic, total - n_med, 0.0)
+            self.rng.shuffle(words)
+            out.append(" ".join(words))
+        return out
+
+
+def make_corpus(workdir: Path, n: int, n_queries: int, seed: int) -> tuple[Path, list[str]]:
+    corpus = workdir / f"corpus-{n}-{seed}.jsonl"
+    qfile = workdir / f"queries-{n}-{n_queries}-{seed}.json"
+    gen = Generator(seed)
+    if not corpus.exists():
+        t = time.perf_counter()
+        tmp = corpus.with_suffix(".tmp")
+        with open(tmp, "w", encoding="utf-8") as fh:
+            for p in gen.passages(n):
+                fh.write(json.dumps(p) + "\n")
+        os.replace(tmp, corpus)
+        print(f"[bench] corpus: {n:,} passages in {time.perf_counter() - t:.0f}s -> {corpus}", flush=True)
+    queries = Generator(seed + 1).queries(n_queries)
+    qfile.write_text(json.dumps(queries))
+    return corpus, queries
+
+
+def iter_corpus(path: Path):
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            yield json.loads(line)
+
+
+# ---------------------------------------------------------------------------------------------
+# Engines
+# ---------------------------------------------------------------------------------------------
+
+
+class Ours:
+    name = "ours"
+
+    @staticmethod
+    def build(corpus: Path, index: Path) -> None:
+        from kb_service.ingest import build_kb, file_input
+
+        build_kb([file_input(corpus)], index, progress=False, resume=False, echo=lambda s: None)
+
+    def __init__(self, index: Path) -> None:
+        from kb_service.kb import KnowledgeBase
+
+        self.kb = KnowledgeBase.open(index)
+
+    def search(self, q: str) -> list[str]:
+        return [p.doc_id for p in self.kb.search(q, k=K)]
+
+
+class BM25S:
+    name = "bm25s"
+
+    @staticmethod
+    def build(corpus: Path, index: Path) -> None:
+        import bm25s
+
+        ids, texts = [], []
+        for d in iter_corpus(corpus):
+            ids.append(d["doc_id"])
+            texts.append(f"{d['title']}\n{d['content']}")
+        tokens = bm25s.tokenize(texts, stopwords="en", show_progress=False)
+        del texts
+        retriever = bm25s.BM25(k1=1.2, b=0.75, method="lucene", backend="numba")
+        retriever.index(tokens, show_progress=False)
+        retriever.save(str(index), show_progress=False)
+        (index / "doc_ids.json").write_text(json.dumps(ids))
+
+    def __init__(self, index: Path) -> None:
+        import bm25s
+
+        self.bm25s = bm25s
+        self.r = bm25s.BM25.load(str(index), mmap=True, show_progress=False)
+        self.ids = json.loads((index / "doc_ids.json").read_text())
+
+    def search(self, q: str) -> list[str]:
+        toks = self.bm25s.tokenize([q], stopwords="en", show_progress=False, return_ids=False)
+        toks = [[t for t in toks[0] if t in self.r.vocab_dict]]
+        if not toks[0]:
+            return []
+        docs, scores = self.r.retrieve(toks, k=K, n_threads=1, show_progress=False)
+        return [self.ids[d] for d, s in zip(docs[0], scores[0]) if s > 0]
+
+
+def _tantivy_analyzer():
+    import tantivy
+
+    return (tantivy.TextAnalyzerBuilder(tantivy.Tokenizer.simple()).filter(tantivy.Filter.remove_long(40))
+            .filter(tantivy.Filter.lowercase()).filter(tantivy.Filter.stemmer("english")).build())
+
+
+class Tantivy:
+    name = "tantivy"
+
+    @staticmethod
+    def build(corpus: Path, index: Path) -> None:
+        import tantivy
+
+        sb = tantivy.SchemaBuilder()
+        sb.add_text_field("doc_id", stored=True, tokenizer_name="raw")
+        sb.add_text_field("text", stored=True, tokenizer_name="en")
+        index.mkdir(parents=True, exist_ok=True)
+        idx = tantivy.Index(sb.build(), path=str(index), reuse=False)
+        idx.register_tokenizer("en", _tantivy_analyzer())
+        w = idx.writer(heap_size=256_000_000)
+        for d in iter_corpus(corpus):
+            doc = tantivy.Document()
+            doc.add_text("doc_id", d["doc_id"])
+            doc.add_text("text", f"{d['title']}\n{d['content']}")
+            w.add_document(doc)
+        w.commit()
+        w.wait_merging_threads()
+
+    def __init__(self, index: Path) -> None:
+        import tantivy
+
+        self.t = tantivy
+        self.idx = tantivy.Index.open(str(index))
+        self.idx.register_tokenizer("en", _tantivy_analyzer())
+        self.an = _tantivy_analyzer()
+        self.schema = self.idx.schema
+        self.searcher = self.idx.searcher()
+
+    def search(self, q: str) -> list[str]:
+        t = self.t
+        words = [w for w in dict.fromkeys(re.findall(r"[^\W_]+", q.lower())) if w not in STOPWORDS]
+        terms = list(dict.fromkeys(x for w in words for x in self.an.analyze(w)))
+        if not terms:
+            return []
+        query = t.Query.boolean_query([(t.Occur.Should, t.Query.term_query(self.schema, "text", x)) for x in terms])
+        hits = self.searcher.search(query, K, count=False).hits
+        return [self.searcher.doc(addr)["doc_id"][0] for _s, addr in hits]
+
+
+def fts5_query(q: str) -> str:
+    """The safe FTS5 query builder: each lower-cased word as a quoted string, OR-ed."""
+    words = [w for w in dict.fromkeys(re.findall(r"[^\W_]+", q.lower())) if w not in STOPWORDS]
+    return " OR ".join('"' + w.replace('"', '""') + '"' for w in words)
+
+
+class FTS5:
+    name = "fts5"
+
+    @staticmethod
+    def build(corpus: Path, index: Path) -> None:
+        import sqlite3
+
+        index.mkdir(parents=True, exist_ok=True)
+        db = sqlite3.connect(index / "kb.sqlite")
+        db.execute("PRAGMA journal_mode=OFF")
+        db.execute("PRAGMA synchronous=OFF")
+        db.execute("CREATE VIRTUAL TABLE passages_fts USING fts5(doc_id, source, title, content, category, "
+                   "dataset_name, tokenize='porter unicode61')")
+        batch = []
+        for d in iter_corpus(corpus):
+            batch.append((d["doc_id"], d["source"], d["title"], d["content"], d["category"], d["dataset_name"]))
+            if len(batch) >= 10_000:
+                db.executemany("INSERT INTO passages_fts VALUES (?,?,?,?,?,?)", batch)
+                batch = []
+        db.executemany("INSERT INTO passages_fts VALUES (?,?,?,?,?,?)", batch)
+        db.execute("INSERT INTO passages_fts(passages_fts) VALUES('optimize')")
+        db.commit()
+        db.close()
+
+    def __init__(self, index: Path) -> None:
+        import sqlite3
+
+        self.db = sqlite3.connect(f"file:{index / 'kb.sqlite'}?mode=ro", uri=True)
+
+    def search(self, q: str) -> list[str]:
+        expr = fts5_query(q)
+        if not expr:
+            return []
+        rows = self.db.execute("SELECT doc_id FROM passages_fts WHERE passages_fts MATCH ? "
+                               "ORDER BY bm25(passages_fts) LIMIT ?", (expr, K)).fetchall()
+        return [r[0] for r in rows]
+
+
+ENGINES = {e.name: e for e in (Ours, FTS5, Tantivy, BM25S)}
+
+
+# ---------------------------------------------------------------------------------------------
+# Measurement
+# ---------------------------------------------------------------------------------------------
+
+
+def _build_worker(engine: str, corpus: str, index: str) -> None:
+    t = time.perf_counter()
+    ENGINES[engine].build(Path(corpus), Path(index))
+    print(json.dumps({"build_s": time.perf_counter() - t}))
+
+
+def build_engine(engine: str, corpus: Path, index: Path) -> dict:
+    if index.exists():
+        shutil.rmtree(index)
+    proc = subprocess.Popen([sys.executable, __file__, "--worker-build", engine, str(corpus), str(index)],
+                            stdout=subprocess.PIPE, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    out = proc.stdout.read()
+    _pid, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(f"building {engine} failed (exit {proc.returncode})")
+    res = json.loads(out.decode().strip().splitlines()[-1])
+    res["peak_rss_gb"] = usage.ru_maxrss / 1024 ** 2
+    res["disk_gb"] = sum(f.stat().st_size for f in index.rglob("*") if f.is_file()) / 1024 ** 3
+    return res
+
+
+def _query_worker(engine: str, index: str, queries: list[str], barrier, results) -> None:
+    eng = ENGINES[engine](Path(index))
+    for q in queries[:20]:  # warm-up: numba compilation, page cache, SQLite caches
+        eng.search(q)
+    barrier.wait()
+    lat, tops = [], []
+    t0 = time.perf_counter()
+    for q in queries:
+        t = time.perf_counter()
+        tops.append(eng.search(q))
+        lat.append(time.perf_counter() - t)
+    results.put({"elapsed": time.perf_counter() - t0, "lat": lat, "tops": tops})
+
+
+def run_queries(engine: str, index: Path, queries: list[str], procs: int) -> list[dict]:
+    ctx = mp.get_context("spawn")
+    barrier = ctx.Barrier(procs)
+    results = ctx.Queue()
+    ps = [ctx.Process(target=_query_worker, args=(engine, str(index), queries, barrier, results)) for _ in range(procs)]
+    for p in ps:
+        p.start()
+    out = [results.get() for _ in ps]
+    for p in ps:
+        p.join()
+        if p.exitcode != 0:
+            raise RuntimeError(f"{engine} query worker failed (exit {p.exitcode})")
+    return out
+
+
+def overlap(a: list[list[str]], b: list[list[str]]) -> float:
+    vals = [len(set(x) & set(y)) / max(1, min(K, len(y))) for x, y in zip(a, b) if y]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n-passages", type=int, default=PAPER_N)
+    ap.add_argument("--n-queries", type=int, default=1000)
+    ap.add_argument("--fts5-sample", type=int, default=100,
+                    help="FTS5 is timed on this many seeded queries when it would take too long for all")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--engines", default="ours,bm25s,tantivy,fts5")
+    ap.add_argument("--workdir", default=os.environ.get("HCGYM_BENCH_DIR", "/tmp/hcgym-bench-kb"))
+    ap.add_argument("--keep", action="store_true", help="keep the built indexes")
+    args = ap.parse_args(argv)
+
+    work = Path(args.workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    load = os.getloadavg()
+    print(f"[bench] {args.n_passages:,} passages, {args.n_queries} queries, seed {args.seed}, {os.cpu_count()} CPUs, "
+          f"load average {load[0]:.1f}", flush=True)
+    corpus, queries = make_corpus(work, args.n_passages, args.n_queries, args.seed)
+    engines = [e.strip() for e in args.engines.split(",") if e.strip()]
+    rng = np.random.default_rng(args.seed + 2)
+    results: dict[str, dict] = {}
+    for name in engines:
+        index = work / f"index-{name}-{args.n_passages}"
+        print(f"[bench] {name}: building ...", flush=True)
+        res = build_engine(name, corpus, index)
+        qs = queries
+        if name == "fts5" and args.n_passages > 100_000 and args.fts5_sample < len(queries):
+            pick = np.sort(rng.choice(len(queries), args.fts5_sample, replace=False))
+            qs = [queries[i] for i in pick]
+            res["query_sample"] = pick.tolist()
+        print(f"[bench] {name}: built in {res['build_s']:.0f}s, {res['disk_gb']:.2f} GB, peak RSS "
+              f"{res['peak_rss_gb']:.2f} GB; querying ({len(qs)} queries) ...", flush=True)
+        one = run_queries(name, index, qs, 1)[0]
+        two = run_queries(name, index, qs, 2)
+        lat = np.array(one["lat"]) * 1000
+        res.update(n_queries=len(qs), p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)),
+                   qps_1=len(qs) / one["elapsed"], qps_2=2 * len(qs) / max(r["elapsed"] for r in two),
+                   tops=one["tops"], queries=qs)
+        res["scaling_2"] = res["qps_2"] / res["qps_1"]
+        print(f"[bench] {name}: p50 {res['p50_ms']:.2f} ms, p99 {res['p99_ms']:.2f} ms, {res['qps_1']:.1f} q/s (1 proc), "
+              f"{res['qps_2']:.1f} q/s (2 procs)", flush=True)
+        results[name] = res
+        if not args.keep:
+            shutil.rmtree(index, ignore_errors=True)
+
+    if "bm25s" in results:
+        ref = dict(zip(results["bm25s"]["queries"], results["bm25s"]["tops"]))
+        for name, res in results.items():
+            res["overlap_bm25s"] = overlap(res["tops"], [ref[q] for q in res["queries"]])
+
+    report(results, args, load)
+    slim = {n: {k: v for k, v in r.items() if k not in ("tops", "queries")} for n, r in results.items()}
+    out = work / f"results-{args.n_passages}.json"
+    out.write_text(json.dumps({"n_passages": args.n_passages, "n_queries": args.n_queries, "seed": args.seed,
+                               "cpus": os.cpu_count(), "load_before": load, "load_after": os.getloadavg(),
+                               "engines": slim}, indent=2))
+    print(f"[bench] results: {out}")
+    return 0
+
+
+def report(results: dict, args, load) -> None:
+    print(f"\n| engine | build | on disk | build peak RSS | p50 / p99 | q/s 1 proc | q/s 2 procs | 2/1 | overlap@10 vs bm25s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, r in results.items():
+        note = f" ({r['n_queries']} queries)" if r["n_queries"] != args.n_queries else ""
+        print(f"| {name}{note} | {r['build_s']:.0f} s | {r['disk_gb']:.2f} GB | {r['peak_rss_gb']:.2f} GB | "
+              f"{r['p50_ms']:.2f} / {r['p99_ms']:.2f} ms | {r['qps_1']:.1f} | {r['qps_2']:.1f} | {r['scaling_2']:.2f}x | "
+              f"{r.get('overlap_bm25s', float('nan')):.3f} |")
+    if "ours" not in results:
+        return
+    o = results["ours"]
+    fastest = max(results.values(), key=lambda r: r["qps_1"])
+    checks = [("q/s >= 0.8x the fastest engine", o["qps_1"] / fastest["qps_1"], 0.8)]
+    if "fts5" in results:
+        checks.append(("q/s >= 50x SQLite FTS5", o["qps_1"] / results["fts5"]["qps_1"], 50))
+    checks += [("p99 <= 20 ms", 20 / max(o["p99_ms"], 1e-9), 1.0), ("2 processes >= 1.6x one", o["scaling_2"], 1.6),
+               ("build <= 6 min", 360 / o["build_s"], 1.0), ("index + passages <= 3 GB", 3 / o["disk_gb"], 1.0)]
+    for name, r in results.items():
+        if name != "bm25s" and "overlap_bm25s" in r:
+            checks.append((f"{name} overlap@10 with bm25s >= 0.8", r["overlap_bm25s"], 0.8))
+    print(f"\nTargets ({args.n_passages:,} passages; load average before the run {load[0]:.1f}):")
+    for label, value, need in checks:
+        print(f"  [{'PASS' if value >= need else 'FAIL'}] {label}: {value:.2f} (need >= {need})")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker-build":
+        _build_worker(*sys.argv[2:5])
+        sys.exit(0)
+    sys.exit(main())
