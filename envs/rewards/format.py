@@ -18,14 +18,15 @@ scores 0, except the final turn when its text is a conclusion (that is how a cha
 
     format = 0.8 * mean(turn scores) + 0.2 * conclusion
 
-`conclusion` is 1 when the final answer/message has more than 10 characters, or commits to a
-structured value (an option letter, a number, an ESI level) for tasks that ask for one.
+`conclusion` is 1 when the final answer/message has more than 10 characters, or commits to the
+structured value the task asks for (an option letter for choice, a number for numeric, any
+non-empty value for exact and category answers such as "ESI 2" or a drug name).
 """
 
 from __future__ import annotations
 
 from envs.core.trajectory import ToolCallRecord, TurnRecord
-from envs.rewards.accuracy import esi_levels, stated_number
+from envs.rewards.accuracy import stated_number
 from envs.rewards.choice import extract_choice
 from envs.rewards.view import EpisodeView
 
@@ -66,8 +67,8 @@ def has_conclusion(view: EpisodeView) -> bool:
         return extract_choice(answer, task.options) is not None
     if task.answer_type == "numeric":
         return stated_number(answer, task.answer_unit) is not None
-    if task.answer_type == "category":
-        return bool(esi_levels(answer)) or bool(answer.strip())
+    if task.answer_type in ("category", "exact"):
+        return bool(answer.strip())  # a short categorical or exact value is the conclusion asked for
     return False
 
 

@@ -155,6 +155,14 @@ def test_follow_up_only_where_relevant():
     assert "followup.missing" in ids(no_plan, task)
     with_call = episode(task, turn(CHART), turn(CHECK), turn(rx("metformin")), turn(FOLLOW), answer="Metformin started.")
     assert "followup.missing" not in ids(with_call, task)
+    # a management task that asks for one value ("which antibiotic? give the generic name")
+    pick = patient_task(ticket="P1 has strep throat and a penicillin allergy. Which antibiotic do you prescribe?",
+                        correct_answer="azithromycin", answer_type="exact")
+    one_value = episode(pick, turn(CHART), turn(CHECK), turn(rx("azithromycin")), answer="azithromycin")
+    assert ids(one_value, pick) == set()
+    # ... unless its ticket asks for a plan
+    plan = pick.model_copy(update={"ticket": pick.ticket + " Give the plan."})
+    assert "followup.missing" in ids(one_value, plan)
     # an exact-answer knowledge question that mentions a drug: no follow-up or confirmatory rules
     qa = Task(ticket="First-line drug for type 2 diabetes?", correct_answer="metformin", answer_type="exact")
     assert ids(episode(qa, answer="metformin"), qa) == set()
