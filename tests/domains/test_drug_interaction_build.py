@@ -5,7 +5,9 @@ and nothing third-party committed."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -92,9 +94,14 @@ def test_build_is_deterministic_offline_and_skips_when_up_to_date(tmp_path, monk
     assert di_build.build(offline=True)["status"] == "up to date"
     a = outputs(first)
 
-    monkeypatch.setenv("HCGYM_DATA_DIR", str(second))
-    assert di_build.build(offline=True)["status"] == "built"
-    assert outputs(second) == a  # byte-identical
+    # a second build in another process, with another string-hash seed: byte-identical output
+    env = {**os.environ, "HCGYM_DATA_DIR": str(second), "PYTHONHASHSEED": "12345", "OMP_NUM_THREADS": "1"}
+    code = "from envs.domains.drug_interaction.build import build; print(build(offline=True)['status'])"
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          cwd=di_build.HERE.parents[2])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip().endswith("built")
+    assert outputs(second) == a
 
     # a damaged output is rebuilt, to the same bytes
     monkeypatch.setenv("HCGYM_DATA_DIR", str(first))

@@ -129,3 +129,19 @@ def test_authored_answers_agree_with_the_tools(authored):
             raise AssertionError(f"{task.id}: no rule to re-derive its answer")
         checked += 1
     assert checked == len(authored)
+
+
+def test_gym_episode_smoke(tasks):
+    from envs.core.env import HealthcareGymEnv
+
+    env = HealthcareGymEnv(domain="drug_interaction", task_id="di-auth-01-warfarin-nsaid", max_turns=4)
+    obs, info = env.reset(seed=0)
+    assert "P001" in obs and "Drug interaction and medication safety policy" in obs
+    assert "check_patient_interactions" in {t["function"]["name"] for t in info["tools"]}
+    call = {"name": "check_interaction", "arguments": {"drug_a": "warfarin", "drug_b": "ibuprofen"}}
+    obs, reward, terminated, truncated, info = env.step("<tool_call>" + json.dumps(call) + "</tool_call>")
+    assert '"severity_level": "major"' in obs and not terminated
+    assert env.observation_space.contains(obs)
+    submit = {"name": "submit_answer", "arguments": {"answer": "minor", "reasoning": "wrong on purpose"}}
+    _, reward, terminated, _, info = env.step("<tool_call>" + json.dumps(submit) + "</tool_call>")
+    assert terminated and info["reward_components"]["accuracy"] == 0.0
