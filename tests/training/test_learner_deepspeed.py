@@ -67,9 +67,13 @@ def test_learner_and_teacher_actors_exchange_weights_through_the_object_store(ra
     teacher = TeacherActor.options(num_cpus=0).remote(TeacherConfig(ema_interval=1, hard_copy_interval=3), model_dir)
     try:
         ray.get(teacher.submit.remote(batch))
-        got = ray.get(teacher.fetch.remote([s.sample_id for s in batch], 60.0))
-        metrics = ray.get(learner.train_step.remote(batch, got.outputs, 1))
+        # The fetch's ref goes to the learner unresolved (inside a list); it blocks on it after its
+        # reference forward.
+        fetch_ref = teacher.fetch.remote([s.sample_id for s in batch], 60.0)
+        metrics = ray.get(learner.train_step.remote(batch, [fetch_ref], 1))
         assert metrics["policy_version"] == 1.0 and metrics["distill_tokens"] > 0
+        assert metrics["teacher_wait_s"] >= 0 and metrics["kl_teacher"] != 0
+        got = ray.get(fetch_ref)
         weights_ref = learner.get_weights.remote()  # passed on as a ref: never through this process
         first = ray.get(teacher.update.remote(weights_ref, 1))
         assert first["action"] == "ema" and first["teacher_version"] == 1
