@@ -46,8 +46,9 @@ def _prepare_environment(config: LearnerConfig, rank: int, world_size: int, mast
         "MASTER_ADDR": ds.master_addr, "MASTER_PORT": str(port), "RANK": str(rank),
         "WORLD_SIZE": str(world_size), "LOCAL_RANK": "0" if config.device == "cpu" else str(rank),
     })
-    if config.device == "cpu":
-        os.environ.setdefault("DS_ACCELERATOR", "cpu")
+    # The CPU runtime defaults (envs/_runtime.py) may have set DS_ACCELERATOR=cpu on a GPU node whose
+    # CUDA_VISIBLE_DEVICES was unset; the learner config decides.
+    os.environ["DS_ACCELERATOR"] = "cpu" if config.device == "cpu" else "cuda"
 
 
 def _ds_config(config: LearnerConfig) -> dict:
