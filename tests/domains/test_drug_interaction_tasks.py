@@ -138,7 +138,7 @@ def test_gym_episode_smoke(tasks):
     obs, info = env.reset(seed=0)
     assert "P001" in obs and "Drug interaction and medication safety policy" in obs
     assert "check_patient_interactions" in {t["function"]["name"] for t in info["tools"]}
-    call = {"name": "check_interaction", "arguments": {"drug_a": "warfarin", "drug_b": "ibuprofen"}}
+    call = {"name": "check_interaction", "arguments": {"drugs": ["ibuprofen", "warfarin"]}}
     obs, reward, terminated, truncated, info = env.step("<tool_call>" + json.dumps(call) + "</tool_call>")
     assert '"severity_level": "major"' in obs and not terminated
     assert env.observation_space.contains(obs)

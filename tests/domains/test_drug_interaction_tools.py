@@ -113,7 +113,7 @@ def test_class_members_follow_the_index(env, raw_ansm):
 # -- interactions ---------------------------------------------------------------------------------
 def test_class_rule_applies_to_warfarin(env, raw_ansm):
     thesaurus, _ = raw_ansm
-    out = call(env, "check_interaction", drug_a="warfarin", drug_b="ibuprofen")
+    out = call(env, "check_interaction", drugs=["warfarin", "ibuprofen"])
     assert out["severity_level"] == "major"
     rule = out["rules"][0]
     assert rule["parties"] == ["non-steroidal anti-inflammatory drugs [class]", "oral anticoagulants [class]"]
@@ -123,34 +123,35 @@ def test_class_rule_applies_to_warfarin(env, raw_ansm):
 
 def test_substance_rule_and_symmetry(env, raw_ansm):
     thesaurus, _ = raw_ansm
-    ab = call(env, "check_interaction", drug_a="simvastatin", drug_b="clarithromycin")
-    ba = call(env, "check_interaction", drug_a="clarithromycin", drug_b="simvastatin")
+    ab = call(env, "check_interaction", drugs=["simvastatin", "clarithromycin"])
+    assert "exactly two" in fails(env, "check_interaction", drugs=["simvastatin"])
+    ba = call(env, "check_interaction", drugs=["clarithromycin", "simvastatin"])
     assert ab["severity_level"] == ba["severity_level"] == "contraindicated"
     assert [r["rule_id"] for r in ab["rules"]] == [r["rule_id"] for r in ba["rules"]]
     assert raw_levels(thesaurus, "simvastatine", "inhibiteurs puissants du cyp3a4") == ["contre-indication"]
-    none = call(env, "check_interaction", drug_a="amoxicillin", drug_b="omeprazole")
+    none = call(env, "check_interaction", drugs=["amoxicillin", "omeprazole"])
     assert none == {**none, "interaction_found": False, "severity_level": "none", "rules": []}
-    assert "same drug" in fails(env, "check_interaction", drug_a="Zocor", drug_b="simvastatin")
+    assert "same drug" in fails(env, "check_interaction", drugs=["Zocor", "simvastatin"])
 
 
 def test_conditional_levels_resolved_from_named_drugs(env):
     # ANSM: alpha-blockers + PDE5 inhibitors is 'not recommended' with doxazosin, a precaution otherwise
-    assert call(env, "check_interaction", drug_a="doxazosin", drug_b="sildenafil")["severity_level"] == "major"
-    assert call(env, "check_interaction", drug_a="tamsulosin", drug_b="sildenafil")["severity_level"] == "moderate"
+    assert call(env, "check_interaction", drugs=["doxazosin", "sildenafil"])["severity_level"] == "major"
+    assert call(env, "check_interaction", drugs=["tamsulosin", "sildenafil"])["severity_level"] == "moderate"
     # sedatives together are 'take into account'; the contraindication is specific to sodium oxybate
-    assert call(env, "check_interaction", drug_a="lorazepam", drug_b="zolpidem")["severity_level"] == "minor"
-    oxybate = call(env, "check_interaction", drug_a="lorazepam", drug_b="sodium oxybate")
+    assert call(env, "check_interaction", drugs=["lorazepam", "zolpidem"])["severity_level"] == "minor"
+    oxybate = call(env, "check_interaction", drugs=["lorazepam", "sodium oxybate"])
     assert oxybate["severity_level"] == "major" and "sodium oxybate" in oxybate["rules"][0]["level_basis"]
 
 
 def test_non_drug_party(env):
-    out = call(env, "check_interaction", drug_a="simvastatin", drug_b="grapefruit")
+    out = call(env, "check_interaction", drugs=["simvastatin", "grapefruit"])
     assert out["severity_level"] == "major" and out["drug_b"] == "grapefruit-juice-and-fruit"
 
 
 def test_rule_details_keep_the_french_text(env):
-    rule = call(env, "get_interaction_rule", rule_id=call(env, "check_interaction", drug_a="metformin",
-                                                           drug_b="iohexol")["rules"][0]["rule_id"])
+    rule = call(env, "get_interaction_rule",
+                rule_id=call(env, "check_interaction", drugs=["metformin", "iohexol"])["rules"][0]["rule_id"])
     assert rule["party_a"]["name_fr"] == "METFORMINE"
     assert rule["levels"][0]["condition"]["language"] == "fr"
     assert "2 jours" in rule["levels"][0]["condition"]["text"]

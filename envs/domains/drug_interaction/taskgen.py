@@ -150,7 +150,7 @@ class Generator:
                   f"thesaurus, how severe is the {a}-{b} interaction? Reply with one word: {SEVERITY_CHOICES}.")
         self.add(Spec(
             id=f"di-gen-{task_type}-{_slug(a)}--{_slug(b)}", task_type=task_type, ticket=ticket,
-            calls=[("check_interaction", {"drug_a": a, "drug_b": b}, ["drug_a", "drug_b"])],
+            calls=[("check_interaction", {"drugs": [a, b]}, ["drugs"])],
             answer=lambda r: r[0]["severity_level"], answer_type="category", source=source,
             provenance=_prov(self.ansm, rule_id), category="interaction severity", difficulty="easy",
             aliases=lambda ans: SEVERITY_ALIASES[ans], challenges=[why],
@@ -169,7 +169,7 @@ class Generator:
                       f"thesaurus, what is the severity of combining {d} with {thing}? One word: {SEVERITY_CHOICES}.")
             self.add(Spec(
                 id=f"di-gen-non_drug_interaction-{_slug(d)}--{_slug(thing)}", task_type="non_drug_interaction",
-                ticket=ticket, calls=[("check_interaction", {"drug_a": d, "drug_b": thing}, ["drug_a", "drug_b"])],
+                ticket=ticket, calls=[("check_interaction", {"drugs": [d, thing]}, ["drugs"])],
                 answer=lambda r: r[0]["severity_level"], answer_type="category", source="generated:ansm",
                 provenance=_prov(self.ansm, rule.id), category="interaction severity",
                 aliases=lambda ans: SEVERITY_ALIASES[ans], challenges=["Non-drug party (food, alcohol)."],

@@ -147,16 +147,18 @@ class DrugInteractionTools(BaseDomainTools):
 
     # -- interactions ------------------------------------------------------------------------------
     @is_tool(ToolType.READ)
-    def check_interaction(self, drug_a: str, drug_b: str) -> dict:
-        """Check two drugs (or a drug and grapefruit/alcohol) against the ANSM thesaurus, including class-level rules.
+    def check_interaction(self, drugs: list[str]) -> dict:
+        """Check a pair of drugs (or a drug and grapefruit/alcohol) against the ANSM thesaurus, class-level rules included.
 
         Args:
-            drug_a: First drug (generic or brand name).
-            drug_b: Second drug, or a non-drug party such as "grapefruit" or "alcohol".
+            drugs: Exactly two names, in any order: generic or brand names, or a non-drug party such as
+                "grapefruit" or "alcohol", e.g. ["warfarin", "ibuprofen"].
         """
-        a, b = self._party(drug_a), self._party(drug_b)
+        if len(drugs) != 2:
+            raise ToolError(f"give exactly two names in 'drugs', got {len(drugs)}: {drugs}")
+        a, b = self._party(drugs[0]), self._party(drugs[1])
         if a.id == b.id:
-            raise ToolError(f"{drug_a!r} and {drug_b!r} are the same drug ({a.id}); give two different drugs")
+            raise ToolError(f"{drugs[0]!r} and {drugs[1]!r} are the same drug ({a.id}); give two different drugs")
         return L.pair_report(self.db, a, b)
 
     @is_tool(ToolType.READ)
