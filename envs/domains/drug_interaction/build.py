@@ -41,8 +41,8 @@ OUTPUTS = ("db.json", "tasks.json", "split_tasks.json")
 
 def builder_inputs() -> list[Path]:
     """The files whose content determines the build output (code, authored tables, patients)."""
-    files = sorted(HERE.glob("*.py")) + sorted((HERE / "authored").glob("*.json")) + [HERE / "patients.json"]
-    return [f for f in files if f.exists()]
+    authored = [HERE / name for name in ("substance_names.json", "class_names.json", "patients.json")]
+    return sorted(HERE.glob("*.py")) + [f for f in authored if f.exists()]
 
 
 def inputs_hash() -> str:

