@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from envs.core.task import Task  # noqa: E402
 from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord  # noqa: E402
-from envs.rewards import StaticSafetyContext, score_episode  # noqa: E402
+from envs.rewards import StaticSafetyContext, score_episode, score_episodes  # noqa: E402
 
 OPTION_SETS = [
     {"A": "Vitamin A", "B": "Vitamin C", "C": "Iron", "D": "Vitamin D"},
@@ -138,6 +138,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--embeddings", action="store_true",
+                        help="also time free-text episodes graded with the offline embedding model")
     args = parser.parse_args()
 
     mc = [mc_episode(i) for i in range(args.episodes)]
@@ -150,6 +152,23 @@ def main() -> None:
     mgmt_rate, mgmt_wall, _ = rate(lambda xs: [score_episode(t, k, context=c) for t, k, c in xs], mgmt, args.repeats)
     ft = [free_text_episode(i) for i in range(max(200, args.episodes // 4))]
     ft_rate, ft_wall, _ = rate(lambda xs: [score_episode(t, k) for t, k in xs], ft, args.repeats)
+    sem_rate = sem_batch_rate = None
+    if args.embeddings:
+        from envs.rewards import similarity
+
+        os.environ["HCGYM_EMBEDDINGS"] = "1"
+        similarity.set_embedder(None)
+        start = time.perf_counter()
+        loaded = similarity.get_embedder() is not None
+        load_s = time.perf_counter() - start
+        print(f"embedding model: {similarity.embedding_status()} in {load_s:.1f} s")
+        if loaded:
+            varied = [(t.model_copy(update={"submitted_answer": f"{t.submitted_answer} (variant {i})"}), k)
+                      for i, (t, k) in enumerate(ft)]  # distinct texts: no embedding-cache hits
+            sem_rate, sem_wall, _ = rate(lambda xs: [score_episode(t, k) for t, k in xs], varied, 1)
+            batched = [(t.model_copy(update={"submitted_answer": f"{t.submitted_answer} (batched {i})"}), k)
+                       for i, (t, k) in enumerate(ft)]
+            sem_batch_rate, sem_batch_wall, _ = rate(lambda xs: score_episodes(xs), batched, 1)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
 
     result = {
@@ -162,6 +181,8 @@ def main() -> None:
         "ratio_vs_baseline": round(ours / base, 4),
         "misgraded_ours": round(ours_wrong, 4), "misgraded_baseline": round(naive_wrong, 4),
         "management_episodes_per_cpu_s": round(mgmt_rate), "free_text_overlap_episodes_per_cpu_s": round(ft_rate),
+        "free_text_semantic_episodes_per_cpu_s": None if sem_rate is None else round(sem_rate),
+        "free_text_semantic_batched_episodes_per_cpu_s": None if sem_batch_rate is None else round(sem_batch_rate),
         "target_mc_episodes_per_s": 2000, "pass": ours >= 2000,
     }
     print(f"machine: {os.cpu_count()} cores, load average {load:.2f}; rates are per CPU-second of this single-threaded process"
@@ -172,6 +193,9 @@ def main() -> None:
     print(f"mis-graded correctness: ours {ours_wrong:.1%}, baseline {naive_wrong:.1%} (hedges, option lists)")
     print(f"patient management (5 calls, safety context): {mgmt_rate:,.0f} episodes/s [{mgmt_wall:,.0f}]")
     print(f"free text (token overlap, embeddings off): {ft_rate:,.0f} episodes/s [{ft_wall:,.0f}]")
+    if sem_rate is not None:
+        print(f"free text (overlap + MiniLM embeddings, distinct answers): {sem_rate:,.0f} episodes/s [{sem_wall:,.0f}]"
+              f"; batched with score_episodes: {sem_batch_rate:,.0f} episodes/s [{sem_batch_wall:,.0f}]")
     print(f"target >= 2,000 MC episodes/s on one core: {'PASS' if ours >= 2000 else 'FAIL'}")
     if args.json:
         args.json.write_text(json.dumps(result, indent=1) + "\n")

@@ -23,11 +23,11 @@ from envs.rewards.safety import (
     safety_check,
 )
 from envs.rewards.safety_patterns import PATTERNS, Pattern, register_pattern
-from envs.rewards.score import score_episode
+from envs.rewards.score import score_episode, score_episodes
 from envs.rewards.types import DEFAULT_WEIGHTS, RewardBreakdown, RewardWeights, Violation
 
 __all__ = [
-    "score_episode", "RewardWeights", "RewardBreakdown", "Violation", "cosine_length_reward", "extract_choice",
+    "score_episode", "score_episodes", "RewardWeights", "RewardBreakdown", "Violation", "cosine_length_reward", "extract_choice",
     "SafetyContext", "BaseSafetyContext", "StaticSafetyContext", "detect_violations", "safety_check",
     "PATTERNS", "Pattern", "register_pattern", "ToolConventions", "DEFAULT_CONVENTIONS", "DEFAULT_WEIGHTS",
     "assistant_tokens", "episode_cosine_reward",

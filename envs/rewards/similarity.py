@@ -149,6 +149,16 @@ def _vectors(texts: list[str]):
     return np.stack([_cache[t] for t in texts])
 
 
+def warm(texts: list[str]) -> int:
+    """Encode texts in batches ahead of grading (no-op without a model); returns how many were new."""
+    if not texts or get_embedder() is None:
+        return 0
+    new = [t for t in dict.fromkeys(texts) if t not in _cache]
+    if new:
+        _vectors(new)
+    return len(new)
+
+
 def similarity_matrix(queries: list[str], candidates: list[str]):
     """Cosine similarities (len(queries), len(candidates)), or None without a model."""
     if not queries or not candidates:

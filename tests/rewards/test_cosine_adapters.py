@@ -123,3 +123,32 @@ def test_adapters_score_tool_calls_like_the_environment():
     function = completion_to_trajectory('submit_answer(answer="D")', task)
     assert function.turns[0].tool_calls[0].format == "function"
     assert call("x").format == "hermes"
+
+
+def test_score_episodes_encodes_free_text_in_one_batch():
+    import hashlib
+
+    import numpy as np
+
+    from envs.core.task import Task
+    from envs.rewards import score_episode, score_episodes, similarity
+
+    calls: list[int] = []
+
+    def fake(texts):
+        calls.append(len(texts))
+        out = []
+        for t in texts:
+            v = np.frombuffer(hashlib.sha256(t.lower().encode()).digest(), dtype=np.uint8).astype(np.float32)
+            out.append(v / np.linalg.norm(v))
+        return np.stack(out)
+
+    task = Task(ticket="Most likely result?", correct_answer="Pneumothorax due to pleural injury", answer_type="free_text")
+    items = [(episode(task, answer=a), task) for a in ("pneumothorax", "collapsed lung", "rotator cuff tear")]
+    similarity.set_embedder(fake, "fake")
+    batch = score_episodes(items)
+    assert calls == [4]  # three answers and the gold, once
+    singles = [score_episode(t, k) for t, k in items]
+    assert calls == [4]  # all cached
+    assert [b.total for b in batch] == [s.total for s in singles]
+    assert all(b.details["accuracy"]["semantic"] for b in batch)
