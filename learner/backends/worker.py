@@ -117,6 +117,10 @@ class RankWorker:
         """Whole-batch quantities that do not need the teacher."""
         if not samples:
             raise ValueError("train_step got an empty batch")
+        ids = [s.sample_id for s in samples]
+        if len(set(ids)) != len(ids):
+            dup = sorted({i for i in ids if ids.count(i) > 1})
+            raise ValueError(f"duplicate sample_id(s) in the batch: {dup[:5]}")
         cfg = self.config.loss
         adv = group_advantages([s.reward for s in samples], [s.group_id for s in samples],
                                scale=cfg.grpo.scale_advantages, eps=cfg.grpo.advantage_eps)

@@ -151,6 +151,8 @@ def test_bad_inputs_fail_with_named_errors(model_dir, batch):
         learner.train_step(batch, wrong)
     with pytest.raises(ValueError, match="empty"):
         learner.train_step([])
+    with pytest.raises(ValueError, match="duplicate"):
+        learner.train_step(batch + batch[:1], outs)
     with pytest.raises(ValueError, match="world_size"):
         LearnerConfig(backend="torch", deepspeed={"world_size": 2})
     with pytest.raises(ValueError, match="lr"):

@@ -12,25 +12,40 @@ from tests.training.learner_fixtures import make_batch, tiny_model_dir
 
 pytestmark = pytest.mark.ray
 
-COMPARED = ("loss", "policy_loss", "kl_ref_loss", "distill_loss", "kl_ref", "entropy", "grad_norm", "logprob_diff")
+COMPARED = ("loss", "policy_loss", "kl_ref_loss", "distill_loss", "kl_ref", "kl_teacher", "entropy", "grad_norm",
+            "logprob_diff")
 
 
-def _cfg(backend: str, **extra) -> LearnerConfig:
+def _cfg(backend: str) -> LearnerConfig:
+    # GRPO + KL to the reference + TT-OPD distillation with turn truncation: every loss term is compared.
     return LearnerConfig(backend=backend, optim={"lr": 1e-3, "micro_batch_size": 2},
-                         deepspeed={"world_size": 2 if backend == "deepspeed" else 1, "num_cpus_per_rank": 1}, **extra)
+                         loss={"distill": {"enabled": True, "estimator": "k3", "max_turn_tokens": 20}},
+                         deepspeed={"world_size": 2 if backend == "deepspeed" else 1, "num_cpus_per_rank": 1})
+
+
+def _teacher_outputs(model_dir, batches):
+    from actors.teacher import Teacher
+
+    teacher = Teacher(TeacherConfig(), model_dir, start_worker=False)
+    gen = torch.Generator().manual_seed(3)
+    teacher.hard_copy({k: v + 0.03 * torch.randn(v.shape, generator=gen) for k, v in teacher.get_weights().items()})
+    return [teacher.compute(b) for b in batches]
 
 
 def test_zero3_two_ranks_match_the_torch_backend_and_resume(ray_cluster, tmp_path):
     model_dir = tiny_model_dir()
     # 7 samples: the ranks get 4 and 3, so one rank runs a padding micro-batch (2+2 vs 2+1).
     batches = [make_batch(seed=s, groups=2, group_size=3, model_dir=model_dir) for s in range(3)]
-    batches[0] = batches[0] + make_batch(seed=9, groups=1, group_size=1, model_dir=model_dir)
+    extra = make_batch(seed=9, groups=1, group_size=1, model_dir=model_dir)[0]
+    batches[0] = batches[0] + [extra.model_copy(update={"sample_id": "g9:0", "group_id": "g9"})]
+    teacher = _teacher_outputs(model_dir, batches)
     torch_learner = Learner(_cfg("torch"), model_dir)
     ds = Learner(_cfg("deepspeed"), model_dir)
     try:
         for step in (1, 2):
-            a = ds.train_step(batches[step - 1], step=step)
-            b = torch_learner.train_step(batches[step - 1], step=step)
+            a = ds.train_step(batches[step - 1], teacher[step - 1], step=step)
+            b = torch_learner.train_step(batches[step - 1], teacher[step - 1], step=step)
+            assert a["distill_loss"] > 0 and a["turns_truncated"] == b["turns_truncated"] > 0
             for key in COMPARED:
                 assert a[key] == pytest.approx(b[key], rel=1e-4, abs=1e-6), (step, key, a[key], b[key])
         wa, wb = ds.get_state_dict(), torch_learner.get_state_dict()
@@ -42,13 +57,13 @@ def test_zero3_two_ranks_match_the_torch_backend_and_resume(ray_cluster, tmp_pat
         ckpt = checkpoint_dir(tmp_path, 2)
         ds.save_checkpoint(str(ckpt))
         assert (ckpt / "learner" / "fp32_partition_rank1.safetensors").exists()
-        ds.train_step(batches[2], step=3)
+        ds.train_step(batches[2], teacher[2], step=3)
         straight = ds.get_state_dict()
         ds.load_checkpoint(str(ckpt))
         assert ds.policy_version() == 2
         restored = ds.get_state_dict()
         assert all(torch.equal(restored[k], wa[k]) for k in wa)
-        ds.train_step(batches[2], step=3)
+        ds.train_step(batches[2], teacher[2], step=3)
         again = ds.get_state_dict()
         assert all(torch.equal(again[k], straight[k]) for k in straight)
     finally:
