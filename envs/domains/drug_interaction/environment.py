@@ -13,6 +13,7 @@ from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment, DomainTaskStore, read_policy
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
+from envs.core.shared import shared_toolkits
 from envs.core.tools import CompositeToolkit
 
 from .data_model import DrugInteractionDB
@@ -59,7 +60,7 @@ def get_environment() -> DomainEnvironment:
     if _policy is None:
         _policy = read_policy(HERE)
     tools = DrugInteractionTools(load_db())
-    toolkit = CompositeToolkit(tools)
+    toolkit = CompositeToolkit(tools, *shared_toolkits())
     return DomainEnvironment(name=NAME, policy=_policy, toolkit=toolkit,
                              safety_context=DrugInteractionSafetyContext(lambda: tools.db))
 
