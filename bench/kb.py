@@ -8,7 +8,7 @@ English, a few thousand generated medical terms clustered by topic, and a rare-t
 1,000 queries of 3-12 words. Each engine is built in its own process (build time, peak RSS of
 that process, size on disk) and queried by 1 and then 2 processes (top-10, single-threaded per
 process): p50/p99 latency, queries/s, and overlap@10 with bm25s. All engines rank with BM25
-(k1=1.2, b=0.75) over an OR of the query's words with English stop words dropped:
+(k1=1.2, b=0.75) over an OR of the query's distinct words with English stop words dropped:
 
 * ours     -- kb_service.KnowledgeBase.search (bm25s kernel + SQLite passages + highlighted
               snippets: the full call an agent tool makes)
@@ -272,7 +272,7 @@ class BM25S:
 
     def search(self, q: str) -> list[str]:
         toks = self.bm25s.tokenize([q], stopwords="en", show_progress=False, return_ids=False)
-        toks = [[t for t in toks[0] if t in self.r.vocab_dict]]
+        toks = [[t for t in dict.fromkeys(toks[0]) if t in self.r.vocab_dict]]  # de-duplicated, as every engine
         if not toks[0]:
             return []
         docs, scores = self.r.retrieve(toks, k=K, n_threads=1, show_progress=False)
@@ -437,6 +437,43 @@ def overlap(a: list[list[str]], b: list[list[str]]) -> float:
     return float(np.mean(vals)) if vals else float("nan")
 
 
+def bench_pages(work: Path, n: int, seed: int) -> dict:
+    """Article store: ingest rate, bytes per article, lookup latency by title (random order)."""
+    from kb_service.pages import PageStore, PageStoreWriter
+
+    gen = Generator(seed + 3)
+    rng = np.random.default_rng(seed + 4)
+    store = work / f"pages-{n}"
+    shutil.rmtree(store, ignore_errors=True)
+    titles, raw = [], 0
+    t = time.perf_counter()
+    w = PageStoreWriter(store)
+    pool = list(gen.passages(20_000))
+    for i in range(n):
+        picks = rng.integers(0, len(pool), int(rng.integers(3, 25)))  # 3-24 paragraphs of ~155 words
+        text = "\n\n".join(pool[j]["content"] for j in picks)
+        title = f"{pool[picks[0]]['title']} {i}"
+        titles.append(title)
+        raw += len(text.encode())
+        w.add(title, text, f"https://example.org/wiki/{i}")
+    w.close()
+    build_s = time.perf_counter() - t
+    ps = PageStore(store)
+    order = rng.permutation(n)[:2000]
+    lat = []
+    for i in order:
+        t = time.perf_counter()
+        art = ps.get(titles[i])
+        lat.append(time.perf_counter() - t)
+        assert art is not None
+    disk = {f.name: f.stat().st_size for f in store.iterdir()}
+    shutil.rmtree(store, ignore_errors=True)
+    return {"articles": n, "build_s": build_s, "articles_per_s": n / build_s, "raw_text_gb": raw / 1024 ** 3,
+            "data_gb": disk["pages.zlib"] / 1024 ** 3, "index_gb": disk["pages.sqlite"] / 1024 ** 3,
+            "bytes_per_article_index": disk["pages.sqlite"] / n, "compression": raw / disk["pages.zlib"],
+            "lookup_p50_ms": float(np.percentile(lat, 50) * 1000), "lookup_p99_ms": float(np.percentile(lat, 99) * 1000)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n-passages", type=int, default=PAPER_N)
@@ -447,6 +484,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--engines", default="ours,bm25s,tantivy,fts5")
     ap.add_argument("--workdir", default=os.environ.get("HCGYM_BENCH_DIR", "/tmp/hcgym-bench-kb"))
     ap.add_argument("--keep", action="store_true", help="keep the built indexes")
+    ap.add_argument("--articles", type=int, default=0, help="also measure the article store with this many articles")
     args = ap.parse_args(argv)
 
     work = Path(args.workdir)
@@ -488,11 +526,18 @@ def main(argv: list[str] | None = None) -> int:
             res["overlap_bm25s"] = overlap(res["tops"], [ref[q] for q in res["queries"]])
 
     report(results, args, load)
+    pages = None
+    if args.articles:
+        pages = bench_pages(work, args.articles, args.seed)
+        print(f"\nArticle store, {pages['articles']:,} articles ({pages['raw_text_gb']:.2f} GB of text): "
+              f"{pages['articles_per_s']:.0f} articles/s, data {pages['data_gb']:.2f} GB (x{pages['compression']:.1f} "
+              f"compression), index {pages['index_gb']:.3f} GB ({pages['bytes_per_article_index']:.0f} B/article), "
+              f"lookup p50 {pages['lookup_p50_ms']:.2f} ms, p99 {pages['lookup_p99_ms']:.2f} ms")
     slim = {n: {k: v for k, v in r.items() if k not in ("tops", "queries")} for n, r in results.items()}
     out = work / f"results-{args.n_passages}.json"
     out.write_text(json.dumps({"n_passages": args.n_passages, "n_queries": args.n_queries, "seed": args.seed,
                                "cpus": os.cpu_count(), "load_before": load, "load_after": os.getloadavg(),
-                               "engines": slim}, indent=2))
+                               "engines": slim, "article_store": pages}, indent=2))
     print(f"[bench] results: {out}")
     return 0
 
