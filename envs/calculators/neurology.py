@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from ._core import ScoreResult, check_bool, check_choice, check_int, check_number, make_result
+from ._core import CalculatorInputError, ScoreResult, check_bool, check_choice, check_int, check_number, make_result
 
 # (argument name, maximum points) in the order of the NIHSS form.
 _NIHSS_ITEMS = (
@@ -35,7 +35,8 @@ def calculate_nihss(
     """NIH Stroke Scale total (0-42) from its 15 items; untestable ("UN") items are scored 0.
 
     Args:
-        loc: 1a level of consciousness, integer 0-3.
+        loc: 1a level of consciousness, integer 0-3 (3 = coma: 1b, 1c and sensory must then be 2,
+            best_language 3, as the NIHSS instructions score them).
         loc_questions: 1b LOC questions (month, age), integer 0-2.
         loc_commands: 1c LOC commands (eyes, grip), integer 0-2.
         best_gaze: 2 best gaze, integer 0-2.
@@ -56,6 +57,11 @@ def calculate_nihss(
               motor_arm_right, motor_leg_left, motor_leg_right, limb_ataxia, sensory, best_language,
               dysarthria, extinction_inattention)
     comps = {name: check_int(fn, name, v, 0, hi) for (name, hi), v in zip(_NIHSS_ITEMS, values)}
+    if comps["loc"] == 3:  # NIHSS instructions: a coma patient (1a = 3) scores 2 on 1b, 1c and 8 and 3 on 9
+        for name, forced in (("loc_questions", 2), ("loc_commands", 2), ("sensory", 2), ("best_language", 3)):
+            if comps[name] != forced:
+                raise CalculatorInputError(fn, name, f"{forced} when loc is 3 (the NIHSS scores a coma patient "
+                                           f"{forced} on this item)", comps[name])
     total = sum(comps.values())
     if total == 0:
         cat = "no stroke symptoms"

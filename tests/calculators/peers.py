@@ -585,8 +585,9 @@ def fena_medcalc(urine_sodium_mmol_l, serum_sodium_mmol_l, urine_creatinine_mg_d
 
 
 def fena_clincalc(urine_sodium_mmol_l, serum_sodium_mmol_l, urine_creatinine_mg_dl, serum_creatinine_mg_dl):
-    return _cc("fena", {"urine_sodium": urine_sodium_mmol_l, "plasma_sodium": serum_sodium_mmol_l,
-                        "urine_creatinine": urine_creatinine_mg_dl, "plasma_creatinine": serum_creatinine_mg_dl})
+    return float(_cc("fena", {"urine_sodium": urine_sodium_mmol_l, "plasma_sodium": serum_sodium_mmol_l,
+                              "urine_creatinine": urine_creatinine_mg_dl,
+                              "plasma_creatinine": serum_creatinine_mg_dl}))  # a string, 2 decimals
 
 
 def fwd_medcalc(sodium_mmol_l, weight_kg, age, sex, target_sodium_mmol_l=140.0):
