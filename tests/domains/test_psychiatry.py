@@ -1,0 +1,207 @@
+"""Psychiatry domain: every tool on known input, WRITE tools change state that later reads see,
+the task set (counts, splits, gradeability, emergencies, contamination), gold replay, speed."""
+
+from __future__ import annotations
+
+import collections
+import statistics
+import time
+
+import pytest
+
+from envs import registry
+from envs.calculators import CALCULATORS
+from envs.core.contamination import check_domain
+from envs.core.tools import ToolError
+from envs.domains.psychiatry import build as psy_build
+from envs.domains.psychiatry.instruments import score_mdq
+
+registry.DOMAINS.setdefault("psychiatry", "envs.domains.psychiatry.environment")
+
+
+def use(toolkit, tool: str, **arguments):
+    outcome = toolkit.call(tool, arguments)
+    if outcome.error:
+        raise ToolError(outcome.error)
+    return outcome.result
+
+
+@pytest.fixture(scope="module")
+def built():
+    return psy_build.build()
+
+
+@pytest.fixture
+def env(built):
+    return registry.get_environment("psychiatry")
+
+
+@pytest.fixture
+def tk(env):
+    return env.toolkit
+
+
+@pytest.fixture(scope="module")
+def tasks(built):
+    return registry.get_tasks("psychiatry")
+
+
+def test_chart_and_interview_tools(tk):
+    s = use(tk, "get_patient_summary", patient_id="psy-003")
+    assert s["patient_id"] == "PSY-003" and {m["name"] for m in s["medications"]} == {"lithium", "ibuprofen"}
+    h = use(tk, "get_psychiatric_history", patient_id="PSY-001")
+    assert h["suicide_attempts"][0]["method"] == "sertraline overdose"
+    tr = use(tk, "get_interview_transcript", patient_id="PSY-001", contains="intention")
+    assert [u["speaker"] for u in tr["utterances"]] == ["clinician", "patient"] and "try again" in tr["utterances"][1]["text"]
+    form = use(tk, "get_symptom_report", patient_id="PSY-004", instrument="epds")
+    assert len(form["items"]) == 10 and form["items"][9]["score"] == 1
+    with pytest.raises(ToolError, match="no gad7 form on file"):
+        use(tk, "get_symptom_report", patient_id="PSY-004", instrument="gad7")
+    with pytest.raises(ToolError, match="not found"):
+        use(tk, "get_patient_summary", patient_id="PSY-999")
+
+
+def test_instruments_fill_from_the_chart_and_explicit_inputs_win(tk):
+    phq = use(tk, "administer_phq9", patient_id="PSY-009")
+    assert phq["score"] == 22 and phq["category"] == "severe" and phq["flags"]
+    assert use(tk, "administer_phq9", patient_id="PSY-009", responses=[0] * 9)["score"] == 0
+    assert use(tk, "administer_gad7", patient_id="PSY-010")["score"] == 16
+    assert use(tk, "administer_epds", patient_id="PSY-004")["category"] == "probable depression"
+    audit = use(tk, "administer_audit_c", patient_id="PSY-011")
+    assert audit["score"] == 4 and audit["category"] == "positive"
+    assert use(tk, "administer_audit_c", patient_id="PSY-011", sex="male")["category"] == "positive"
+    assert use(tk, "administer_audit_c", responses=[1, 1, 1], sex="male")["category"] == "negative"
+    assert use(tk, "administer_cage", patient_id="PSY-011")["score"] == 2
+    assert use(tk, "calculate_ciwa_ar", patient_id="PSY-006")["score"] == 19
+    assert use(tk, "assess_suicide_risk", patient_id="PSY-009")["category"] == "high risk"
+    assert use(tk, "assess_suicide_risk", wish_to_be_dead=True, suicidal_thoughts=False,
+               suicidal_behavior="over_3_months_ago")["category"] == "moderate risk"
+    with pytest.raises(ToolError, match="no completed PHQ9 form"):
+        use(tk, "administer_phq9", patient_id="PSY-016")
+    with pytest.raises(ToolError, match="suicidal_thoughts"):
+        use(tk, "assess_suicide_risk", wish_to_be_dead=True, suicidal_thoughts=False, intent=True)
+
+
+def test_mdq_rule():
+    yes7 = [True] * 7 + [False] * 6
+    assert score_mdq(yes7, True, "moderate problem").category == "positive"
+    assert score_mdq(yes7, True, "minor problem").category == "negative"
+    assert score_mdq(yes7, False, "serious problem").category == "negative"
+    assert score_mdq([True] * 6 + [False] * 7, True, "serious problem").category == "negative"
+    with pytest.raises(ValueError, match="items"):
+        score_mdq([True] * 12, True, "serious problem")
+
+
+def test_screen_bipolar_tool(tk):
+    out = use(tk, "screen_bipolar", patient_id="PSY-005")
+    assert out["category"] == "positive" and out["score"] == 10
+
+
+def test_interactions(tk):
+    out = use(tk, "check_psych_med_interactions", patient_id="PSY-008", proposed_drug="Zoloft")
+    assert out["highest_severity"] == "contraindicated" and out["interactions"][0]["rule"] == "PIR-01"
+    li = use(tk, "check_psych_med_interactions", patient_id="PSY-003")
+    assert li["highest_severity"] == "major" and {"lithium", "ibuprofen"} == set(li["interactions"][0]["drugs"])
+    none = use(tk, "check_psych_med_interactions", medications=["sertraline", "atorvastatin"])
+    assert none["highest_severity"] == "none" and none["interactions"] == []
+    with pytest.raises(ToolError, match="not in the psychiatry formulary"):
+        use(tk, "check_psych_med_interactions", patient_id="PSY-003", proposed_drug="unobtainium")
+
+
+def test_order_lab_result_appears_only_after_ordering(tk):
+    before = use(tk, "get_lab_results", patient_id="PSY-003")["results"]
+    assert [r["value"] for r in before if r["name"] == "lithium level"] == [0.8]
+    assert use(tk, "order_lab", patient_id="PSY-003", test="Lithium level")["status"] == "resulted"
+    after = use(tk, "get_lab_results", patient_id="PSY-003")["results"]
+    new = [r for r in after if r["name"] == "lithium level" and r["value"] == 2.3]
+    assert new and new[0]["flag"] == "high"
+    assert use(tk, "order_lab", patient_id="PSY-003", test="serum ammonia")["status"] == "not available"
+
+
+def test_write_tools_record_state(env, tk):
+    h0 = env.db_hash()
+    out = use(tk, "mental_status_exam", patient_id="PSY-013", appearance="bright clothes", behavior="pacing", speech="pressured",
+              mood="fantastic", affect="euphoric", thought_process="flight of ideas", thought_content="grandiose",
+              suicidal_ideation=False, homicidal_ideation=False, perception="denies hallucinations", cognition="oriented",
+              insight="absent", judgment="poor")
+    assert "formal thought disorder (flight of ideas)" in out["risk_flags"]
+    assert any("insight" in f for f in out["risk_flags"]) and env.db_hash() != h0
+    plan = use(tk, "create_safety_plan", patient_id="PSY-002", warning_signs=["insomnia"], coping_strategies=["walk"],
+               social_contacts=["wife"], professional_contacts=["psychiatrist"], means_restriction="lock medicines")
+    assert plan["warnings"] and "firearm" in plan["warnings"][0]
+    assert use(tk, "escalate_care", patient_id="PSY-001", level="1:1 constant observation", reason="C-SSRS high")["escalated"]
+    assert use(tk, "record_diagnosis", patient_id="PSY-010", icd10_code="f41.1")["description"] == "Generalized anxiety disorder"
+    assert use(tk, "schedule_follow_up", patient_id="PSY-020", within_days=7, with_whom="CMHT", purpose="review")["booked"]
+    db = tk.db
+    assert (len(db.mse_records), len(db.safety_plans), len(db.escalations), len(db.diagnoses), len(db.follow_ups)) == (1, 1, 1, 1, 1)
+    h1 = env.db_hash()
+    bad = tk.call("create_safety_plan", {"patient_id": "PSY-002", "warning_signs": [], "coping_strategies": ["x"],
+                                         "social_contacts": ["x"], "professional_contacts": ["x"], "means_restriction": "x"})
+    assert bad.error and "warning_signs" in bad.error and env.db_hash() == h1
+    bad = tk.call("record_diagnosis", {"patient_id": "PSY-010", "icd10_code": "F41"})
+    assert bad.error and "F41.1" in bad.error and env.db_hash() == h1
+    fresh = registry.get_environment("psychiatry")
+    assert fresh.toolkit.db.mse_records == [] and fresh.db_hash() == h0
+
+
+def test_tasks_counts_splits_and_emergencies(tasks):
+    generated = [t for t in tasks if t.description.source == "generated"]
+    authored = [t for t in tasks if t.description.source == "authored"]
+    assert len(generated) >= 130 and len(authored) >= 20
+    splits = registry.get_splits("psychiatry")
+    assert len(splits["validation"]) == 20
+    train, test, val = (set(splits[k]) for k in ("train", "test", "validation"))
+    assert not (train & test or train & val or test & val) and train | test | val == {t.id for t in tasks}
+    for t in tasks:
+        assert t.has_gold_answer and t.patient_id and t.patient_id in t.ticket and t.evaluation_criteria.actions
+        if t.correct_answer == "high risk":
+            assert t.emergency == "suicidality"
+            names = [a.name for a in t.evaluation_criteria.actions]
+            assert "escalate_care" in names and names.index("escalate_care") <= 5
+    for t in authored:
+        assert len(t.evaluation_criteria.actions) >= 2 and len(t.evaluation_criteria.nl_assertions) >= 2
+    assert collections.Counter(t.description.task_type for t in generated)["cssrs_triage"] >= 20
+
+
+def test_generated_answers_recomputed(tasks):
+    for t in tasks:
+        m = t.metadata
+        if t.description.task_type == "phq9_total":
+            assert str(CALCULATORS["administer_phq9"](responses=m["responses"]).score) == t.correct_answer
+        elif t.description.task_type == "cssrs_triage":
+            assert CALCULATORS["assess_suicide_risk"](**m["answers"]).category == t.correct_answer
+
+
+def test_no_held_out_leaks(tasks):
+    assert check_domain("psychiatry") == []
+
+
+def test_gold_replay_through_the_validator(tasks):
+    from envs.core.validate import validate_task
+
+    definitions = registry.get_environment("psychiatry").toolkit.definitions
+    sample = [t for t in tasks if t.description.source == "authored"]
+    sample += list({t.description.task_type: t for t in tasks if t.description.source == "generated"}.values())
+    for t in sample:
+        report = validate_task(t, "psychiatry", definitions)
+        assert report.ok, (t.id, report.problems)
+        assert report.reward_components.get("safety") == 1.0, (t.id, report.reward_components)
+
+
+def test_reset_and_tool_latency(tasks):
+    registry.get_environment("psychiatry")
+    start = time.perf_counter()
+    for _ in range(50):
+        env = registry.get_environment("psychiatry")
+        env.db_hash()
+    assert (time.perf_counter() - start) / 50 < 0.01
+    times = collections.defaultdict(list)
+    for t in tasks[:80]:
+        for a in t.evaluation_criteria.actions:
+            fresh = registry.get_environment("psychiatry")
+            start = time.perf_counter()
+            out = fresh.toolkit.call(a.name, a.arguments)
+            times[a.name].append(time.perf_counter() - start)
+            assert out.ok, (t.id, a.name, out.error)
+    for name, values in times.items():
+        assert statistics.median(values) < 0.005, (name, statistics.median(values))
