@@ -99,6 +99,13 @@ def test_learner_and_teacher_actors_exchange_weights_through_the_object_store(ra
         assert copy["action"] == "hard_copy"
         student, taught = ray.get(learner.get_weights.remote()), ray.get(teacher.get_weights.remote())
         assert all(torch.equal(student[k], taught[k]) for k in student)
+        # A teacher failure surfaces from train_step before any update: the step can be retried.
+        missing = teacher.fetch.remote(["never-submitted"], 5.0)
+        with pytest.raises(KeyError, match="never-submitted"):
+            ray.get(learner.train_step.remote(batch, [missing], 4))
+        assert ray.get(learner.policy_version.remote()) == 3
+        after = ray.get(learner.get_weights.remote())
+        assert all(torch.equal(student[k], after[k]) for k in student)
     finally:
         ray.kill(learner)
         ray.kill(teacher)
