@@ -174,28 +174,49 @@ class EnvPool:
         num_cpus: CPU reservation per actor (fractional is fine: tools are light).
         kb_service: Name of a running knowledge-base service (kb_service.service) the actors' knowledge
             tools share, instead of each opening the KB.
+        env_vars: Environment variables of the actor processes.
     """
 
     def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
-                 max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None) -> None:
+                 max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None,
+                 env_vars: dict[str, str] | None = None) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
             raise ValueError(f"env pool needs num_actors >= 1 and slots_per_actor >= 1, got "
                              f"{num_actors} and {slots_per_actor}")
         options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": num_cpus}
+        variables = dict(env_vars or {})
         if kb_service:
-            options["runtime_env"] = {"env_vars": {"HCGYM_KB_SERVICE": kb_service}}
+            variables["HCGYM_KB_SERVICE"] = kb_service
+        if variables:
+            options["runtime_env"] = {"env_vars": variables}
         cls = ray.remote(EnvActor).options(**options)
         self.actors = [cls.remote(i, max_turns, slots_per_actor, env_kwargs, domain_modules) for i in range(num_actors)]
         self.slots = slots_per_actor
         self.in_flight: list[set[str]] = [set() for _ in range(num_actors)]
         self.lost: list[int] = [0] * num_actors
+        # An actor that lost an episode is left out of scheduling until it answers a ping again
+        # (Ray is restarting it; calls sent meanwhile would fail too).
+        self.healthy: list[bool] = [True] * num_actors
+        self._probes: dict[int, asyncio.Task] = {}
         self._free = asyncio.Condition() if _has_loop() else None
 
-    async def ready(self) -> list[dict[str, Any]]:
-        return list(await asyncio.gather(*[a.ping.remote() for a in self.actors]))
+    async def ready(self, timeout_s: float = 300.0) -> list[dict[str, Any]]:
+        """Ping every actor, waiting for restarting ones; returns their `ping` answers."""
+
+        async def ping(actor):
+            deadline = asyncio.get_running_loop().time() + timeout_s
+            while True:
+                try:
+                    return await actor.ping.remote()
+                except Exception as exc:
+                    if not _is_actor_failure(exc) or asyncio.get_running_loop().time() > deadline:
+                        raise
+                    await asyncio.sleep(0.2)
+
+        return list(await asyncio.gather(*[ping(a) for a in self.actors]))
 
     async def lease(self, spec: EpisodeSpec) -> RemoteEnv:
         """Wait for a free slot on the least-loaded actor and reserve it for the episode."""
@@ -203,7 +224,8 @@ class EnvPool:
             self._free = asyncio.Condition()
         async with self._free:
             while True:
-                loads = [(len(s), i) for i, s in enumerate(self.in_flight) if len(s) < self.slots]
+                loads = [(len(s), i) for i, s in enumerate(self.in_flight)
+                         if len(s) < self.slots and self.healthy[i]]
                 if loads:
                     _, index = min(loads)
                     break
@@ -215,10 +237,33 @@ class EnvPool:
     async def give_back(self, env: RemoteEnv, lost: bool = False) -> None:
         if lost:
             self.lost[env.actor_index] += 1
+            self._mark_down(env.actor_index)
         else:
             await env.close()
         async with self._free:
             self.in_flight[env.actor_index].discard(env.key)
+            self._free.notify_all()
+
+    def _mark_down(self, index: int) -> None:
+        self.healthy[index] = False
+        if index not in self._probes or self._probes[index].done():
+            self._probes[index] = asyncio.ensure_future(self._probe(index))
+
+    async def _probe(self, index: int, interval_s: float = 0.2, timeout_s: float = 600.0) -> None:
+        """Wait until the (restarted) actor answers, then schedule on it again."""
+        deadline = asyncio.get_running_loop().time() + timeout_s
+        while asyncio.get_running_loop().time() < deadline:
+            try:
+                await self.actors[index].ping.remote()
+                break
+            except Exception as exc:
+                if not _is_actor_failure(exc):
+                    raise
+                await asyncio.sleep(interval_s)
+        else:
+            return  # stays out of scheduling; the other actors carry on
+        async with self._free:
+            self.healthy[index] = True
             self._free.notify_all()
 
     def loads(self) -> list[int]:

@@ -100,6 +100,10 @@ class RolloutConfig(RolloutLimits):
     slots_per_env_actor: int = Field(default=8, ge=1)
     env_actor_max_restarts: int = Field(default=-1, ge=-1)
     max_episode_attempts: int = Field(default=5, ge=1, description="re-runs of an episode whose env actor died")
+    # Environment variables of the env actors (and of the driver's own in-process episodes: SFT gold
+    # replays), e.g. {"HCGYM_EMBEDDINGS": "0"} to grade free text by token overlap instead of loading
+    # a sentence-embedding model into every env process.
+    env_vars: dict[str, str] = Field(default_factory=dict)
 
 
 class GeneratorConfig(_Strict):
@@ -124,6 +128,9 @@ class RewardConfig(_Strict):
     r_min: float = 0.7
     r_penalty: float = -0.5
     max_length: int | None = Field(default=None, ge=1)
+    # Which limits count as "truncated" (R_penalty) in Eq. 4: the response-token limit L_max, and
+    # optionally running out of assistant turns without submitting.
+    penalize: list[Literal["response_tokens", "max_turns"]] = Field(default_factory=lambda: ["response_tokens"])
     correct_if: Literal["is_correct", "reward_positive", "accuracy_at_least"] = "is_correct"
     accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
 
@@ -152,6 +159,7 @@ class TrainerConfig(_Strict):
     save_trajectories: bool = True
     weight_sync_timeout_s: float = Field(default=120.0, gt=0)
     teacher_timeout_s: float = Field(default=600.0, gt=0)
+    drain_timeout_s: float = Field(default=120.0, ge=0, description="at the end, wait this long for admitted groups")
 
 
 class RayConfig(_Strict):

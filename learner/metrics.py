@@ -83,7 +83,9 @@ class MetricsSink:
 
     HISTOGRAMS = {
         "response_length": [64, 128, 256, 512, 1024, 2048, 4096, 8192, 12288, 16384],
-        "episode_reward": [-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25],
+        # Ray histograms need positive boundaries: counts, not rewards (rewards are gauges).
+        "episode_turns": [1, 2, 3, 4, 5, 6, 8, 10],
+        "episode_tool_calls": [1, 2, 3, 4, 6, 8, 12, 16],
     }
 
     def __init__(self, run_dir: str | Path, *, tensorboard: bool = True, ray_metrics: bool = True,

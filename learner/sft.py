@@ -134,7 +134,7 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), max_grad_norm)
         optim.step()
-        losses.append(float(loss))
+        losses.append(float(loss.detach()))
         if step == 0 or (step + 1) % max(1, total // 10) == 0 or step + 1 == total:
             log(f"[sft] step {step + 1}/{total} loss {losses[-1]:.4f} lr {lr_at(step):.2e} "
                 f"({time.perf_counter() - started:.0f}s)")

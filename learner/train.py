@@ -34,6 +34,7 @@ import argparse
 import asyncio
 import hashlib
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -156,7 +157,7 @@ def shape_reward(sample: RolloutSample, cfg: RunConfig) -> float:
 
     return float(cosine_length_reward(
         sample.correct, sample.response_tokens, cfg.cosine_max_length,
-        truncated=sample.metadata.get("truncation") == "response_tokens",
+        truncated=sample.metadata.get("truncation") in cfg.reward.penalize,
         r_max=cfg.reward.r_max, r_min=cfg.reward.r_min, r_penalty=cfg.reward.r_penalty,
     ))
 
@@ -184,6 +185,7 @@ class Group:
     failed: str | None = None
     error: BaseException | None = None
     teacher_submitted: bool = False
+    teacher_floor: int = 0      # teacher version confirmed when it was submitted: a valid score is >= it
     completed_at: float = 0.0
 
 
@@ -212,6 +214,10 @@ class Trainer:
         self.unresolved = 0          # admitted groups not consumed, filtered, failed or dropped
         self.readmit: list[tuple[int, TaskRef]] = []
         self.filtered_recent: list[Group] = []
+        # Every admitted group ends in exactly one state: consumed (trained on), filled (filtered, then
+        # used to top up a short batch), filtered, failed, stale (dropped over the staleness bound),
+        # leftover (done but never consumed when the run stopped) or cancelled.
+        self.group_status: dict[int, str] = {}
         self.counters = {"groups_admitted": 0, "groups_filtered": 0, "groups_failed": 0, "groups_consumed": 0,
                          "groups_stale_dropped": 0, "groups_filled": 0, "short_batches": 0, "teacher_recoveries": 0}
         self.ledger = EpisodeLedger()
@@ -248,6 +254,8 @@ class Trainer:
 
         cfg = self.cfg
         register_domains(cfg.data.domain_modules)
+        for key, value in cfg.rollout.env_vars.items():  # the driver runs episodes too (gold replays)
+            os.environ.setdefault(key, value)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         dump_config(cfg, self.run_dir / "config.yaml")
         self.policy_dir = prepare_policy(cfg, self.run_dir, log=self.log)
@@ -265,7 +273,7 @@ class Trainer:
                  f"policy {self.policy_dir}")
         self.pool_args = dict(num_actors=cfg.rollout.num_env_actors, slots_per_actor=cfg.rollout.slots_per_env_actor,
                               max_turns=cfg.rollout.max_turns, max_restarts=cfg.rollout.env_actor_max_restarts,
-                              domain_modules=cfg.data.domain_modules)
+                              domain_modules=cfg.data.domain_modules, env_vars=cfg.rollout.env_vars)
         self.kb_client = None
         if cfg.kb.service:
             from kb_service.service import start_kb_service
@@ -382,6 +390,7 @@ class Trainer:
                     self.next_seq += 1
                 self.unresolved += 1
                 self.counters["groups_admitted"] += 1
+                self.group_status[seq] = "in_flight"
                 self._group_tasks[seq] = task
                 self.in_flight[seq] = asyncio.ensure_future(self._run_group(seq, task, self.version))
 
@@ -426,6 +435,7 @@ class Trainer:
         async with self.cond:
             self.in_flight.pop(seq, None)
             self.completed[seq] = group
+            self.group_status[seq] = "failed" if group.failed else ("done" if group.accepted else "filtered")
             if group.failed or not group.accepted:
                 self.unresolved -= 1  # frees the slot now: dynamic sampling refills at once
                 self.counters["groups_failed" if group.failed else "groups_filtered"] += 1
@@ -436,6 +446,7 @@ class Trainer:
         """Queue a finished group for teacher scoring; the teacher computes while rollouts go on."""
         self.teacher.submit.remote(group.samples)
         group.teacher_submitted = True
+        group.teacher_floor = self.teacher_confirmed
         self.teacher_outstanding[group.seq] = group
 
     def _confirm_teacher_snapshot(self) -> None:
@@ -458,16 +469,18 @@ class Trainer:
         whose scores it may have lost."""
         self.counters["teacher_recoveries"] += 1
         self.log(f"[teacher] recovering ({why}): restoring teacher version {self.teacher_confirmed}")
-        for _ in range(120):
+        current = -1
+        for _ in range(600):
             try:
-                await asyncio.wait_for(self.teacher.teacher_version.remote(), 30)
+                current = await asyncio.wait_for(self.teacher.teacher_version.remote(), 30)
                 break
             except Exception:
                 await asyncio.sleep(0.5)
-        if self.teacher_base_ref is not None:
-            await self.teacher.set_state.remote(self.teacher_base_ref)
-        for weights_ref, step in self.teacher_replay:
-            await self.teacher.update.remote(weights_ref, step)
+        if current != self.teacher_confirmed:  # restarted: its weights are the constructor's
+            if self.teacher_base_ref is not None:
+                await self.teacher.set_state.remote(self.teacher_base_ref)
+            for weights_ref, step in self.teacher_replay:
+                await self.teacher.update.remote(weights_ref, step)
         restored = await self.teacher.teacher_version.remote()
         if restored != self.teacher_confirmed:
             raise RuntimeError(f"teacher recovery restored version {restored}, expected {self.teacher_confirmed}")
@@ -490,10 +503,11 @@ class Trainer:
                 # Died mid-fetch, or restarted and never heard of these samples.
                 await self._recover_teacher(f"{type(exc).__name__} during fetch")
                 continue
-            old = [o for o in fetched.outputs if o.teacher_version < self.teacher_confirmed]
+            floors = {s.sample_id: g.teacher_floor for g in groups for s in g.samples}
+            old = [o for o in fetched.outputs if o.teacher_version < floors[o.sample_id]]
             if old:  # scored by a restarted teacher before its state came back
                 await self._recover_teacher(f"sample scored by teacher version {old[0].teacher_version} "
-                                            f"< {self.teacher_confirmed}")
+                                            f"< {floors[old[0].sample_id]}")
                 continue
             for group in groups:
                 self.teacher_outstanding.pop(group.seq, None)
@@ -554,6 +568,7 @@ class Trainer:
             if self.version - group.admit_version > cfg.max_staleness:
                 stale += 1
                 self.counters["groups_stale_dropped"] += 1
+                self.group_status[group.seq] = "stale"
                 async with self.cond:
                     self.unresolved -= 1
                     self.cond.notify_all()
@@ -569,6 +584,8 @@ class Trainer:
             self.log(f"[dynamic sampling] only {len(batch)} mixed-outcome groups after {inspected} inspected; "
                      f"topping up with {filled} filtered groups")
             batch.extend(fill)
+            for g in fill:
+                self.group_status[g.seq] = "filled"
             self.filtered_recent = [g for g in self.filtered_recent if g not in fill]
         batch.sort(key=lambda g: g.seq)
         info = {"filtered_groups_frac": filtered / max(inspected, 1), "groups_inspected": float(inspected),
@@ -601,13 +618,24 @@ class Trainer:
         sync_s = time.perf_counter() - t_sync
         if cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0:
             await self._save_checkpoint()
+        val_metrics: dict[str, float] = {}
+        val_due = bool(cfg.trainer.val_interval) and self.step % cfg.trainer.val_interval == 0 and bool(self.val_refs)
+        if val_due and cfg.trainer.max_staleness == 0:
+            # On-policy runs validate between steps, alone on the generators, so the run stays
+            # deterministic (no training request shares a generation batch with a validation one).
+            val_metrics = await self._validate()
         # Only now may work for the next versions start (staleness is counted against this version).
         async with self.cond:
             self.version = self.step
             self.unresolved -= len([g for g in groups if g.accepted])
             self.counters["groups_consumed"] += len(groups)
+            for g in groups:
+                if g.accepted:
+                    self.group_status[g.seq] = "consumed"
             self.cond.notify_all()
-        step_s = time.perf_counter() - t_start
+        if val_due and cfg.trainer.max_staleness > 0:
+            val_metrics = await self._validate()
+        step_s = time.perf_counter() - t_start - val_metrics.get("val_time_s", 0.0)
 
         record: dict[str, Any] = {"step": self.step}
         record.update(rollout_metrics(samples, cfg.rollout.max_response_tokens))
@@ -632,12 +660,12 @@ class Trainer:
             raise RuntimeError("learner.train_step returned no grad_norm")
         record.setdefault("kl_teacher", 0.0)
         self.sink.observe("response_length", [s.response_tokens for s in samples])
-        self.sink.observe("episode_reward", [s.reward for s in samples])
+        self.sink.observe("episode_turns", [len(s.turns) for s in samples])
+        self.sink.observe("episode_tool_calls", [s.num_tool_calls for s in samples])
         if cfg.trainer.save_trajectories:
             write_samples(samples, self.run_dir / "trajectories" / f"step_{self.step:06d}.parquet",
                           step=self.step, teacher=teacher_out)
-        if cfg.trainer.val_interval and self.step % cfg.trainer.val_interval == 0:
-            record.update(await self._validate())
+        record.update(val_metrics)
         self.sink.write(record)
         if cfg.metrics.progress:
             self.log(self._progress_line(record))
@@ -702,19 +730,28 @@ class Trainer:
         if self.step == 0 and cfg.trainer.val_at_start and self.val_refs:
             await self._validate()
         admission = asyncio.ensure_future(self._admission_loop())
+        finished = False
         try:
             while self.step < cfg.trainer.max_steps:
                 await self._train_one_step()
                 if admission.done():
                     admission.result()  # re-raise an admission error
+            finished = True
         finally:
             async with self.cond:
                 self.stopping = True
                 self.cond.notify_all()
             await asyncio.gather(admission, return_exceptions=True)
-            for task in list(self.in_flight.values()):
+            if finished and self.in_flight:
+                # Let admitted groups finish so every episode is accounted for (completed or failed).
+                await asyncio.wait(list(self.in_flight.values()), timeout=cfg.trainer.drain_timeout_s)
+            for seq, task in list(self.in_flight.items()):
                 task.cancel()
+                self.group_status[seq] = "cancelled"
             await asyncio.gather(*self.in_flight.values(), return_exceptions=True)
+            for seq, status in self.group_status.items():
+                if status == "done":
+                    self.group_status[seq] = "leftover"
         if self.step and not (cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0):
             await self._save_checkpoint()
         if self.val_refs and cfg.trainer.val_interval and self.step % cfg.trainer.val_interval != 0:
@@ -723,6 +760,8 @@ class Trainer:
         summary = {"steps": self.step, "wall_s": time.perf_counter() - started, "run_dir": str(self.run_dir),
                    "policy_dir": str(self.policy_dir), "counters": dict(self.counters),
                    "ledger": self.ledger.balance(), "generator_failures": self.gen_client.failures,
+                   "group_status": {k: sum(1 for v in self.group_status.values() if v == k)
+                                    for k in sorted(set(self.group_status.values()))},
                    "last_validation": self.last_val}
         (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=1))
         return summary

@@ -1,14 +1,20 @@
 """Fixtures of the training tests: one local Ray cluster per session, and a tiny policy built on
-the ward test domain (tokenizer trained on its corpus, Qwen3 with hidden 64, 2 layers)."""
+the ward test domain (tokenizer trained on its corpus, Qwen3 with hidden 64, 2 layers).
+
+Env processes of these tests run with HCGYM_EMBEDDINGS=0: free-text grading falls back to token
+overlap instead of loading a sentence-embedding model into every process (about 16 s each)."""
 
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 
 import pytest
 
 import envs  # noqa: F401  (CPU runtime defaults before torch/ray load)
+
+NO_EMBEDDINGS = {"HCGYM_EMBEDDINGS": "0"}
 
 
 @pytest.fixture(scope="session")
@@ -32,7 +38,16 @@ def ward_policy_dir() -> str:
     from learner.sft import task_corpus
 
     root = Path(tempfile.mkdtemp(prefix="t2_ward_policy_"))
-    corpus = task_corpus(["ward"], None) * 20
+    # Gold replays grade free text; token overlap is enough here (no sentence-embedding model load).
+    previous = os.environ.get("HCGYM_EMBEDDINGS")
+    os.environ["HCGYM_EMBEDDINGS"] = "0"
+    try:
+        corpus = task_corpus(["ward"], None) * 20
+    finally:
+        if previous is None:
+            os.environ.pop("HCGYM_EMBEDDINGS")
+        else:
+            os.environ["HCGYM_EMBEDDINGS"] = previous
     tok = train_tokenizer(corpus, 1024, root / "tok", max_stdlib_files=40)
     out = build_tiny_model(root / "model", tok, seed=0, hidden_size=64, intermediate_size=128, num_hidden_layers=2,
                            num_attention_heads=4, num_key_value_heads=2, head_dim=16)

@@ -8,6 +8,7 @@ import pytest
 
 from actors.agent_loop import AgentLoop, EpisodeSpec, GoldReplayPolicy, RolloutLimits, gold_turn_actions
 from actors.env_actor import EnvPool, EpisodeLedger, run_episode
+from tests.training.conftest import NO_EMBEDDINGS
 
 pytestmark = pytest.mark.ray
 WARD = {"ward": "tests.fixtures.ward_domain.environment"}
@@ -44,7 +45,7 @@ def test_pool_spreads_episodes_and_balances(ray_cluster, setup):
     tokenizer, limits, tasks, actions = setup
 
     async def go():
-        pool = EnvPool(2, 3, limits.max_turns, domain_modules=WARD)
+        pool = EnvPool(2, 3, limits.max_turns, domain_modules=WARD, env_vars=NO_EMBEDDINGS)
         await pool.ready()
         ledger = EpisodeLedger()
         samples = await run_all(pool, AgentLoop(tokenizer, limits), GoldReplayPolicy(tokenizer, actions),
@@ -69,7 +70,7 @@ def test_killed_actor_episodes_rerun_from_start_exactly_once(ray_cluster, setup)
     specs = specs_for(tasks, 8)
 
     async def go():
-        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, max_restarts=2)
+        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, max_restarts=2, env_vars=NO_EMBEDDINGS)
         before = await pool.ready()
         loop = AgentLoop(tokenizer, limits)
         policy = GoldReplayPolicy(tokenizer, actions)

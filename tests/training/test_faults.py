@@ -1,0 +1,91 @@
+"""Kill an env actor, a generator and the teacher mid-run: training continues and every
+trajectory is accounted for exactly once."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from learner.metrics import read_metrics, read_samples
+from tests.training.test_train import tiny_config
+
+pytestmark = pytest.mark.ray
+
+
+def wait_for(predicate, timeout=120.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_policy_dir, tmp_path):
+    from learner.train import Trainer
+
+    steps = 5
+    cfg = tiny_config(
+        tmp_path / "faults", ward_policy_dir,
+        trainer={"max_steps": steps, "max_staleness": 1, "checkpoint_interval": 0},
+        teacher={"enabled": True, "ema_interval": 1, "hard_copy_interval": 0},
+        learner={"optim": {"lr": 1e-3}, "loss": {"entropy_coef": 0.01, "distill": {"enabled": True, "lambda_distill": 1.0,
+                                                                       # a random policy's turns all hit the
+                                                                       # token limit; keep them in the KL
+                                                                       "drop_length_truncated_turns": False}}},
+    )
+    trainer = Trainer(cfg, log=lambda line: None)
+    outcome: dict = {}
+
+    def run():
+        try:
+            outcome["summary"] = trainer.run()
+        except BaseException as exc:  # surfaced below
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    killed = {}
+    try:
+        wait_for(lambda: trainer.step >= 1, what="step 1")
+        # An env actor while it hosts episodes.
+        wait_for(lambda: trainer.pool.loads()[0] > 0, what="episodes on env actor 0")
+        killed["env_in_flight"] = trainer.pool.loads()[0]
+        ray_cluster.kill(trainer.pool.actors[0], no_restart=False)
+        wait_for(lambda: trainer.step >= 2, what="step 2")
+        # A generator while requests are outstanding on it.
+        wait_for(lambda: trainer.gen_client.outstanding[0] > 0, what="requests on the generator")
+        ray_cluster.kill(trainer.generators[0], no_restart=False)
+        wait_for(lambda: trainer.step >= 3, what="step 3")
+        # The teacher, with EMA state to lose (it has been updated at every step).
+        ray_cluster.kill(trainer.teacher, no_restart=False)
+    finally:
+        thread.join(timeout=600)
+    if "error" in outcome:
+        raise outcome["error"]
+    summary = outcome["summary"]
+
+    assert summary["steps"] == steps
+    assert [r["step"] for r in read_metrics(cfg.output_dir)] == list(range(1, steps + 1))
+    assert summary["ledger"]["reruns"] >= 1, "the killed env actor's episodes were not re-run"
+    assert summary["generator_failures"] >= 1
+    assert summary["counters"]["teacher_recoveries"] >= 1
+    # Accounting: every episode completed once; every admitted group ended in exactly one state.
+    ledger = summary["ledger"]
+    assert ledger["in_flight"] == 0 and ledger["admitted"] == ledger["completed"] + ledger["failed"]
+    assert ledger["attempts"] == ledger["admitted"] + ledger["reruns"]
+    status = summary["group_status"]
+    assert sum(status.values()) == summary["counters"]["groups_admitted"]
+    assert status.get("in_flight", 0) == 0 and status.get("cancelled", 0) == 0
+    # No trajectory trained on twice, each step a full batch of whole groups.
+    seen: set[str] = set()
+    for step in range(1, steps + 1):
+        samples, extras = read_samples(tmp_path / "faults" / "trajectories" / f"step_{step:06d}.parquet")
+        ids = [s.sample_id for s in samples]
+        assert len(ids) == 4 and not (seen & set(ids))
+        seen.update(ids)
+        assert all(extras[i]["teacher_logprobs"] is not None for i in ids)
+    consumed_groups = status.get("consumed", 0) + status.get("filled", 0)
+    assert consumed_groups * 2 == len(seen)
