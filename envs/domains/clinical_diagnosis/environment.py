@@ -13,6 +13,7 @@ from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import ClinicalDiagnosisDB
+from .safety import ClinicalDiagnosisSafetyContext
 from .tools import ClinicalDiagnosisTools
 
 NAME = "clinical_diagnosis"
@@ -37,8 +38,11 @@ _STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
 
 def get_environment() -> DomainEnvironment:
     db = ClinicalDiagnosisDB.model_validate_json(_db_json())
-    toolkit = CompositeToolkit(ClinicalDiagnosisTools(db), *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit)
+    tools = ClinicalDiagnosisTools(db)
+    toolkit = CompositeToolkit(tools, *shared_toolkits())
+    # The context reads the toolkit's current database (a failed WRITE restores a snapshot object).
+    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit,
+                             safety_context=ClinicalDiagnosisSafetyContext(lambda: tools.db))
 
 
 def get_tasks(split: str | None = None) -> list[Task]:

@@ -430,6 +430,22 @@ class ClinicalDiagnosisTools(BaseDomainTools):
         result = self._allergy_check(p, d)
         return {"drug": d.name, "drug_class": d.drug_class, "safe_to_prescribe": not result["conflicts"], **result}
 
+    @is_tool(ToolType.READ)
+    def check_drug_interactions(self, patient_id: str, drug: str) -> dict:
+        """Check a proposed drug against the patient's home medications and this encounter's prescriptions:
+        ANSM interaction rules (severity and rule) and same-class duplications.
+
+        Args:
+            patient_id: The patient identifier.
+            drug: The proposed drug (generic or brand name).
+        """
+        from .safety import drug_reference
+
+        p = self._patient(patient_id)
+        d = self._drug(drug)
+        current = [m.name for m in p.medications] + [x.drug for x in p.prescriptions]
+        return {"patient_id": p.patient_id, **drug_reference().interaction_report(d.name, current)}
+
     @is_tool(ToolType.WRITE)
     def prescribe_medication(self, patient_id: str, drug: str, dose_mg: float,
                              route: str, frequency: str, duration_days: int | None = None,

@@ -13,6 +13,7 @@ from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import EHRDB
+from .safety import EHRSafetyContext
 from .tools import EHRTools
 
 NAME = "ehr_management"
@@ -46,8 +47,10 @@ def focus_on_patient(env: DomainEnvironment, task: Task) -> None:
 
 def get_environment() -> DomainEnvironment:
     db = EHRDB.model_validate_json(_db_json())
-    toolkit = CompositeToolkit(EHRTools(db), *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=focus_on_patient)
+    tools = EHRTools(db)
+    toolkit = CompositeToolkit(tools, *shared_toolkits())
+    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=focus_on_patient,
+                             safety_context=EHRSafetyContext(lambda: tools.db))
 
 
 def get_tasks(split: str | None = None) -> list[Task]:

@@ -397,12 +397,16 @@ class EHRTools(BaseDomainTools):
         """
         p = self._patient(patient_id)
         adm = self._admission(p, hadm_id)
-        name = drug.strip().lower()
-        classes = {"penicillin": ("penicillin", "amoxicillin", "ampicillin", "piperacillin", "nafcillin"),
-                   "sulfonamides": ("sulfamethoxazole", "trimethoprim-sulfamethoxazole", "sulfadiazine")}
-        for allergy in p.allergies:
-            if any(x in name for x in classes.get(allergy.lower(), (allergy.lower(),))):
-                raise ToolError(f"allergy: {p.patient_id} is allergic to {allergy}; {drug} is not allowed")
+        name = " ".join(drug.strip().lower().split())
+        if len(name) < 3:
+            raise ToolError("drug is empty")
+        from envs.domains.clinical_diagnosis.safety import drug_reference
+
+        # The same drug reference the reward's safety context uses: same drug, its class or allergy group.
+        allergy = drug_reference().allergy_conflict(p.allergies, name)
+        if allergy is not None:
+            raise ToolError(f"allergy: {p.patient_id} is allergic to {allergy}; {drug} is covered by that allergy "
+                            f"and is not allowed")
         if dose <= 0:
             raise ToolError("dose must be positive")
         if any(m.drug == name and m.status == "active" for m in adm.medication_orders):
@@ -411,6 +415,30 @@ class EHRTools(BaseDomainTools):
                                 frequency=frequency, start=self.db.clock, indication=indication)
         adm.medication_orders.append(order)
         return order.model_dump()
+
+    @is_tool(ToolType.READ)
+    def check_drug_interactions(self, patient_id: str, drug: str, hadm_id: str | None = None) -> dict:
+        """Check a proposed drug against the admission's active medication orders: ANSM interaction rules
+        (severity and rule), same-class duplications, and a recorded allergy that covers it.
+
+        Args:
+            patient_id: The patient identifier.
+            drug: The proposed drug (generic or brand name).
+            hadm_id: Optional admission id (default: the latest admission).
+        """
+        from envs.domains.clinical_diagnosis.safety import drug_reference
+
+        p = self._patient(patient_id)
+        adm = self._admission(p, hadm_id)
+        if len(drug.strip()) < 3:
+            raise ToolError("drug is empty")
+        reference = drug_reference()
+        report = reference.interaction_report(drug, [m.drug for m in adm.medication_orders if m.status == "active"])
+        out = {"patient_id": p.patient_id, "hadm_id": adm.hadm_id, **report}
+        allergy = reference.allergy_conflict(p.allergies, drug)
+        if allergy is not None:  # present only when a recorded allergy covers the drug
+            out["allergy_conflict"] = f"{p.patient_id} is allergic to {allergy}"
+        return out
 
     @is_tool(ToolType.WRITE)
     def discontinue_order(self, patient_id: str, order_id: str, reason: str, hadm_id: str | None = None) -> dict:

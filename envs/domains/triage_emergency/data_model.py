@@ -43,6 +43,16 @@ class EDResult(_Strict):
     order_id: str
 
 
+class GivenMedication(_Strict):
+    """A medication given at triage under a standing order (time from the department clock)."""
+
+    drug: str
+    dose_mg: float
+    route: str
+    time: str
+    indication: str = ""
+
+
 class TriageAssignment(_Strict):
     esi_level: int = Field(ge=1, le=5)
     rationale: str = ""
@@ -72,6 +82,7 @@ class EDPatient(_Strict):
     results: list[EDResult] = Field(default_factory=list)
     triage: TriageAssignment | None = None
     alerts: list[Alert] = Field(default_factory=list)
+    medications_given: list[GivenMedication] = Field(default_factory=list)
     notes: list[str] = Field(default_factory=list)
     source: str = "authored"
     source_case_id: str | None = None

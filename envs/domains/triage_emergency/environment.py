@@ -13,6 +13,7 @@ from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import TriageDB
+from .safety import TriageSafetyContext
 from .tools import TriageTools
 
 NAME = "triage_emergency"
@@ -37,8 +38,10 @@ _STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
 
 def get_environment() -> DomainEnvironment:
     db = TriageDB.model_validate_json(_db_json())
-    toolkit = CompositeToolkit(TriageTools(db), *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit)
+    tools = TriageTools(db)
+    toolkit = CompositeToolkit(tools, *shared_toolkits())
+    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit,
+                             safety_context=TriageSafetyContext(lambda: tools.db))
 
 
 def get_tasks(split: str | None = None) -> list[Task]:

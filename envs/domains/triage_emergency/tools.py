@@ -22,7 +22,7 @@ from envs.calculators import (
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 
-from .data_model import Alert, EDPatient, EDResult, EDVitals, TriageAssignment, TriageDB
+from .data_model import Alert, EDPatient, EDResult, EDVitals, GivenMedication, TriageAssignment, TriageDB
 
 POC_TESTS = {"glucose": "mg/dL", "troponin_i": "ng/L", "lactate": "mmol/L", "wbc": "10^3/uL", "bun": "mg/dL",
              "hemoglobin": "g/dL", "potassium": "mmol/L", "beta_hcg": "mIU/mL", "bands_percent": "%",
@@ -113,7 +113,8 @@ class TriageTools(BaseDomainTools):
         """
         p = self._patient(patient_id)
         return {"patient_id": p.patient_id, "results": [r.model_dump() for r in p.results],
-                "alerts": [a.model_dump() for a in p.alerts], "notes": p.notes}
+                "alerts": [a.model_dump() for a in p.alerts],
+                "medications_given": [m.model_dump() for m in p.medications_given], "notes": p.notes}
 
     # -- instruments -----------------------------------------------------------------------------
     @is_tool(ToolType.READ)
@@ -508,6 +509,46 @@ class TriageTools(BaseDomainTools):
             raise ToolError("reason must state the emergency")
         p.alerts.append(Alert(kind="escalation", detail=f"{level}: {reason.strip()}"))
         return {"patient_id": p.patient_id, "escalated_to": level, "reason": reason.strip()}
+
+    @is_tool(ToolType.WRITE)
+    def administer_medication(self, patient_id: str, drug: str, dose_mg: float,
+                              route: Literal["oral", "sublingual", "intravenous", "intramuscular", "subcutaneous",
+                                             "inhaled", "intranasal"],
+                              indication: str) -> dict:
+        """Give a medication at triage under a standing order (e.g. aspirin for suspected ACS, IM epinephrine for
+        anaphylaxis, an antipyretic); checked against the recorded allergies (drug and class) and the maximum
+        single dose, and recorded on the ED chart.
+
+        Args:
+            patient_id: The ED patient identifier.
+            drug: The drug (generic or brand name).
+            dose_mg: The dose in mg.
+            route: oral, sublingual, intravenous, intramuscular, subcutaneous, inhaled or intranasal.
+            indication: Why it is given, e.g. "suspected acute coronary syndrome".
+        """
+        from envs.domains.clinical_diagnosis.safety import drug_reference
+
+        p = self._patient(patient_id)
+        reference = drug_reference()
+        name = reference.resolve(drug)
+        if name is None:
+            raise ToolError(f"drug {drug!r} is not recognised (generic or brand name, e.g. aspirin, epinephrine)")
+        if not dose_mg > 0:
+            raise ToolError(f"dose_mg must be positive, got {dose_mg}")
+        if len(indication.strip()) < 3:
+            raise ToolError("indication must say why the drug is given")
+        allergy = reference.allergy_conflict(p.allergies, name)
+        if allergy is not None:
+            raise ToolError(f"allergy: {p.patient_id} is allergic to {allergy}; {name} is covered by that allergy. "
+                            f"Choose an alternative.")
+        cap = reference.max_dose_mg(name, route)
+        if cap is not None and dose_mg > cap:
+            raise ToolError(f"dose_mg {dose_mg:g} exceeds the maximum single {route} dose of {name} ({cap:g} mg)")
+        given = GivenMedication(drug=name, dose_mg=dose_mg, route=route, time=self.db.clock,
+                                indication=indication.strip())
+        p.medications_given.append(given)
+        return {"patient_id": p.patient_id, **given.model_dump(), "max_single_dose_mg": cap,
+                "doses_given_of_this_drug": sum(m.drug == name for m in p.medications_given)}
 
     @is_tool(ToolType.WRITE)
     def write_triage_note(self, patient_id: str, note: str) -> dict:
