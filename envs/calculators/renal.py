@@ -146,7 +146,8 @@ def calculate_fena(
     else:
         cat, text = "intrinsic renal", "FENa > 2% suggests intrinsic renal injury such as acute tubular necrosis"
     return make_result(
-        "FENa", fena, "%", cat, f"FENa {fena:.2f}%: {text}.", {},
+        "FENa", fena, "%", cat, f"FENa {fena:.2f}%: {text}.",
+        {"urine_to_plasma_sodium": una / pna, "urine_to_plasma_creatinine": ucr / pcr},
         "Espinel CH. The FENa test: use in the differential diagnosis of acute renal failure. JAMA "
         "1976;236:579-581; Miller TR et al. Ann Intern Med 1978;89:47-50.",
     )
