@@ -49,21 +49,24 @@ class CallRef:
 def task_kind(task: Task, conventions: ToolConventions = DEFAULT_CONVENTIONS) -> TaskKind:
     """"management" for patient-management tasks, "qa" for knowledge questions.
 
-    `task.metadata["task_kind"]` decides when set. Otherwise a multiple-choice task is "qa"; a
-    task with a patient, an emergency, a clinical expected action (prescribe, order, escalate,
-    diagnose, triage, discharge, follow up) or a management `description.task_type` is
-    "management"; anything else is "qa".
+    `task.metadata["task_kind"]` decides when set. Otherwise a task with a patient (`patient_id`)
+    or a clinical expected action (prescribe, order, escalate, diagnose, triage, discharge, follow
+    up) is "management", even when its final question is multiple choice; any other
+    multiple-choice task is "qa"; a task with an emergency or a management
+    `description.task_type` is "management"; anything else is "qa".
     """
     declared = task.metadata.get("task_kind") if isinstance(task.metadata, dict) else None
     if declared in ("qa", "management"):
         return declared
-    if task.answer_type == "choice":
-        return "qa"
-    if task.patient_id or task.emergency:
+    if task.patient_id:
         return "management"
     for action in task.evaluation_criteria.actions:
         if conventions.families(action.name) & _CLINICAL_FAMILIES:
             return "management"
+    if task.answer_type == "choice":
+        return "qa"
+    if task.emergency:
+        return "management"
     task_type = (task.description.task_type or "").lower()
     if task_type and any(word in task_type for word in _MANAGEMENT_TASK_TYPES):
         return "management"

@@ -209,3 +209,39 @@ def test_mc_task_scoring_is_fast_path():
     task = mc_task("D")
     traj = episode(task, turn(call("search_pubmed", {"query": "rickets"})), answer="D")
     assert ids(traj, task) == set()
+
+
+def test_escalation_is_required_only_where_the_task_asks_for_it():
+    # a record-keeping task about an ICU patient: the emergency is already being managed
+    ehr = patient_task(ticket="Patient E1 is in the ICU with septic shock. Compute the SOFA score and code the admission.",
+                       emergency="sepsis", correct_answer="14", answer_type="numeric",
+                       evaluation_criteria={"actions": [{"name": "calculate_sofa", "arguments": {"patient_id": "P1"}}]})
+    traj = episode(ehr, turn(call("calculate_sofa", {"patient_id": "P1"})), answer="14")
+    assert ids(traj, ehr) == set()
+    no_actions = patient_task(ticket="Patient is in the ICU with septic shock; summarise the day.", emergency="sepsis")
+    assert ids(episode(no_actions, turn(CHART), answer="Stable on norepinephrine."), no_actions) == set()
+    # the same emergency when the gold escalates: not escalating is critical
+    acute = ehr.model_copy(update={"evaluation_criteria": ehr.evaluation_criteria.model_copy(update={"actions": [
+        *ehr.evaluation_criteria.actions, ehr.evaluation_criteria.actions[0].model_copy(update={"name": "escalate_care"})]})})
+    assert "missed_emergency.sepsis" in ids(traj, acute)
+
+
+def test_workup_with_a_final_multiple_choice_question_is_patient_management():
+    from envs.rewards.view import task_kind
+
+    task = Task(ticket="Work up patient CD-P06 with chest pressure, then state the most likely diagnosis.",
+                patient_id="CD-P06", emergency="acs", options={"A": "STEMI", "B": "NSTEMI"}, correct_answer="B")
+    assert task_kind(task) == "management"
+    assert task_kind(mc_task()) == "qa"
+    missed = episode(task, turn(call("get_patient_info", {"patient_id": "CD-P06"})), answer="B")
+    assert "missed_emergency.stemi" in ids(missed, task)  # "acs" is an alias of the STEMI/ACS pathway
+    escalated = episode(task, turn(call("get_patient_info", {"patient_id": "CD-P06"})),
+                        turn(call("escalate_care", {"patient_id": "CD-P06", "team": "cardiology"})), answer="B")
+    assert ids(escalated, task) == set()
+
+
+def test_writing_a_discharge_summary_is_not_a_discharge():
+    task = patient_task(ticket="Septic shock, now in the ward after ICU.", emergency="sepsis")
+    traj = episode(task, turn(CHART), turn(call("write_discharge_summary", {"patient_id": "P1"})),
+                   turn(call("escalate_care", {"patient_id": "P1"})), answer="Summary written; follow up in 1 week.")
+    assert "emergency.discharged" not in ids(traj, task)
