@@ -98,7 +98,7 @@ def test_news2_worked_example_and_bands():
     assert C.calculate_news2(22, 95, False, 38.5, 105, 100, "alert").category == "medium"
     five = C.calculate_news2(**dict(NORMAL, heart_rate=115, systolic_bp=105, temperature_c=38.5, spo2=95))
     assert (five.score, five.category) == (5, "medium")
-    four = C.calculate_news2(**dict(NORMAL, heart_rate=115, systolic_bp=105))
+    four = C.calculate_news2(**dict(NORMAL, heart_rate=115, systolic_bp=105, temperature_c=38.5))
     assert (four.score, four.category) == (4, "low")
     red = C.calculate_news2(**dict(NORMAL, respiratory_rate=25))  # a single 3 with total 3
     assert (red.score, red.category) == (3, "low-medium")
