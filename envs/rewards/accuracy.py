@@ -42,7 +42,7 @@ class AccuracyResult:
 _ANSWER_PREFIX = re.compile(r"^\s*(?:(?:my|the)\s+)?(?:final\s+)?answer\s*(?:is|:|=|-)?\s*", re.IGNORECASE)
 
 
-def _strip_prefix(text: str) -> str:
+def strip_answer_prefix(text: str) -> str:
     return _ANSWER_PREFIX.sub("", text.strip(), count=1).strip()
 
 
@@ -64,7 +64,7 @@ _HEDGE_WORDS = re.compile(r"\b(?:or|either|versus|vs)\b|/")
 
 
 def score_exact(answer: str, golds: list[str]) -> AccuracyResult:
-    stripped = _strip_prefix(answer)
+    stripped = strip_answer_prefix(answer)
     norm = normalise_text(stripped)
     n_tokens = len(norm.split())
     hedged = _HEDGE_WORDS.search(stripped.lower()) is not None
@@ -152,7 +152,7 @@ def score_numeric(answer: str, task: Task) -> AccuracyResult:
     gold_text = (task.correct_answer or "").strip()
     gold = float(gold_text.replace(",", ""))
     tolerance = task.answer_tolerance if task.answer_tolerance is not None else default_tolerance(gold_text)
-    stated = stated_number(_strip_prefix(answer), task.answer_unit)
+    stated = stated_number(strip_answer_prefix(answer), task.answer_unit)
     if stated is None:
         return AccuracyResult(0.0, "numeric", {"stated": None, "gold": gold})
     value, unit = stated
@@ -215,7 +215,7 @@ def is_esi_task(task: Task, gold: str) -> bool:
 def score_category(answer: str, task: Task) -> AccuracyResult:
     golds = gold_answers(task)
     gold = golds[0] if golds else ""
-    stripped = _strip_prefix(answer)
+    stripped = strip_answer_prefix(answer)
     if is_esi_task(task, gold):
         want = int(_ESI_GOLD.match(gold).group(1))  # type: ignore[union-attr]
         got = esi_levels(stripped)
@@ -254,7 +254,7 @@ def copies_question(answer: str, question: str, reference: str) -> bool:
 def score_free_text(answer: str, task: Task) -> AccuracyResult:
     golds = gold_answers(task)
     question = task.ticket + " " + (task.raw_question or "")
-    stripped = _strip_prefix(answer)
+    stripped = strip_answer_prefix(answer)
     if not stripped or not golds:
         return AccuracyResult(0.0, "free_text", {"answer": ""})
     if copies_question(stripped, question, golds[0]):

@@ -353,7 +353,9 @@ class SafetyState:
         return True
 
     def flagged(self, prefix: str, key: Any) -> bool:
-        return any(p.startswith(prefix) and k == key for p, k in self._seen)
+        """A violation whose id starts with `prefix` was already reported for `key` (or for a
+        pair `key` belongs to)."""
+        return any(p.startswith(prefix) and (k == key or (isinstance(k, frozenset) and key in k)) for p, k in self._seen)
 
 
 Check = Callable[[SafetyState], None]

@@ -18,7 +18,7 @@ from typing import Any, Iterable
 
 from envs.core.task import Task
 from envs.core.trajectory import Trajectory
-from envs.rewards.accuracy import _strip_prefix, answer_accuracy, gold_answers
+from envs.rewards.accuracy import strip_answer_prefix, answer_accuracy, gold_answers
 from envs.rewards.assertions import AssertionGrader, grade_assertions
 from envs.rewards.coherence import coherence_score
 from envs.rewards.conventions import ToolConventions
@@ -152,7 +152,7 @@ def score_episodes(items: Iterable[tuple], weights: RewardWeights | dict[str, An
     for row in rows:
         trajectory, task = row[0], row[1]
         if task.answer_type == "free_text" and task.has_gold_answer:
-            texts.append(_strip_prefix(EpisodeView(trajectory, task).answer_text))
+            texts.append(strip_answer_prefix(EpisodeView(trajectory, task).answer_text))
             texts.extend(gold_answers(task))
     warm([t for t in texts if t])
     return [score_episode(row[0], row[1], weights, row[2] if len(row) > 2 else context, **kwargs) for row in rows]

@@ -108,7 +108,8 @@ class EpisodeView:
     @cached_property
     def answer_text(self) -> str:
         """The committed answer: `submitted_answer`, else the submit call's `answer`, else the
-        last turn's free text."""
+        last turn's free text (a chat answer), except in a truncated episode: an agent cut off
+        at the turn or token limit committed to nothing."""
         if self.trajectory.submitted_answer is not None:
             return str(self.trajectory.submitted_answer)
         ref = self.submit_ref
@@ -117,7 +118,9 @@ class EpisodeView:
             if value is not None:
                 return value if isinstance(value, str) else json.dumps(value, ensure_ascii=False)
         turns = self.trajectory.turns
-        return turns[-1].message if turns else ""
+        if self.trajectory.truncated or not turns:
+            return ""
+        return turns[-1].message
 
     @cached_property
     def submit_reasoning(self) -> str:

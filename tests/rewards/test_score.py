@@ -153,3 +153,12 @@ def test_perfect_format_wrong_answer_cannot_beat_correct_answer_with_poor_format
     pw, sr = score_episode(perfect_wrong, task), score_episode(sloppy_right, task)
     assert pw.format > sr.format
     assert sr.total > pw.total
+
+
+def test_truncated_episode_without_submission_has_no_answer():
+    task = mc_task("D")
+    chat = episode(task, turn(message="Rickets: vitamin D.\nAnswer: D", fmt="text"), submit=False)
+    assert score_episode(chat, task).accuracy == 1.0  # a chat answer (no submit tool) counts
+    cut = chat.model_copy(update={"truncated": True})
+    b = score_episode(cut, task)
+    assert b.accuracy == 0.0 and not b.is_correct

@@ -353,8 +353,6 @@ def tool_warnings(state: SafetyState) -> None:
     for ev in med_events(state):
         if ev.source != "tool" or state.flagged("allergy.", ev.drug) or state.flagged("ddi.", ev.drug):
             continue
-        if any(ev.drug in k for p, k in state._seen if p.startswith("ddi.") and isinstance(k, frozenset)):
-            continue
         for ref in state.view.calls:
             if ref.order >= ev.order or not ref.call.result or "prescribing" in ref.families:
                 continue
