@@ -106,6 +106,8 @@ def kl_surrogate(
     rho * (estimate * grad log pi_theta + grad estimate), the unbiased gradient of
     E_{x~pi_old}[rho * estimate] = KL(pi_theta || q) (rho = 1 in value on the first update).
     "pathwise": the estimate alone (GRPO's k3 convention; its gradient is not that of the reverse KL).
+    Both are token-level, as in GRPO and on-policy distillation practice: the KL of later tokens is not
+    credited back to the earlier choices that led there.
 
     Args:
         logp: Current log-probs (with grad).

@@ -334,6 +334,7 @@ def token_stats(
     gather_ids: torch.Tensor | None = None,
     topk: int = 0,
     chunk_size: int = 1024,
+    entropy_requires_grad: bool = False,
 ) -> TokenStats:
     """One forward pass, then log-probs (and optional entropy / top-k) computed chunk by chunk.
 
@@ -350,6 +351,8 @@ def token_stats(
         gather_ids: Optional [B, T, K] ids whose log-probs to return (the teacher's top-k).
         topk: If > 0, also return the model's own top-k log-probs and ids.
         chunk_size: Positions per LM-head chunk.
+        entropy_requires_grad: Keep the entropy in the autograd graph (only for an entropy bonus;
+            otherwise it is computed without grad so its [chunk, vocab] intermediates are not kept).
 
     Returns:
         A `TokenStats` whose position t is the prediction of token t given tokens < t.
@@ -381,7 +384,8 @@ def token_stats(
         logp = F.log_softmax(logits_of(lo, hi).float() / temperature, dim=-1)
         lp_parts.append(logp.gather(-1, targets[:, lo:hi].unsqueeze(-1)).squeeze(-1))
         if with_entropy:
-            ent_parts.append(-(logp.exp() * logp).sum(-1))
+            with torch.set_grad_enabled(entropy_requires_grad and torch.is_grad_enabled()):
+                ent_parts.append(-(logp.exp() * logp).sum(-1))
         if gather_ids is not None:
             gat_parts.append(logp.gather(-1, gather_ids[:, lo + 1 : hi + 1]))
         if topk:

@@ -231,6 +231,7 @@ class RankWorker:
                 temperature=self.config.temperature, with_entropy=True,
                 gather_ids=t.get("teacher_topk_ids") if d.enabled and d.estimator == "topk" else None,
                 chunk_size=self.config.logprob_chunk_size,
+                entropy_requires_grad=grad and self.config.loss.entropy_coef > 0,
             )
 
     def _reference_logprobs(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:

@@ -159,3 +159,16 @@ def test_bad_inputs_fail_with_named_errors(model_dir, batch):
         LearnerConfig(optim={"lr": -1})
     with pytest.raises(ValueError, match="extra|learning_rate"):
         LearnerConfig(optim={"learning_rate": 1e-3})
+
+
+def test_entropy_bonus_raises_entropy(model_dir, batch):
+    flat = [s.model_copy(update={"reward": 0.0}) for s in batch]  # no policy gradient, no KL: only the bonus
+    learner = Learner(LearnerConfig(optim={"lr": 1e-2}, loss={"grpo": {"kl_beta": 0.0}, "entropy_coef": 1.0}),
+                      model_dir)
+    ent = [learner.train_step(flat)["entropy"] for _ in range(3)]
+    assert ent[-1] > ent[0], ent
+    # Without the bonus the same batch leaves the weights untouched (zero advantages, zero gradient).
+    idle = Learner(LearnerConfig(optim={"lr": 1e-2}, loss={"grpo": {"kl_beta": 0.0}}), model_dir)
+    w0 = idle.get_state_dict()
+    assert idle.train_step(flat)["grad_norm"] == 0.0
+    assert all(torch.equal(w0[k], v) for k, v in idle.get_state_dict().items())
