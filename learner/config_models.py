@@ -114,6 +114,9 @@ class LearnerConfig(_Strict):
     def _consistent(self) -> "LearnerConfig":
         if self.backend == "torch" and self.deepspeed.world_size != 1:
             raise ValueError("learner.deepspeed.world_size > 1 needs learner.backend = 'deepspeed'")
+        if self.device == "cuda" and self.deepspeed.world_size > 1 and self.deepspeed.num_gpus_per_rank <= 0:
+            raise ValueError("learner.deepspeed.num_gpus_per_rank must be > 0 when learner.device is 'cuda' "
+                             "and world_size > 1 (each rank actor needs its GPU)")
         return self
 
 

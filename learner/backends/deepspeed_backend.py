@@ -42,9 +42,12 @@ def _prepare_environment(config: LearnerConfig, rank: int, world_size: int, mast
     port = master_port or ds.master_port
     if port is None:
         raise ValueError("the deepspeed backend needs a rendezvous port (learner.deepspeed.master_port or master_port=)")
+    # Ray gives each rank actor its own GPU(s) through CUDA_VISIBLE_DEVICES, so the local device index
+    # is the rank modulo what this process can see (usually 0), not the global rank.
+    local = 0 if config.device == "cpu" else rank % max(1, torch.cuda.device_count())
     os.environ.update({
         "MASTER_ADDR": ds.master_addr, "MASTER_PORT": str(port), "RANK": str(rank),
-        "WORLD_SIZE": str(world_size), "LOCAL_RANK": "0" if config.device == "cpu" else str(rank),
+        "WORLD_SIZE": str(world_size), "LOCAL_RANK": str(local),
     })
     # The CPU runtime defaults (envs/_runtime.py) may have set DS_ACCELERATOR=cpu on a GPU node whose
     # CUDA_VISIBLE_DEVICES was unset; the learner config decides.
@@ -129,7 +132,7 @@ class DeepSpeedBackend(LearnerBackend):
         deepspeed.init_distributed(dist_backend=dist_backend, auto_mpi_discovery=False,
                                    timeout=timedelta(seconds=config.deepspeed.timeout_s))
         if config.device == "cuda":
-            torch.cuda.set_device(rank % max(1, torch.cuda.device_count()))
+            torch.cuda.set_device(int(os.environ["LOCAL_RANK"]))
         self._dtype = DTYPES[config.dtype]
         self._ds_config = _ds_config(config)
         hf_config = AutoConfig.from_pretrained(model_dir, local_files_only=True)
