@@ -9,6 +9,8 @@ import pytest
 
 from envs import registry
 
+DOMAIN = "clinical_diagnosis"
+MIN_EMERGENCY_TASKS = 4
 registry.DOMAINS.setdefault("clinical_diagnosis", "envs.domains.clinical_diagnosis.environment")
 
 from envs.core.task import Task  # noqa: E402
@@ -138,3 +140,53 @@ def test_dose_cap_from_the_formulary_is_critical_at_twice_the_max(env):
                                                          "route": "oral", "frequency": "daily"})], "doxycycline")
     b = score_episode(traj, task, context=env.safety_context)
     assert "dose.dangerous" in {v.pattern_id for v in b.violations}  # 400 mg = 2x the 200 mg single-dose cap
+
+
+# -- emergencies ------------------------------------------------------------------------------------
+def _gold_episode(env, task: Task) -> Trajectory:
+    if env.on_reset is not None:
+        env.on_reset(env, task)
+    calls = [(a.name, a.arguments) for a in task.evaluation_criteria.actions]
+    traj = episode(env, task, calls, task.correct_answer or "")
+    assert all(c.ok for t in traj.turns for c in t.tool_calls), task.id
+    return traj
+
+
+def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monkeypatch):
+    """Every `task.emergency` is one of the reward's EMERGENCY_TYPES as written (no alias), and the gold
+    replay of every emergency task escalates in time: the reward's detector, run on the gold episode as a
+    patient-management task with a free-text answer (so its emergency checks run whatever the task
+    kind), reports no missed-emergency violation."""
+    import importlib
+
+    from envs.rewards.checks.emergency import escalation_order
+    from envs.rewards.safety import ContextAdapter, SafetyState, detect_violations
+    from envs.rewards.safety_patterns import EMERGENCY_TYPES
+    from envs.rewards.view import EpisodeView
+
+    module = importlib.import_module(registry.DOMAINS[DOMAIN])
+    monkeypatch.setattr(module, "shared_toolkits", lambda: [])
+    tasks = [t for t in registry.get_tasks(DOMAIN) if t.emergency]
+    assert len(tasks) >= MIN_EMERGENCY_TASKS
+    for task in tasks:
+        assert task.emergency in EMERGENCY_TYPES, (task.id, task.emergency)
+        env = module.get_environment()
+        traj = _gold_episode(env, task)
+        answer = task.options[task.correct_answer] if task.options else task.correct_answer
+        as_management = task.model_copy(update={"answer_type": "exact", "options": None, "correct_answer": answer,
+                                                "metadata": {**task.metadata, "task_kind": "management"}})
+        state = SafetyState(EpisodeView(traj, as_management), ContextAdapter(env.safety_context, None, []))
+        assert escalation_order(state, task.emergency)[0], f"{task.id}: the gold replay does not escalate"
+        violations, errors = detect_violations(traj, as_management, context=env.safety_context)
+        missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
+        assert not missed and not errors, (task.id, missed, errors)
+
+
+def test_nstemi_and_adrenal_crisis_are_labelled_other(built):
+    tasks = {t.id: t for t in registry.get_tasks("clinical_diagnosis")}
+    nstemi = tasks["cd_case_cd_p06"]
+    assert nstemi.emergency == "other" and nstemi.options[nstemi.correct_answer] == "Non-ST elevation myocardial infarction"
+    patients = json.loads((cd_build.HERE / "authored" / "patients.json").read_text())["patients"]
+    ecg = next(p for p in patients if p["patient_id"] == "CD-P06")["hidden_results"]["ecg"]["value"]
+    assert "no ST elevation" in ecg  # "acs" would be "stemi" only for an ST-elevation ECG
+    assert tasks["cd_case_cd_p22"].emergency == "other"  # adrenal crisis is not a reward emergency type

@@ -10,6 +10,8 @@ import pytest
 
 from envs import registry
 
+DOMAIN = "triage_emergency"
+MIN_EMERGENCY_TASKS = 40
 registry.DOMAINS.setdefault("triage_emergency", "envs.domains.triage_emergency.environment")
 
 from envs.core.task import Task  # noqa: E402
@@ -100,3 +102,49 @@ def test_no_allergy_no_allergy_violation(env):
                                                           "route": "oral", "indication": "infection"})], "amoxicillin")
     b = score_episode(traj, task, context=env.safety_context)
     assert not [v for v in b.violations if v.pattern_id.startswith("allergy.")] and not b.capped
+
+
+# -- emergencies ------------------------------------------------------------------------------------
+def _gold_episode(env, task: Task) -> Trajectory:
+    if env.on_reset is not None:
+        env.on_reset(env, task)
+    calls = [(a.name, a.arguments) for a in task.evaluation_criteria.actions]
+    traj = episode(env, task, calls, task.correct_answer or "")
+    assert all(c.ok for t in traj.turns for c in t.tool_calls), task.id
+    return traj
+
+
+def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monkeypatch):
+    """Every `task.emergency` is one of the reward's EMERGENCY_TYPES as written (no alias), and the gold
+    replay of every emergency task escalates in time: the reward's detector, run on the gold episode as a
+    patient-management task with a free-text answer (so its emergency checks run whatever the task
+    kind), reports no missed-emergency violation."""
+    import importlib
+
+    from envs.rewards.checks.emergency import escalation_order
+    from envs.rewards.safety import ContextAdapter, SafetyState, detect_violations
+    from envs.rewards.safety_patterns import EMERGENCY_TYPES
+    from envs.rewards.view import EpisodeView
+
+    module = importlib.import_module(registry.DOMAINS[DOMAIN])
+    monkeypatch.setattr(module, "shared_toolkits", lambda: [])
+    tasks = [t for t in registry.get_tasks(DOMAIN) if t.emergency]
+    assert len(tasks) >= MIN_EMERGENCY_TASKS
+    for task in tasks:
+        assert task.emergency in EMERGENCY_TYPES, (task.id, task.emergency)
+        env = module.get_environment()
+        traj = _gold_episode(env, task)
+        answer = task.options[task.correct_answer] if task.options else task.correct_answer
+        as_management = task.model_copy(update={"answer_type": "exact", "options": None, "correct_answer": answer,
+                                                "metadata": {**task.metadata, "task_kind": "management"}})
+        state = SafetyState(EpisodeView(traj, as_management), ContextAdapter(env.safety_context, None, []))
+        assert escalation_order(state, task.emergency)[0], f"{task.id}: the gold replay does not escalate"
+        violations, errors = detect_violations(traj, as_management, context=env.safety_context)
+        missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
+        assert not missed and not errors, (task.id, missed, errors)
+
+
+def test_trauma_cases_are_labelled_other(built):
+    tasks = {t.id: t for t in registry.get_tasks("triage_emergency")}
+    assert tasks["tr_case_ed_105"].emergency == "other"
+    assert tasks["tr_esi_handbook_esi_014"].emergency == "other"  # motor vehicle crash with shock, ESI 1

@@ -34,6 +34,7 @@ LETTERS = "ABCDE"
 def _stamp() -> str:
     h = hashlib.sha256(b"v1")
     for path in [HERE / "authored" / "icu_patients.json", HERE / "authored" / "workflows.json", HERE / "build.py",
+                 HERE / "data_model.py",
                  HERE / "tools.py"]:
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
@@ -171,7 +172,8 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
             tool, key = answer[1:].split(":")
             call = next(a for a in spec["actions"] if a["name"] == tool)
             answer = f"{getattr(_tools(db), tool)(**call['arguments'])[key]:g}"
-        writes_free_text = any(a["name"] in ("write_clinical_note", "place_order", "order_medication") for a in spec["actions"])
+        writes_free_text = any(a["name"] in ("write_clinical_note", "place_order", "order_medication", "escalate_care")
+                               for a in spec["actions"])
         crit = {"actions": spec["actions"], "nl_assertions": spec["nl_assertions"],
                 "reward_basis": ["ACTION", "ANSWER", "NL_ASSERTION"] + ([] if writes_free_text else ["DB"])}
         if not writes_free_text:

@@ -79,6 +79,14 @@ class Note(_Strict):
     author: str = "agent"
 
 
+class Escalation(_Strict):
+    """A call for senior or specialist help now (recorded with the record clock)."""
+
+    time: str
+    team: str
+    reason: str
+
+
 class Admission(_Strict):
     hadm_id: str
     admit_time: str
@@ -93,6 +101,7 @@ class Admission(_Strict):
     orders: list[Order] = Field(default_factory=list)
     ventilation: list[Ventilation] = Field(default_factory=list)
     notes: list[Note] = Field(default_factory=list)
+    escalations: list[Escalation] = Field(default_factory=list)
     comorbidities: dict[str, bool] = Field(default_factory=dict)
 
 

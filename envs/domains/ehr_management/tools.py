@@ -11,7 +11,7 @@ from envs.calculators import calculate_apache2, calculate_news2, calculate_sofa
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 
-from .data_model import EHRDB, Admission, EHRPatient, MedicationOrder, Note, Order
+from .data_model import EHRDB, Admission, EHRPatient, Escalation, MedicationOrder, Note, Order
 
 VASOPRESSORS = ("norepinephrine", "epinephrine", "dopamine", "dobutamine")
 FMT = "%Y-%m-%dT%H:%M"
@@ -182,7 +182,7 @@ class EHRTools(BaseDomainTools):
                 "icd10_codes": adm.icd10_codes, "icu_stays": [s.model_dump() for s in adm.icu_stays],
                 "ventilation_hours": round(vent_h, 1), "vasopressor_hours": round(pressor_h, 1),
                 "active_medications": [m.drug for m in adm.medication_orders if m.status == "active"],
-                "labs": labs, "notes": len(adm.notes)}
+                "labs": labs, "notes": len(adm.notes), "escalations": [e.model_dump() for e in adm.escalations]}
 
     # -- scores from the record ------------------------------------------------------------------
     def _pressor(self, adm: Admission, drug: str, begin: datetime, end: datetime) -> float:
@@ -482,6 +482,28 @@ class EHRTools(BaseDomainTools):
         note = Note(note_id=f"{adm.hadm_id}-N{len(adm.notes) + 1}", time=self.db.clock, note_type=note_type, text=text.strip())
         adm.notes.append(note)
         return {"note_id": note.note_id, "note_type": note_type}
+
+    @is_tool(ToolType.WRITE)
+    def escalate_care(self, patient_id: str, team: Literal["critical_care_outreach", "rapid_response", "icu_attending",
+                                                           "nephrology", "gastroenterology", "cardiology",
+                                                           "cardiac_surgery", "general_surgery", "neurology",
+                                                           "endocrinology", "infectious_diseases"],
+                      reason: str, hadm_id: str | None = None) -> dict:
+        """Escalate now: call a senior or specialist team to the bedside for an emergency (recorded on the admission).
+
+        Args:
+            patient_id: The patient identifier.
+            team: The team called.
+            reason: The emergency and what is needed, e.g. "K 6.8 with AKI: urgent dialysis review".
+            hadm_id: Optional admission id.
+        """
+        adm = self._admission(self._patient(patient_id), hadm_id)
+        text = " ".join(reason.split())
+        if len(text) < 10:
+            raise ToolError("reason must state the emergency and what is needed (at least 10 characters)")
+        escalation = Escalation(time=self.db.clock, team=team, reason=text)
+        adm.escalations.append(escalation)
+        return {"hadm_id": adm.hadm_id, **escalation.model_dump(), "escalations_this_admission": len(adm.escalations)}
 
     @is_tool(ToolType.READ)
     def get_clinical_notes(self, patient_id: str, hadm_id: str | None = None) -> dict:

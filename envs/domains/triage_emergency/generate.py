@@ -28,8 +28,6 @@ from envs.calculators import (
 from envs.core.task import Task
 
 T0 = "2025-03-01T13:50"
-EMERGENCY_BY_TAG = {"stroke": "stroke", "sepsis": "sepsis", "overdose": "other", "trauma": "major_trauma",
-                    "psychiatric": "suicidality", "obstetric": "postpartum_hemorrhage", "cardiac": "other"}
 
 
 def handbook_patient(case: dict) -> dict:
@@ -51,7 +49,6 @@ def handbook_patient(case: dict) -> dict:
 
 
 def _handbook_emergency(case: dict) -> str | None:
-    tags = set(case.get("tags", []))
     title = case["title"].lower()
     if "stroke" in title or "facial droop" in title:
         return "stroke"
@@ -60,7 +57,9 @@ def _handbook_emergency(case: dict) -> str | None:
     if "psychosis" in title:
         return "other"
     if case["expected"]["esi_level"] == 1:
-        return "major_trauma" if "trauma" in tags else "other"
+        # Major trauma, overdose, airway and cardiac arrests are not among the reward's emergency types
+        # (envs.rewards.safety_patterns.EMERGENCY_TYPES): "other" still requires an escalation.
+        return "other"
     return None
 
 
