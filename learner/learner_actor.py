@@ -69,8 +69,17 @@ class Learner:
         cls = ray.remote(RankWorker).options(num_cpus=ds.num_cpus_per_rank, num_gpus=ds.num_gpus_per_rank,
                                              max_restarts=0)
         workers = [cls.remote(self.config, self.model_dir, self.seed, r, ws, port) for r in range(ws)]
-        # Wait for every rank: the process group forms only when all have joined.
-        ray.get([w.ready.remote() for w in workers], timeout=ds.timeout_s)
+        # Wait for every rank: the process group forms only when all have joined. A rank that never
+        # comes up is named instead of hanging the run.
+        refs = [w.ready.remote() for w in workers]
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=ds.timeout_s)
+        missing = [r for r, ref in enumerate(refs) if ref not in ready]
+        if missing:
+            for w in workers:
+                ray.kill(w)
+            raise TimeoutError(f"DeepSpeed rank(s) {missing} of {ws} did not start within {ds.timeout_s:.0f}s "
+                               f"(rendezvous {ds.master_addr}:{port})")
+        ray.get(refs)  # re-raise a rank's start-up error, if any
         return workers
 
     def _all(self, method: str, *args) -> list[Any]:
