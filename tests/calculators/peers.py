@@ -6,8 +6,9 @@ test can compare ``ours(**kw).score`` with ``peer(**kw)``. Peers used (test-only
 * ``medcalc`` (medcalc-bench 1.7.0, Apache-2.0): functions take ``{name: (value, unit)}`` dicts
   and return ``{"Explanation": ..., "Answer": ...}``;
 * ``open_medicine`` (0.12.0, MIT): pydantic ``*Params`` models, results in ``.value``;
-* ``clincalc`` (0.4.0, AGPL-3.0): Rust engine behind ``clincalc.calculate(name, inputs)``.
-  AGPL: imported here, in tests only, never from ``envs/``.
+* ``clincalc`` (0.4.0, AGPL-3.0): adapters in ``peers_clincalc.py``, kept apart so that this
+  module (used by ``bench/calculators.py`` too) never imports AGPL code; clincalc is imported
+  by tests only, never from ``envs/`` or ``bench/``.
 
 Where a peer's definition differs from the published one, the adapter does not paper over it:
 the property test restricts or special-cases the inputs and says why.
@@ -15,7 +16,6 @@ the property test restricts or special-cases the inputs and says why.
 
 from __future__ import annotations
 
-import clincalc
 from medcalc import (
     anion_gap as mc_anion_gap,
     calcium_correction as mc_calcium,
@@ -95,10 +95,6 @@ def _mc(fn, inputs: dict) -> float:
     return fn(inputs)["Answer"]
 
 
-def _cc(name: str, inputs: dict) -> float:
-    return clincalc.calculate(name, inputs)["result"]
-
-
 def _om(module, func: str, params_cls: str, **kwargs) -> float:
     params = getattr(module, params_cls)(**kwargs)
     return getattr(module, func)(params).value
@@ -111,12 +107,6 @@ _MC_VERBAL = {5: "oriented", 4: "confused", 3: "inappropriate words", 2: "incomp
               1: "no verbal response"}
 _MC_MOTOR = {6: "obeys commands", 5: "localizes pain", 4: "withdrawal from pain", 3: "flexion to pain",
              2: "extension to pain", 1: "no motor response"}
-_CC_EYE = {4: "spontaneous", 3: "to_sound", 2: "to_pressure", 1: "no_response"}
-_CC_VERBAL = {5: "orientated", 4: "confused", 3: "words", 2: "sounds", 1: "no_response"}
-_CC_MOTOR = {6: "obey_commands", 5: "localising", 4: "normal_flexion", 3: "abnormal_flexion", 2: "extension",
-             1: "no_response"}
-
-
 def gcs_medcalc(eye, verbal, motor):
     return _mc(mc_gcs.compute_glasgow_coma_score_explanation, {
         "best_eye_response": _MC_EYE[eye], "best_verbal_response": _MC_VERBAL[verbal],
@@ -127,19 +117,9 @@ def gcs_open_medicine(eye, verbal, motor):
     return _om(om_gcs, "calculate_gcs", "GCSParams", eye_response=eye, verbal_response=verbal, motor_response=motor)
 
 
-def gcs_clincalc(eye, verbal, motor):
-    return _cc("gcs", {"eye_opening": _CC_EYE[eye], "verbal_response": _CC_VERBAL[verbal],
-                       "motor_response": _CC_MOTOR[motor]})
-
-
 def qsofa_open_medicine(respiratory_rate, systolic_bp, altered_mentation):
     return _om(om_qsofa, "calculate_qsofa", "QSOFAParams", respiratory_rate=respiratory_rate,
                systolic_blood_pressure=systolic_bp, altered_mentation=altered_mentation)
-
-
-def qsofa_clincalc(respiratory_rate, systolic_bp, altered_mentation):
-    return _cc("qsofa", {"respiratory_rate": respiratory_rate, "systolic_bp": systolic_bp,
-                         "altered_mentation": altered_mentation})
 
 
 def sirs_medcalc(temperature_c, heart_rate, respiratory_rate, wbc_k_per_ul, paco2_mmhg=None, bands_percent=None):
@@ -161,14 +141,6 @@ def news2_open_medicine(respiratory_rate, spo2, on_supplemental_oxygen, temperat
                pulse=heart_rate, consciousness=_OM_AVPU[consciousness], temperature=temperature_c)
 
 
-def news2_clincalc(respiratory_rate, spo2, on_supplemental_oxygen, temperature_c, systolic_bp, heart_rate,
-                   consciousness, spo2_scale=1):
-    return _cc("news2", {"respiratory_rate": respiratory_rate, "spo2": spo2, "spo2_scale": str(spo2_scale),
-                         "on_oxygen": on_supplemental_oxygen, "systolic_bp": systolic_bp, "pulse": heart_rate,
-                         "consciousness": "alert" if consciousness == "alert" else "confusion-or-vpu",
-                         "temperature": temperature_c})
-
-
 def sofa_open_medicine(pao2_fio2_ratio, on_mechanical_ventilation, platelets_k_per_ul, bilirubin_mg_dl, map_mmhg, gcs,
                        creatinine_mg_dl, dopamine_mcg_kg_min=0.0, dobutamine_mcg_kg_min=0.0,
                        epinephrine_mcg_kg_min=0.0, norepinephrine_mcg_kg_min=0.0, urine_output_ml_day=None):
@@ -178,28 +150,6 @@ def sofa_open_medicine(pao2_fio2_ratio, on_mechanical_ventilation, platelets_k_p
                creatinine=creatinine_mg_dl, urine_output=urine_output_ml_day,
                **({"mechanical_ventilation": on_mechanical_ventilation}
                   if "mechanical_ventilation" in om_sofa.SOFAParams.model_fields else {}))
-
-
-def _cc_cardio(map_mmhg, dopa, dobu, epi, norepi):
-    if dopa > 15 or epi > 0.1 or norepi > 0.1:
-        return "high-vasopressors"
-    if dopa > 5 or epi > 0 or norepi > 0:
-        return "moderate-vasopressors"
-    if dopa > 0 or dobu > 0:
-        return "dopamine-low"
-    return "map-below70" if map_mmhg < 70 else "map-at-least70"
-
-
-def sofa_clincalc(pao2_fio2_ratio, on_mechanical_ventilation, platelets_k_per_ul, bilirubin_mg_dl, map_mmhg, gcs,
-                  creatinine_mg_dl, dopamine_mcg_kg_min=0.0, dobutamine_mcg_kg_min=0.0,
-                  epinephrine_mcg_kg_min=0.0, norepinephrine_mcg_kg_min=0.0, urine_output_ml_day=None):
-    # clincalc takes the cardiovascular level as a category: the mapping from doses is Vincent 1996's.
-    return _cc("sofa", {
-        "pao2_fio2": pao2_fio2_ratio, "respiratory_support": on_mechanical_ventilation,
-        "platelets": platelets_k_per_ul, "bilirubin": bilirubin_mg_dl, "bilirubin_unit": "mg/dL",
-        "cardiovascular": _cc_cardio(map_mmhg, dopamine_mcg_kg_min, dobutamine_mcg_kg_min, epinephrine_mcg_kg_min,
-                                     norepinephrine_mcg_kg_min),
-        "gcs": gcs, "creatinine": creatinine_mg_dl, "creatinine_unit": "mg/dL"})
 
 
 _OM_ADMISSION = {"nonoperative": "nonoperative", "emergency_postoperative": "emergency_surgery",
@@ -217,25 +167,6 @@ def apache2_open_medicine(**kw):
                admission_type=_OM_ADMISSION[kw.get("admission_type", "nonoperative")],
                severe_organ_insufficiency_or_immunocompromised=kw.get(
                    "severe_organ_insufficiency_or_immunocompromised", False))
-
-
-def apache2_clincalc(**kw):
-    chronic = "none"
-    if kw.get("severe_organ_insufficiency_or_immunocompromised"):
-        chronic = ("elective_postoperative" if kw.get("admission_type") == "elective_postoperative"
-                   else "nonoperative_or_emergency_postoperative")
-    inputs = {"temperature_c": kw["temperature_c"], "mean_arterial_pressure_mm_hg": kw["map_mmhg"],
-              "heart_rate": kw["heart_rate"], "respiratory_rate": kw["respiratory_rate"], "fio2": kw["fio2"],
-              "arterial_ph": kw["arterial_ph"], "sodium_mmol_l": kw["sodium_mmol_l"],
-              "potassium_mmol_l": kw["potassium_mmol_l"], "creatinine_mg_dl": kw["creatinine_mg_dl"],
-              "acute_renal_failure": kw.get("acute_renal_failure", False),
-              "hematocrit_percent": kw["hematocrit_percent"], "wbc_10_9_l": kw["wbc_k_per_ul"],
-              "glasgow_coma_scale": kw["gcs"], "age": kw["age"], "chronic_health_status": chronic}
-    if kw["fio2"] >= 0.5:
-        inputs["aa_gradient_mm_hg"] = kw["aa_gradient_mmhg"]
-    else:
-        inputs["pao2_mm_hg"] = kw["pao2_mmhg"]
-    return _cc("apache2", inputs)
 
 
 def aa_gradient_open_medicine(pao2_mmhg, paco2_mmhg, fio2, age=None, atmospheric_pressure_mmhg=760.0,
@@ -257,12 +188,6 @@ def curb65_medcalc(confusion, bun_mg_dl, respiratory_rate, systolic_bp, diastoli
 def curb65_open_medicine(confusion, bun_mg_dl, respiratory_rate, systolic_bp, diastolic_bp, age):
     return _om(om_curb, "calculate_curb65", "CURB65Params", confusion=confusion, bun=bun_mg_dl,
                respiratory_rate=respiratory_rate, systolic_bp=systolic_bp, diastolic_bp=diastolic_bp, age=age)
-
-
-def curb65_clincalc(confusion, bun_mg_dl, respiratory_rate, systolic_bp, diastolic_bp, age):
-    # clincalc takes urea in mmol/L (the paper's unit): BUN mg/dL / 2.8.
-    return _cc("curb65", {"confusion": confusion, "urea_mmol_l": bun_mg_dl / 2.8, "respiratory_rate": respiratory_rate,
-                          "systolic_bp": systolic_bp, "diastolic_bp": diastolic_bp, "age": age})
 
 
 def crb65_open_medicine(confusion, respiratory_rate, systolic_bp, diastolic_bp, age):
@@ -287,14 +212,6 @@ def wells_pe_open_medicine(clinical_signs_dvt, pe_most_likely, heart_rate, immob
                hemoptysis=hemoptysis, malignancy=malignancy)
 
 
-def wells_pe_clincalc(clinical_signs_dvt, pe_most_likely, heart_rate, immobilization_or_recent_surgery,
-                      previous_dvt_pe, hemoptysis, malignancy, model="two_tier"):
-    return _cc("wells_pe", {"clinical_signs_of_dvt": clinical_signs_dvt, "pe_most_likely_diagnosis": pe_most_likely,
-                            "heart_rate_over_100": heart_rate > 100, "immobilisation_or_surgery":
-                                immobilization_or_recent_surgery, "previous_dvt_or_pe": previous_dvt_pe,
-                            "haemoptysis": hemoptysis, "malignancy": malignancy})
-
-
 def perc_medcalc(age, heart_rate, spo2, unilateral_leg_swelling, hemoptysis, recent_surgery_or_trauma,
                  prior_pe_or_dvt, hormone_use):
     return _mc(mc_perc.compute_perc_rule_explanation, {
@@ -310,16 +227,6 @@ def perc_open_medicine(age, heart_rate, spo2, unilateral_leg_swelling, hemoptysi
                spo2_lt_95=spo2 < 95, unilateral_leg_swelling=unilateral_leg_swelling, hemoptysis=hemoptysis,
                recent_surgery_or_trauma=recent_surgery_or_trauma, prior_dvt_pe=prior_pe_or_dvt,
                estrogen_use=hormone_use)
-
-
-def perc_clincalc(age, heart_rate, spo2, unilateral_leg_swelling, hemoptysis, recent_surgery_or_trauma,
-                  prior_pe_or_dvt, hormone_use):
-    r = clincalc.calculate("perc", {
-        "age_years": age, "heart_rate_bpm": heart_rate, "room_air_oxygen_saturation_percent": spo2,
-        "unilateral_leg_swelling": unilateral_leg_swelling, "haemoptysis": hemoptysis,
-        "recent_surgery_or_trauma_requiring_hospitalisation": recent_surgery_or_trauma, "prior_vte": prior_pe_or_dvt,
-        "exogenous_oestrogen_use": hormone_use, "low_pretest_probability_confirmed": True})
-    return r["working"]["positive_count"]  # "result" is the rule's verdict; the count is in the working
 
 
 # ----------------------------------------------------------------------------- cardiology
@@ -352,31 +259,12 @@ def heart_open_medicine(history, ecg, age, risk_factor_count, atherosclerotic_di
                troponin=_trop_points(troponin_x_uln))
 
 
-def heart_clincalc(history, ecg, age, risk_factor_count, atherosclerotic_disease, troponin_x_uln):
-    rf = ("three_or_more_or_atherosclerosis" if risk_factor_count >= 3 or atherosclerotic_disease
-          else "one_or_two" if risk_factor_count else "none")
-    return _cc("heart", {
-        "history": f"{history}_suspicious",
-        "ecg": {"normal": "normal", "nonspecific": "non_specific_repolarisation",
-                "st_deviation": "significant_st_deviation"}[ecg],
-        "age": age, "risk_factors": rf,
-        "troponin": ("normal", "one_to_three_times", "over_three_times")[_trop_points(troponin_x_uln)]})
-
-
 def timi_open_medicine(age, cad_risk_factor_count, known_cad_stenosis_50, aspirin_past_7_days, angina_episodes_24h,
                        st_deviation_05mm, positive_cardiac_marker):
     return _om(om_timi, "calculate_timi_ua_nstemi", "TIMIUANSTEMIParams", age_gte_65=age >= 65,
                three_or_more_cad_risk_factors=cad_risk_factor_count >= 3, known_cad_gte_50_stenosis=known_cad_stenosis_50,
                aspirin_use_past_7_days=aspirin_past_7_days, two_or_more_anginal_events_24h=angina_episodes_24h >= 2,
                st_deviation_gte_0_5mm=st_deviation_05mm, elevated_cardiac_markers=positive_cardiac_marker)
-
-
-def timi_clincalc(age, cad_risk_factor_count, known_cad_stenosis_50, aspirin_past_7_days, angina_episodes_24h,
-                  st_deviation_05mm, positive_cardiac_marker):
-    return _cc("timi", {"age": age, "three_or_more_cad_risk_factors": cad_risk_factor_count >= 3,
-                        "known_cad": known_cad_stenosis_50, "aspirin_use_past_7_days": aspirin_past_7_days,
-                        "severe_angina": angina_episodes_24h >= 2, "st_deviation": st_deviation_05mm,
-                        "positive_biomarker": positive_cardiac_marker})
 
 
 def chads_medcalc(age, sex, chf, hypertension, diabetes, stroke_tia_thromboembolism, vascular_disease):
@@ -391,12 +279,6 @@ def chads_open_medicine(age, sex, chf, hypertension, diabetes, stroke_tia_thromb
                hypertension=hypertension, age=age, diabetes=diabetes,
                stroke_tia_thromboembolism=stroke_tia_thromboembolism, vascular_disease=vascular_disease,
                female_sex=sex == "female")
-
-
-def chads_clincalc(age, sex, chf, hypertension, diabetes, stroke_tia_thromboembolism, vascular_disease):
-    return _cc("cha2ds2vasc", {"age": age, "sex": sex, "congestive_heart_failure": chf, "hypertension": hypertension,
-                               "diabetes": diabetes, "stroke_tia_thromboembolism": stroke_tia_thromboembolism,
-                               "vascular_disease": vascular_disease})
 
 
 def hasbled_medcalc(age, uncontrolled_hypertension, abnormal_renal_function, abnormal_liver_function, stroke_history,
@@ -415,17 +297,6 @@ def hasbled_open_medicine(age, uncontrolled_hypertension, abnormal_renal_functio
                abnormal_renal_function=abnormal_renal_function, abnormal_liver_function=abnormal_liver_function,
                stroke=stroke_history, bleeding=bleeding_history_or_predisposition, labile_inr=labile_inr,
                elderly=age > 65, drugs=antiplatelet_or_nsaid_use, alcohol=alcohol_use)
-
-
-def hasbled_clincalc(age, uncontrolled_hypertension, abnormal_renal_function, abnormal_liver_function,
-                     stroke_history, bleeding_history_or_predisposition, labile_inr, antiplatelet_or_nsaid_use,
-                     alcohol_use):
-    return _cc("hasbled", {"hypertension_uncontrolled": uncontrolled_hypertension,
-                           "abnormal_renal_function": abnormal_renal_function,
-                           "abnormal_liver_function": abnormal_liver_function, "stroke": stroke_history,
-                           "bleeding_history": bleeding_history_or_predisposition, "labile_inr": labile_inr,
-                           "elderly_over_65": age > 65, "drugs_antiplatelet_nsaid": antiplatelet_or_nsaid_use,
-                           "alcohol_excess": alcohol_use})
 
 
 _DVT_KEYS = ("active_cancer", "paralysis_paresis_or_cast", "bedridden_or_major_surgery", "localized_tenderness",
@@ -448,13 +319,6 @@ def wells_dvt_open_medicine(**kw):
              "entire_leg_swollen", "calf_swelling_gt_3cm", "pitting_edema", "collateral_superficial_veins",
              "previously_documented_dvt", "alternative_diagnosis_likely")
     return _om(om_wdvt, "calculate_wells_dvt", "WellsDVTParams", **{n: kw[k] for n, k in zip(names, _DVT_KEYS)})
-
-
-def wells_dvt_clincalc(**kw):
-    names = ("active_cancer", "paralysis_paresis_immobilisation", "bedridden_or_major_surgery", "localised_tenderness",
-             "entire_leg_swollen", "calf_swelling_over_3cm", "pitting_oedema", "collateral_superficial_veins",
-             "previously_documented_dvt", "alternative_diagnosis_as_likely")
-    return _cc("wells_dvt", {n: kw[k] for n, k in zip(names, _DVT_KEYS)})
 
 
 _MC_QT = {"bazett": (mc_qt_b, "bazett_calculator_explanation"),
@@ -492,12 +356,6 @@ def meld_na_open_medicine(bilirubin_mg_dl, inr, creatinine_mg_dl, sodium_mmol_l,
                inr=inr, sodium=sodium_mmol_l, on_dialysis=on_dialysis)
 
 
-def meld_clincalc(bilirubin_mg_dl, inr, creatinine_mg_dl, sodium_mmol_l, on_dialysis):
-    """clincalc's ``meld`` is MELD without sodium: compare with our MELD(i) component."""
-    return _cc("meld", {"bilirubin": bilirubin_mg_dl, "bilirubin_unit": "mg/dL", "creatinine": creatinine_mg_dl,
-                        "creatinine_unit": "mg/dL", "inr": inr, "dialysis_twice_past_week": on_dialysis})
-
-
 _MC_ASCITES = {"none": "Absent", "mild": "Slight", "moderate_severe": "Moderate"}
 _MC_ENCEPH = {"none": "No Encephalopathy", "grade_1_2": "Grade 1-2", "grade_3_4": "Grade 3-4"}
 
@@ -512,13 +370,6 @@ def child_pugh_open_medicine(bilirubin_mg_dl, albumin_g_dl, inr, ascites, enceph
     return _om(om_child, "calculate_child_pugh", "ChildPughParams", bilirubin=bilirubin_mg_dl, albumin=albumin_g_dl,
                inr=inr, ascites={"none": "none", "mild": "mild", "moderate_severe": "severe"}[ascites],
                encephalopathy=encephalopathy)
-
-
-def child_pugh_clincalc(bilirubin_mg_dl, albumin_g_dl, inr, ascites, encephalopathy):
-    return _cc("child_pugh", {"bilirubin": bilirubin_mg_dl, "bilirubin_unit": "mg/dL", "albumin": albumin_g_dl,
-                              "albumin_unit": "g/dL", "inr": inr, "ascites": ascites.replace("_", "-"),
-                              "encephalopathy": {"none": "none", "grade_1_2": "grade1-to2",
-                                                 "grade_3_4": "grade3-to4"}[encephalopathy]})
 
 
 def gbs_medcalc(bun_mg_dl, hemoglobin_g_dl, sex, systolic_bp, heart_rate, melena, syncope, hepatic_disease,
@@ -536,15 +387,6 @@ def gbs_open_medicine(bun_mg_dl, hemoglobin_g_dl, sex, systolic_bp, heart_rate, 
                melena=melena, syncope=syncope, hepatic_disease=hepatic_disease, cardiac_failure=cardiac_failure)
 
 
-def gbs_clincalc(bun_mg_dl, hemoglobin_g_dl, sex, systolic_bp, heart_rate, melena, syncope, hepatic_disease,
-                 cardiac_failure):
-    return _cc("glasgow_blatchford", {
-        "age_16_or_over": True, "acute_upper_gi_bleeding_at_first_assessment": True,
-        "emergency_department_overt_ugib": True, "sex": sex, "urea_mmol_l": bun_mg_dl / 2.8,
-        "haemoglobin_g_l": hemoglobin_g_dl * 10.0, "systolic_bp_mm_hg": systolic_bp, "heart_rate_bpm": heart_rate,
-        "melaena": melena, "syncope": syncope, "hepatic_disease": hepatic_disease, "cardiac_failure": cardiac_failure})
-
-
 # ----------------------------------------------------------------------------- renal
 
 
@@ -559,11 +401,6 @@ def cg_open_medicine(age, weight_kg, creatinine_mg_dl, sex):
                is_female=sex == "female", serum_creatinine=creatinine_mg_dl)
 
 
-def cg_clincalc(age, weight_kg, creatinine_mg_dl, sex):
-    return _cc("cockcroft_gault", {"age": age, "weight_kg": weight_kg, "creatinine": creatinine_mg_dl,
-                                   "creatinine_unit": "mg/dL", "sex": sex})
-
-
 def ckd_epi_medcalc(creatinine_mg_dl, age, sex):
     return _mc(mc_ckd.ckd_epi_2021_explanation, {"sex": sex.capitalize(), "age": (age, "years"),
                                                  "creatinine": (creatinine_mg_dl, "mg/dL")})
@@ -574,32 +411,15 @@ def ckd_epi_open_medicine(creatinine_mg_dl, age, sex):
                serum_creatinine=creatinine_mg_dl)
 
 
-def ckd_epi_clincalc(creatinine_mg_dl, age, sex):
-    return _cc("egfr", {"age": age, "creatinine": creatinine_mg_dl, "creatinine_unit": "mg/dL", "sex": sex})
-
-
 def fena_medcalc(urine_sodium_mmol_l, serum_sodium_mmol_l, urine_creatinine_mg_dl, serum_creatinine_mg_dl):
     return _mc(mc_fena.compute_fena_explanation, {
         "sodium": (serum_sodium_mmol_l, "mmol/L"), "creatinine": (serum_creatinine_mg_dl, "mg/dL"),
         "urine_sodium": (urine_sodium_mmol_l, "mmol/L"), "urine_creatinine": (urine_creatinine_mg_dl, "mg/dL")})
 
 
-def fena_clincalc(urine_sodium_mmol_l, serum_sodium_mmol_l, urine_creatinine_mg_dl, serum_creatinine_mg_dl):
-    return float(_cc("fena", {"urine_sodium": urine_sodium_mmol_l, "plasma_sodium": serum_sodium_mmol_l,
-                              "urine_creatinine": urine_creatinine_mg_dl,
-                              "plasma_creatinine": serum_creatinine_mg_dl}))  # a string, 2 decimals
-
-
 def fwd_medcalc(sodium_mmol_l, weight_kg, age, sex, target_sodium_mmol_l=140.0):
     return _mc(mc_fwd.free_water_deficit_explanation, {
         "sex": sex.capitalize(), "age": (age, "years"), "weight": (weight_kg, "kg"), "sodium": (sodium_mmol_l, "mmol/L")})
-
-
-def fwd_clincalc(sodium_mmol_l, weight_kg, age, sex, target_sodium_mmol_l=140.0, tbw_fraction=0.6):
-    return _cc("free_water_deficit", {
-        "assessment_context": "adult_with_hypernatraemia", "weight_kg": weight_kg,
-        "current_sodium_mmol_l": sodium_mmol_l, "target_sodium_mmol_l": target_sodium_mmol_l,
-        "total_body_water_fraction": tbw_fraction})
 
 
 # ----------------------------------------------------------------------------- general
@@ -613,10 +433,6 @@ def bmi_open_medicine(weight_kg, height_cm):
     return _om(om_bmi, "calculate_bmi", "BMIParams", weight_kg=weight_kg, height_cm=height_cm)
 
 
-def bmi_clincalc(weight_kg, height_cm):
-    return _cc("bmi", {"weight_kg": weight_kg, "height_cm": height_cm})
-
-
 def anion_gap_medcalc(sodium, chloride, bicarbonate, albumin_g_dl=None):
     return _mc(mc_anion_gap.compute_anion_gap_explanation, {
         "sodium": (sodium, "mmol/L"), "chloride": (chloride, "mmol/L"), "bicarbonate": (bicarbonate, "mmol/L")})
@@ -625,10 +441,6 @@ def anion_gap_medcalc(sodium, chloride, bicarbonate, albumin_g_dl=None):
 def anion_gap_open_medicine(sodium, chloride, bicarbonate, albumin_g_dl=None):
     return _om(om_ag, "calculate_anion_gap", "AnionGapParams", sodium=sodium, chloride=chloride,
                bicarbonate=bicarbonate)
-
-
-def anion_gap_clincalc(sodium, chloride, bicarbonate, albumin_g_dl=None):
-    return _cc("anion_gap", {"sodium_mmol_l": sodium, "chloride_mmol_l": chloride, "bicarbonate_mmol_l": bicarbonate})
 
 
 def calcium_medcalc(calcium_mg_dl, albumin_g_dl):
@@ -641,11 +453,6 @@ def calcium_open_medicine(calcium_mg_dl, albumin_g_dl):
                albumin=albumin_g_dl)
 
 
-def calcium_clincalc(calcium_mg_dl, albumin_g_dl):
-    return _cc("corrected_calcium", {"calcium": calcium_mg_dl, "calcium_unit": "mg/dL", "albumin": albumin_g_dl,
-                                     "albumin_unit": "g/dL"})
-
-
 def sodium_medcalc(sodium_mmol_l, glucose_mg_dl, formula="hillier"):
     return _mc(mc_sch.compute_sodium_correction_hyperglycemia_explanation,
                {"glucose": (glucose_mg_dl, "mg/dL"), "sodium": (sodium_mmol_l, "mEq/L")})
@@ -654,11 +461,6 @@ def sodium_medcalc(sodium_mmol_l, glucose_mg_dl, formula="hillier"):
 def sodium_open_medicine(sodium_mmol_l, glucose_mg_dl, formula="katz"):
     return _om(om_na, "calculate_corrected_sodium", "CorrectedSodiumParams", sodium=sodium_mmol_l,
                glucose=glucose_mg_dl)
-
-
-def sodium_clincalc(sodium_mmol_l, glucose_mg_dl, formula="katz"):
-    return _cc("corrected_sodium", {"sodium": sodium_mmol_l, "glucose": glucose_mg_dl, "glucose_unit": "mg/dL",
-                                    "method": formula})
 
 
 def osm_medcalc(sodium_mmol_l, glucose_mg_dl, bun_mg_dl):
@@ -694,19 +496,6 @@ def apgar_open_medicine(heart_rate, respiratory_effort, muscle_tone, reflex_irri
                respiration=_APGAR["respiratory_effort"][respiratory_effort])
 
 
-def apgar_clincalc(heart_rate, respiratory_effort, muscle_tone, reflex_irritability, color):
-    return _cc("apgar", {
-        "minute_after_birth": 5, "assessment_during_resuscitation": False, "gestational_context": "term_or_late_preterm",
-        "heart_rate": "absent" if heart_rate == 0 else "below_100" if heart_rate < 100 else "at_least_100",
-        "respiratory_effort": {"absent": "absent", "weak": "slow_or_irregular",
-                               "strong": "good_with_vigorous_cry"}[respiratory_effort],
-        "muscle_tone": {"limp": "flaccid", "some_flexion": "some_flexion", "active": "active_motion"}[muscle_tone],
-        "reflex_irritability": {"none": "no_response", "grimace": "grimace",
-                                "cry": "cough_sneeze_or_active_withdrawal"}[reflex_irritability],
-        "appearance": {"blue_pale": "blue_or_pale", "acrocyanosis": "pink_body_blue_extremities",
-                       "pink": "completely_pink"}[color]})
-
-
 # ----------------------------------------------------------------------------- psychiatry
 
 _PHQ9_FIELDS = tuple(om_phq9.PHQ9Params.model_fields)
@@ -718,33 +507,17 @@ def phq9_open_medicine(responses):
     return _om(om_phq9, "calculate_phq9", "PHQ9Params", **dict(zip(_PHQ9_FIELDS, responses)))
 
 
-def phq9_clincalc(responses):
-    return _cc("phq9", {"responses": list(responses)})
-
-
 def gad7_open_medicine(responses):
     return _om(om_gad7, "calculate_gad7", "GAD7Params", **dict(zip(_GAD7_FIELDS, responses)))
-
-
-def gad7_clincalc(responses):
-    return _cc("gad7", {"responses": list(responses)})
 
 
 def epds_open_medicine(responses):
     return _om(om_epds, "calculate_epds", "EPDSParams", **dict(zip(_EPDS_FIELDS, responses)))
 
 
-def epds_clincalc(responses):
-    return _cc("epds", {"responses": list(responses)})
-
-
 def audit_c_open_medicine(responses, sex):
     return _om(om_auditc, "calculate_audit_c", "AUDITCParams", frequency=responses[0], typical_quantity=responses[1],
                binge_frequency=responses[2], is_male=sex == "male")
-
-
-def audit_c_clincalc(responses, sex):
-    return _cc("auditc", {"responses": list(responses), "sex": sex})
 
 
 def cage_open_medicine(cut_down, annoyed, guilty, eye_opener):
@@ -754,16 +527,6 @@ def cage_open_medicine(cut_down, annoyed, guilty, eye_opener):
 
 def ciwa_open_medicine(**kw):
     return _om(om_ciwa, "calculate_ciwa_ar", "CIWAArParams", **kw)
-
-
-def ciwa_clincalc(**kw):
-    return _cc("ciwa_ar", {
-        "assessment_context": "clinically_identified_alcohol_withdrawal_with_reliable_patient_participation",
-        "nausea_and_vomiting": kw["nausea_vomiting"], "tremor": kw["tremor"],
-        "paroxysmal_sweats": kw["paroxysmal_sweats"], "anxiety": kw["anxiety"], "agitation": kw["agitation"],
-        "tactile_disturbances": kw["tactile_disturbances"], "auditory_disturbances": kw["auditory_disturbances"],
-        "visual_disturbances": kw["visual_disturbances"], "headache_or_fullness": kw["headache"],
-        "orientation_and_clouding": kw["orientation"]})
 
 
 # ----------------------------------------------------------------------------- emergency / neurology
@@ -784,12 +547,6 @@ def centor_open_medicine(age, tonsillar_exudate_or_swelling, tender_anterior_cer
                absence_of_cough=cough_absent)
 
 
-def centor_clincalc(age, tonsillar_exudate_or_swelling, tender_anterior_cervical_nodes, temperature_c, cough_absent):
-    return _cc("centor", {"age": age, "tonsillar_exudate": tonsillar_exudate_or_swelling,
-                          "tender_anterior_cervical_nodes": tender_anterior_cervical_nodes,
-                          "fever": temperature_c > 38, "absence_of_cough": cough_absent})
-
-
 def rts_open_medicine(gcs, systolic_bp, respiratory_rate):
     return _om(om_rts, "calculate_rts", "RTSParams", gcs=gcs, systolic_bp=systolic_bp,
                respiratory_rate=respiratory_rate)
@@ -797,14 +554,6 @@ def rts_open_medicine(gcs, systolic_bp, respiratory_rate):
 
 def parkland_open_medicine(weight_kg, tbsa_percent):
     return _om(om_parkland, "calculate_parkland", "ParklandParams", weight_kg=weight_kg, tbsa_percent=tbsa_percent)
-
-
-def alvarado_clincalc(migration_to_rlq, anorexia, nausea_vomiting, rlq_tenderness, rebound_tenderness, temperature_c,
-                      wbc_k_per_ul, neutrophil_percent):
-    return _cc("alvarado", {"migration_to_rlq": migration_to_rlq, "anorexia": anorexia,
-                            "nausea_or_vomiting": nausea_vomiting, "rlq_tenderness": rlq_tenderness,
-                            "rebound_tenderness": rebound_tenderness, "fever": temperature_c >= 37.3,
-                            "leukocytosis": wbc_k_per_ul > 10, "left_shift": neutrophil_percent > 75})
 
 
 def ottawa_open_medicine(**kw):
@@ -824,24 +573,8 @@ _NIHSS_OM = ("loc", "loc_questions", "loc_commands", "best_gaze", "visual_fields
 _NIHSS_OURS = ("loc", "loc_questions", "loc_commands", "best_gaze", "visual_fields", "facial_palsy", "motor_arm_left",
                "motor_arm_right", "motor_leg_left", "motor_leg_right", "limb_ataxia", "sensory", "best_language",
                "dysarthria", "extinction_inattention")
-_NIHSS_CC = ("level_of_consciousness", "loc_questions", "loc_commands", "best_gaze", "visual_fields", "facial_palsy",
-             "motor_arm_left", "motor_arm_right", "motor_leg_left", "motor_leg_right", "limb_ataxia", "sensory",
-             "best_language", "dysarthria", "extinction_inattention")
-_NIHSS_CC_SCHEMA = clincalc.get_schema("nihss")["properties"]
-
-
 def nihss_open_medicine(**kw):
     return _om(om_nihss, "calculate_nihss", "NIHSSParams", **{o: kw[k] for o, k in zip(_NIHSS_OM, _NIHSS_OURS)})
-
-
-def nihss_clincalc(**kw):
-    inputs = {"assessment_context": "clinician_administered_standard_adult_nihss_using_authorized_scale_materials"}
-    for cc_name, ours in zip(_NIHSS_CC, _NIHSS_OURS):
-        enum = _NIHSS_CC_SCHEMA[cc_name]["enum"]
-        if cc_name == "loc_questions":  # its enum lists two options worth 1 point
-            enum = ["both_correct", "one_correct", "neither_correct_or_aphasic_or_stuporous"]
-        inputs[cc_name] = enum[kw[ours]]  # enums are listed in point order (0, 1, 2, ...)
-    return _cc("nihss", inputs)
 
 
 def abcd2_open_medicine(age, systolic_bp, diastolic_bp, clinical_features, duration_minutes, diabetes):
@@ -850,9 +583,3 @@ def abcd2_open_medicine(age, systolic_bp, diastolic_bp, clinical_features, durat
                duration="ge_60_min" if duration_minutes >= 60 else "10_to_59_min" if duration_minutes >= 10
                else "lt_10_min", diabetes=diabetes)
 
-
-def abcd2_clincalc(age, systolic_bp, diastolic_bp, clinical_features, duration_minutes, diabetes):
-    return _cc("abcd2", {"age": age, "systolic_bp": systolic_bp, "diastolic_bp": diastolic_bp,
-                         "clinical_features": clinical_features.replace("_", "-"),
-                         "duration": "60min-or-more" if duration_minutes >= 60 else "10-59min"
-                         if duration_minutes >= 10 else "under-10min", "diabetes": diabetes})

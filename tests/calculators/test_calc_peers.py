@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from envs import calculators as C
 
 from . import peers as P
+from . import peers_clincalc as Q
 
 BATCH, EXAMPLES = 40, 50
 PEER = settings(max_examples=EXAMPLES, deadline=None, database=None,
@@ -107,14 +108,14 @@ def agree(ours, kw: dict, *peer_fns, tol: float = 0.0):
 @given(batch(eye=ints(1, 4), verbal=ints(1, 5), motor=ints(1, 6)))
 def test_gcs_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_gcs, kw, P.gcs_medcalc, P.gcs_open_medicine, P.gcs_clincalc)
+        agree(C.calculate_gcs, kw, P.gcs_medcalc, P.gcs_open_medicine, Q.gcs_clincalc)
 
 
 @PEER
 @given(batch(bools=('altered_mentation',), respiratory_rate=ints(0, 60), systolic_bp=ints(40, 250)))
 def test_qsofa_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_qsofa, kw, P.qsofa_open_medicine, P.qsofa_clincalc)
+        agree(C.calculate_qsofa, kw, P.qsofa_open_medicine, Q.qsofa_clincalc)
 
 
 @PEER
@@ -134,7 +135,7 @@ def test_sirs_vs_medcalc(cases):
              spo2_scale=choice([1, 2])))
 def test_news2_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_news2, kw, P.news2_open_medicine, P.news2_clincalc)
+        agree(C.calculate_news2, kw, P.news2_open_medicine, Q.news2_clincalc)
 
 
 @PEER
@@ -146,7 +147,7 @@ def test_news2_vs_peers(cases):
              norepinephrine_mcg_kg_min=choice([0.0, 0.0, 0.05, 0.1, 0.3])))
 def test_sofa_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_sofa, kw, P.sofa_clincalc)
+        agree(C.calculate_sofa, kw, Q.sofa_clincalc)
         # open-medicine has no ventilation input (it scores the respiratory rows 3-4 from the ratio
         # alone, while Vincent 1996 requires respiratory support) and no dobutamine input (any
         # dobutamine scores 2): compare only where neither can matter.
@@ -168,7 +169,7 @@ def test_apache2_vs_peers(cases):
             continue  # impossible gas (negative gradient) or a float tie at a band edge
         # open-medicine computes the A-a gradient from PaCO2 as we do; clincalc takes the gradient.
         mine = agree(C.calculate_apache2, kw, P.apache2_open_medicine)
-        assert P.apache2_clincalc(**dict(kw, aa_gradient_mmhg=aa)) == mine, kw
+        assert Q.apache2_clincalc(**dict(kw, aa_gradient_mmhg=aa)) == mine, kw
 
 
 @PEER
@@ -194,7 +195,7 @@ def test_curb65_vs_peers(cases):
         # clincalc scores the paper's urea > 7 mmol/L, i.e. BUN > 19.6 mg/dL; the requirement (and
         # the usual US statement) is BUN > 19 mg/dL, so BUN in (19, 19.6] is scored differently.
         if not 19 < kw["bun_mg_dl"] <= 19.6:
-            agree(C.calculate_curb65, kw, P.curb65_clincalc)
+            agree(C.calculate_curb65, kw, Q.curb65_clincalc)
 
 
 @PEER
@@ -209,14 +210,14 @@ def test_crb65_vs_open_medicine(cases):
 @given(batch(bools=('clinical_signs_dvt', 'pe_most_likely', 'immobilization_or_recent_surgery', 'previous_dvt_pe', 'hemoptysis', 'malignancy',), heart_rate=ints(40, 180)))
 def test_wells_pe_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_wells_pe, kw, P.wells_pe_medcalc, P.wells_pe_open_medicine, P.wells_pe_clincalc)
+        agree(C.calculate_wells_pe, kw, P.wells_pe_medcalc, P.wells_pe_open_medicine, Q.wells_pe_clincalc)
 
 
 @PEER
 @given(batch(bools=('unilateral_leg_swelling', 'hemoptysis', 'recent_surgery_or_trauma', 'prior_pe_or_dvt', 'hormone_use',), age=ints(18, 100), heart_rate=ints(40, 180), spo2=ints(80, 100)))
 def test_perc_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_perc, kw, P.perc_medcalc, P.perc_open_medicine, P.perc_clincalc)
+        agree(C.calculate_perc, kw, P.perc_medcalc, P.perc_open_medicine, Q.perc_clincalc)
 
 
 # ----------------------------------------------------------------------------- cardiology
@@ -229,7 +230,7 @@ def test_perc_vs_peers(cases):
              troponin_x_uln=tenths(0, 6)))
 def test_heart_score_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_heart_score, kw, P.heart_open_medicine, P.heart_clincalc)
+        agree(C.calculate_heart_score, kw, P.heart_open_medicine, Q.heart_clincalc)
         # medcalc-bench scores known atherosclerotic disease as 2 only together with >= 3 risk factors
         # (it gives 1 for atherosclerosis alone); Six 2008 gives 2 for ">= 3 risk factors or history of
         # atherosclerotic disease", which we follow.
@@ -241,28 +242,28 @@ def test_heart_score_vs_peers(cases):
 @given(batch(bools=('known_cad_stenosis_50', 'aspirin_past_7_days', 'st_deviation_05mm', 'positive_cardiac_marker',), age=ints(18, 100), cad_risk_factor_count=ints(0, 5), angina_episodes_24h=ints(0, 5)))
 def test_timi_ua_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_timi_ua, kw, P.timi_open_medicine, P.timi_clincalc)
+        agree(C.calculate_timi_ua, kw, P.timi_open_medicine, Q.timi_clincalc)
 
 
 @PEER
 @given(batch(bools=('chf', 'hypertension', 'diabetes', 'stroke_tia_thromboembolism', 'vascular_disease',), age=ints(18, 100), sex=choice(["male", "female"])))
 def test_cha2ds2_vasc_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_cha2ds2_vasc, kw, P.chads_medcalc, P.chads_open_medicine, P.chads_clincalc)
+        agree(C.calculate_cha2ds2_vasc, kw, P.chads_medcalc, P.chads_open_medicine, Q.chads_clincalc)
 
 
 @PEER
 @given(batch(bools=('uncontrolled_hypertension', 'abnormal_renal_function', 'abnormal_liver_function', 'stroke_history', 'bleeding_history_or_predisposition', 'labile_inr', 'antiplatelet_or_nsaid_use', 'alcohol_use',), age=ints(18, 100)))
 def test_has_bled_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_has_bled, kw, P.hasbled_medcalc, P.hasbled_open_medicine, P.hasbled_clincalc)
+        agree(C.calculate_has_bled, kw, P.hasbled_medcalc, P.hasbled_open_medicine, Q.hasbled_clincalc)
 
 
 @PEER
 @given(batch(bools=P._DVT_KEYS))
 def test_wells_dvt_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_wells_dvt, kw, P.wells_dvt_medcalc, P.wells_dvt_open_medicine, P.wells_dvt_clincalc)
+        agree(C.calculate_wells_dvt, kw, P.wells_dvt_medcalc, P.wells_dvt_open_medicine, Q.wells_dvt_clincalc)
 
 
 @PEER
@@ -296,7 +297,7 @@ def test_meld_na_vs_peers(cases):
         result = C.calculate_meld_na(**kw)
         # clincalc's "meld" is MELD without sodium: it must equal our MELD(i) (same bounds, same rounding).
         if 6 <= result.components["meld_i"] <= 40:
-            assert P.meld_clincalc(**kw) == result.components["meld_i"], kw
+            assert Q.meld_clincalc(**kw) == result.components["meld_i"], kw
         # medcalc-bench applies "dialysis sets creatinine to 4.0" only when creatinine is >= 1.0
         # (meldna.py checks "< 1.0" first); OPTN applies it whatever the creatinine.
         if not (kw["on_dialysis"] and kw["creatinine_mg_dl"] < 1.0):
@@ -312,7 +313,7 @@ def test_meld_na_vs_peers(cases):
              encephalopathy=choice(["none", "grade_1_2", "grade_3_4"])))
 def test_child_pugh_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_child_pugh, kw, P.child_pugh_open_medicine, P.child_pugh_clincalc)
+        agree(C.calculate_child_pugh, kw, P.child_pugh_open_medicine, Q.child_pugh_clincalc)
         # medcalc-bench mis-scores the exact band edges: albumin 2.8 g/dL as 3 points ("<= 2.8"),
         # bilirubin 2.0 mg/dL as 0 and 3.0 as 3. Pugh 1973: bilirubin < 2 / 2-3 / > 3 and albumin
         # > 3.5 / 2.8-3.5 / < 2.8, so 2.0 and 3.0 score 2 and 2.8 scores 2 (as the other peers do).
@@ -325,7 +326,7 @@ def test_child_pugh_vs_peers(cases):
              systolic_bp=ints(60, 180), heart_rate=ints(50, 150)))
 def test_glasgow_blatchford_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_glasgow_blatchford, kw, P.gbs_clincalc)
+        agree(C.calculate_glasgow_blatchford, kw, Q.gbs_clincalc)
         # medcalc-bench mis-scores exact band edges: haemoglobin 12.0 and 13.0 g/dL (men), 10.0 and
         # 12.0 (women), and BUN 70.0 mg/dL (0 instead of 6). Blatchford 2000 bands start at their
         # printed lower value (men 12.0-12.9 = 1; urea >= 25 mmol/L = 6), as clincalc agrees.
@@ -345,7 +346,7 @@ def test_glasgow_blatchford_vs_peers(cases):
 def test_creatinine_clearance_vs_peers(cases):
     for kw in cases:
         agree(C.calculate_creatinine_clearance, kw, P.cg_open_medicine, tol=0.051)  # rounds to 1 decimal
-        agree(C.calculate_creatinine_clearance, kw, P.cg_clincalc, tol=0.051)
+        agree(C.calculate_creatinine_clearance, kw, Q.cg_clincalc, tol=0.051)
 
 
 @PEER
@@ -369,7 +370,7 @@ def test_ckd_epi_2021_vs_peers(cases):
         if not (kw["sex"] == "male" and kw["creatinine_mg_dl"] <= 0.9):
             agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_medcalc, tol=0.0051)  # 3 decimals
         agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_open_medicine, tol=0.051)  # 1 decimal
-        agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_clincalc, tol=0.5)  # whole number
+        agree(C.calculate_ckd_epi_2021, kw, Q.ckd_epi_clincalc, tol=0.5)  # whole number
 
 
 @PEER
@@ -377,7 +378,7 @@ def test_ckd_epi_2021_vs_peers(cases):
              urine_creatinine_mg_dl=ints(10, 300), serum_creatinine_mg_dl=tenths(0.4, 10)))
 def test_fena_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_fena, kw, P.fena_medcalc, P.fena_clincalc, tol=0.0051)  # both round to 2 decimals
+        agree(C.calculate_fena, kw, P.fena_medcalc, Q.fena_clincalc, tol=0.0051)  # both round to 2 decimals
 
 
 @PEER
@@ -388,7 +389,7 @@ def test_free_water_deficit_vs_peers(cases):
         assert P.fwd_medcalc(**kw) == pytest.approx(result.score, abs=0.0051), kw  # same TBW table
         # clincalc asks the caller for the TBW fraction; give it the one we chose (Adrogue 2000).
         fraction = result.components["total_body_water_fraction"]
-        assert P.fwd_clincalc(**kw, tbw_fraction=fraction) == pytest.approx(result.score, abs=0.051), kw
+        assert Q.fwd_clincalc(**kw, tbw_fraction=fraction) == pytest.approx(result.score, abs=0.051), kw
 
 
 # ----------------------------------------------------------------------------- general
@@ -399,14 +400,14 @@ def test_free_water_deficit_vs_peers(cases):
 def test_bmi_vs_peers(cases):
     for kw in cases:
         agree(C.calculate_bmi, kw, P.bmi_medcalc, tol=0.0051)
-        agree(C.calculate_bmi, kw, P.bmi_open_medicine, P.bmi_clincalc, tol=0.051)
+        agree(C.calculate_bmi, kw, P.bmi_open_medicine, Q.bmi_clincalc, tol=0.051)
 
 
 @PEER
 @given(batch(sodium=ints(110, 170), chloride=ints(70, 130), bicarbonate=ints(3, 45)))
 def test_anion_gap_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_anion_gap, kw, P.anion_gap_medcalc, P.anion_gap_open_medicine, P.anion_gap_clincalc,
+        agree(C.calculate_anion_gap, kw, P.anion_gap_medcalc, P.anion_gap_open_medicine, Q.anion_gap_clincalc,
               tol=1e-9)
 
 
@@ -426,7 +427,7 @@ def test_albumin_corrected_anion_gap_vs_open_medicine(cases):
 def test_corrected_calcium_vs_peers(cases):
     for kw in cases:
         agree(C.calculate_corrected_calcium, kw, P.calcium_medcalc, tol=0.0051)
-        agree(C.calculate_corrected_calcium, kw, P.calcium_open_medicine, P.calcium_clincalc, tol=0.051)
+        agree(C.calculate_corrected_calcium, kw, P.calcium_open_medicine, Q.calcium_clincalc, tol=0.051)
 
 
 @PEER
@@ -437,7 +438,7 @@ def test_corrected_sodium_vs_peers(cases):
         agree(C.calculate_corrected_sodium, dict(kw, formula="hillier"), P.sodium_medcalc, tol=0.0051)
         agree(C.calculate_corrected_sodium, dict(kw, formula="katz"), P.sodium_open_medicine, tol=0.051)
         for formula in ("katz", "hillier"):
-            agree(C.calculate_corrected_sodium, dict(kw, formula=formula), P.sodium_clincalc, tol=0.051)
+            agree(C.calculate_corrected_sodium, dict(kw, formula=formula), Q.sodium_clincalc, tol=0.051)
 
 
 @PEER
@@ -469,7 +470,7 @@ def test_bishop_vs_open_medicine(cases):
              color=choice(["blue_pale", "acrocyanosis", "pink"])))
 def test_apgar_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_apgar, kw, P.apgar_open_medicine, P.apgar_clincalc)
+        agree(C.calculate_apgar, kw, P.apgar_open_medicine, Q.apgar_clincalc)
 
 
 # ----------------------------------------------------------------------------- psychiatry
@@ -480,29 +481,29 @@ def test_apgar_vs_peers(cases):
 @given(batch(responses=items(9, 0, 3)))
 def test_phq9_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_phq9, kw, P.phq9_open_medicine, P.phq9_clincalc)
+        agree(C.administer_phq9, kw, P.phq9_open_medicine, Q.phq9_clincalc)
 
 
 @PEER
 @given(batch(responses=items(7, 0, 3)))
 def test_gad7_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_gad7, kw, P.gad7_open_medicine, P.gad7_clincalc)
+        agree(C.administer_gad7, kw, P.gad7_open_medicine, Q.gad7_clincalc)
 
 
 @PEER
 @given(batch(responses=items(10, 0, 3)))
 def test_epds_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_epds, kw, P.epds_open_medicine, P.epds_clincalc)
+        agree(C.administer_epds, kw, P.epds_open_medicine, Q.epds_clincalc)
 
 
 @PEER
 @given(batch(responses=items(3, 0, 4), sex=sexes))
 def test_audit_c_vs_peers(cases):
     for kw in cases:
-        result = agree(C.administer_audit_c, kw, P.audit_c_open_medicine, P.audit_c_clincalc)
-        positive = clincalc_positive = P.clincalc.calculate("auditc", kw)["working"]["screen_positive"]
+        result = agree(C.administer_audit_c, kw, P.audit_c_open_medicine, Q.audit_c_clincalc)
+        positive = clincalc_positive = Q.clincalc.calculate("auditc", kw)["working"]["screen_positive"]
         assert (C.administer_audit_c(**kw).category == "positive") == positive, (kw, result, clincalc_positive)
 
 
@@ -523,7 +524,7 @@ ciwa_items = dict(nausea_vomiting=ints(0, 7), tremor=ints(0, 7), paroxysmal_swea
 @given(batch(**ciwa_items))
 def test_ciwa_ar_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_ciwa_ar, kw, P.ciwa_open_medicine, P.ciwa_clincalc)
+        agree(C.calculate_ciwa_ar, kw, P.ciwa_open_medicine, Q.ciwa_clincalc)
 
 
 # ----------------------------------------------------------------------------- emergency / neurology
@@ -534,7 +535,7 @@ def test_ciwa_ar_vs_peers(cases):
              temperature_c=tenths(36, 40.5)))
 def test_centor_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_centor, kw, P.centor_medcalc, P.centor_open_medicine, P.centor_clincalc)
+        agree(C.calculate_centor, kw, P.centor_medcalc, P.centor_open_medicine, Q.centor_clincalc)
 
 
 @PEER
@@ -555,7 +556,7 @@ def test_parkland_vs_open_medicine(cases):
 @given(batch(bools=('migration_to_rlq', 'anorexia', 'nausea_vomiting', 'rlq_tenderness', 'rebound_tenderness',), temperature_c=tenths(36, 40), wbc_k_per_ul=tenths(3, 25), neutrophil_percent=ints(40, 95)))
 def test_alvarado_vs_clincalc(cases):
     for kw in cases:
-        agree(C.calculate_alvarado, kw, P.alvarado_clincalc)
+        agree(C.calculate_alvarado, kw, Q.alvarado_clincalc)
 
 
 @PEER
@@ -587,7 +588,7 @@ def test_nihss_vs_peers(cases):
         # only in limbs that can move (motor < 4). Compare where neither applies.
         limbs = ("motor_arm_left", "motor_arm_right", "motor_leg_left", "motor_leg_right")
         if kw["loc"] < 3 and all(kw[limb] < 4 for limb in limbs):
-            agree(C.calculate_nihss, kw, P.nihss_clincalc)
+            agree(C.calculate_nihss, kw, Q.nihss_clincalc)
 
 
 @PEER
@@ -596,4 +597,4 @@ def test_nihss_vs_peers(cases):
              duration_minutes=ints(0, 300)))
 def test_abcd2_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_abcd2, kw, P.abcd2_open_medicine, P.abcd2_clincalc)
+        agree(C.calculate_abcd2, kw, P.abcd2_open_medicine, Q.abcd2_clincalc)
