@@ -88,6 +88,9 @@ class BaseSafetyContext:
     """
 
     use_builtin_fallback: bool = False
+    #: Optional `ToolConventions` for this domain's tool names; `score_episode` uses them when the
+    #: caller passes none (the environment passes only the context).
+    conventions: Any = None
 
     def patient_allergies(self, patient_id: str) -> list[str]:
         return []

@@ -62,7 +62,8 @@ def score_episode(trajectory: Trajectory, task: Task, weights: RewardWeights | d
         context: The domain's `SafetyContext` (world-state facts); None uses the built-in lexicon.
         grader: Assertion grader; default: the LLM judge when configured by environment
             variables, else the rule-and-embedding grader.
-        conventions: Tool-name conventions; default `DEFAULT_CONVENTIONS`.
+        conventions: Tool-name conventions; default: `context.conventions` when the domain's
+            context has one, else `DEFAULT_CONVENTIONS`.
 
     Example:
         >>> from envs.core.trajectory import Trajectory, TurnRecord, ToolCallRecord
@@ -75,6 +76,8 @@ def score_episode(trajectory: Trajectory, task: Task, weights: RewardWeights | d
         (1.0, True, 1.0)
     """
     w = RewardWeights.coerce(weights)
+    if conventions is None and isinstance(getattr(context, "conventions", None), ToolConventions):
+        conventions = context.conventions  # a domain's own tool names travel with its context
     view = EpisodeView(trajectory, task, conventions)
     crit = task.evaluation_criteria
     errors: list[str] = []
