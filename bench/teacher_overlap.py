@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import envs  # noqa: E402,F401  (CPU runtime defaults)
+import envs  # noqa: F401  (CPU runtime defaults)
 
 CORPUS = [
     "A 64-year-old man on warfarin presents with melena; INR is 5.2. What is the next step?",

@@ -111,7 +111,7 @@ class LearnerConfig(_Strict):
     reference_model_dir: str | None = Field(default=None, description="frozen KL reference; None = the initial policy")
 
     @model_validator(mode="after")
-    def _consistent(self) -> "LearnerConfig":
+    def _consistent(self) -> LearnerConfig:
         if self.backend == "torch" and self.deepspeed.world_size != 1:
             raise ValueError("learner.deepspeed.world_size > 1 needs learner.backend = 'deepspeed'")
         if self.device == "cuda" and self.deepspeed.world_size > 1 and self.deepspeed.num_gpus_per_rank <= 0:
@@ -139,7 +139,7 @@ class HintConfig(_Strict):
     reward_threshold: float = 0.0
 
     @model_validator(mode="after")
-    def _template_has_slot(self) -> "HintConfig":
+    def _template_has_slot(self) -> HintConfig:
         if "{hint}" not in self.template:
             raise ValueError("teacher.hints.template must contain the placeholder {hint}")
         return self

@@ -371,10 +371,10 @@ def token_stats(
     B, T = input_ids.shape
     if decoder is not None and head is not None:
         hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
-        logits_of = lambda lo, hi: head(hidden[:, lo:hi])  # noqa: E731
+        logits_of = lambda lo, hi: head(hidden[:, lo:hi])
     else:  # a model without the decoder/head split: full logits in one go
         full = model(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).logits
-        logits_of = lambda lo, hi: full[:, lo:hi]  # noqa: E731
+        logits_of = lambda lo, hi: full[:, lo:hi]
 
     # Predictions for targets 1..T-1 come from positions 0..T-2.
     targets = input_ids[:, 1:]

@@ -26,6 +26,7 @@ repository (no GPU was available while it was written).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -185,7 +186,7 @@ class WeightSyncGroup:
         try:
             self.store = dist.TCPStore(config.master_addr, config.master_port, world_size, is_master=rank == 0,
                                        timeout=self.timeout, wait_for_workers=False)
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             raise WeightSyncError(f"{self.names[rank]}: cannot reach the weight-sync store at "
                                   f"{config.master_addr}:{config.master_port} ({self.names[0]}): {exc}") from exc
         self.store.set(f"joined/{rank}", self.names[rank])
@@ -225,7 +226,7 @@ class WeightSyncGroup:
         work = self.pg.broadcast([flat], opts)
         try:
             work.wait(self.timeout)
-        except Exception as exc:  # noqa: BLE001  (timeouts and peer failures surface here)
+        except Exception as exc:
             raise WeightSyncError(self._stall_message(version, bucket, exc)) from exc
 
     def _stall_message(self, version: int, bucket: int, exc: Exception) -> str:
@@ -312,8 +313,6 @@ class WeightSyncGroup:
         """Tear the group down (after an error, NCCL communicators must be aborted, not reused)."""
         abort = getattr(self.pg, "abort", None)
         if callable(abort):
-            try:
+            with contextlib.suppress(Exception):  # best effort: the group is unusable either way
                 abort()
-            except Exception:  # noqa: BLE001  (best effort)
-                pass
         self.pg = None

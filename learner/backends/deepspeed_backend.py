@@ -112,10 +112,9 @@ class DeepSpeedBackend(LearnerBackend):
                  master_port: int | None = None):
         super().__init__(config, model_dir, seed, rank, world_size)
         _prepare_environment(config, rank, world_size, master_port)
-        import torch._dynamo  # noqa: F401  (before zero.Init patches Tensor.__new__)
-
         import deepspeed
         import deepspeed.comm
+        import torch._dynamo  # must be loaded before zero.Init patches Tensor.__new__ (stack notes 4)
 
         if config.device == "cpu" and config.deepspeed.skip_shm_build:
             # `import deepspeed.comm.torch` would bind the torch package (deepspeed.comm has a `torch`
@@ -265,9 +264,7 @@ class DeepSpeedBackend(LearnerBackend):
         return contextlib.nullcontext()
 
     def shutdown(self) -> None:
-        try:
+        with contextlib.suppress(Exception):  # best effort at teardown
             self._engine.destroy()
-        except Exception:  # noqa: BLE001  (best effort at teardown)
-            pass
         if torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()

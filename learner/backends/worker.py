@@ -20,7 +20,14 @@ from actors.types import RolloutSample, TeacherOutput
 from learner.backends.base import LearnerBackend, make_backend
 from learner.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
 from learner.config_models import LearnerConfig
-from learner.losses import BatchNorms, LossInputs, compute_loss, finalize_metrics, group_advantages, turn_weights
+from learner.losses import (
+    BatchNorms,
+    LossInputs,
+    compute_loss,
+    finalize_metrics,
+    group_advantages,
+    turn_weights,
+)
 from learner.model import pad_batch, token_stats
 
 

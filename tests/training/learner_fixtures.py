@@ -26,7 +26,7 @@ CORPUS = [
 ] * 40
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def tiny_model_dir(hidden: int = 64, layers: int = 2, vocab: int = 2048, seed: int = 0) -> str:
     """Build (once per process) a tiny Qwen3 model plus tokenizer; returns its directory."""
     from learner.model import build_tiny_model, train_tokenizer
