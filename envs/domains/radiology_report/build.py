@@ -1,0 +1,79 @@
+"""Build the radiology-report database and generated tasks under `domain_build_dir("radiology_report")`.
+
+    build(offline=False, force=False) -> dict
+
+Inputs: our synthetic studies (`generate.py`, seeded), our authored studies
+(`studies_authored.json`) and report templates (`templates.json`). Report-workflow tasks carry the
+expected final database state (`expected_db_hash`), computed by replaying their expected actions
+on a fresh database. Deterministic; skipped when the inputs are unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections import Counter
+from pathlib import Path
+
+from envs.core.domain import write_split
+from envs.core.paths import domain_build_dir
+from envs.core.task import Task
+from envs.domains.psychiatry.build import assign_splits
+from envs.domains.radiology_report import generate as G
+from envs.domains.radiology_report.data_model import RadiologyDB, ReportTemplate, Study
+from envs.domains.radiology_report.tools import RadiologyTools
+
+HERE = Path(__file__).parent
+NAME = "radiology_report"
+SEED = 5150
+SPLIT_SIZES = {"validation": 10, "test": 32}
+
+
+def _fingerprint() -> str:
+    h = hashlib.sha256()
+    for name in ("build.py", "generate.py", "tools.py", "data_model.py", "templates.json", "studies_authored.json", "tasks.json"):
+        h.update((HERE / name).read_bytes())
+    return h.hexdigest()
+
+
+def expected_hash(db: RadiologyDB, task: dict) -> str:
+    """Replay a task's expected actions on a fork of the database; the resulting content hash."""
+    tools = RadiologyTools(db.fork())
+    for a in task["evaluation_criteria"]["actions"]:
+        outcome = tools.call(a["name"], a["arguments"])
+        if outcome.error:
+            raise ValueError(f"{task['id']}: expected action {a['name']} fails: {outcome.error}")
+    return tools.db.content_hash()
+
+
+def build(offline: bool = False, force: bool = False) -> dict:
+    out = domain_build_dir(NAME)
+    manifest_path = out / "manifest.json"
+    fingerprint = _fingerprint()
+    if not force and manifest_path.exists():
+        manifest = json.loads(manifest_path.read_text())
+        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
+            return {"skipped": "up to date", **manifest["summary"]}
+    out.mkdir(parents=True, exist_ok=True)
+    templates = {k: ReportTemplate(key=k, **v) for k, v in json.loads((HERE / "templates.json").read_text())["templates"].items()}
+    studies, tasks = G.generate(SEED, {k: t.critical_categories for k, t in templates.items()})
+    authored = [Study.model_validate(s) for s in json.loads((HERE / "studies_authored.json").read_text(encoding="utf-8"))]
+    all_studies = {s.study_id: s for s in [*studies, *authored]}
+    if len(all_studies) != len(studies) + len(authored):
+        raise ValueError("radiology_report: duplicate study ids between generated and authored studies")
+    db = RadiologyDB(studies=all_studies, templates=templates)
+    db.dump(out / "db.json")
+    for t in tasks:
+        if t["description"]["task_type"] == "report_workflow":
+            t["evaluation_criteria"]["expected_db_hash"] = expected_hash(db, t)
+            t["evaluation_criteria"]["reward_basis"] = [*t["evaluation_criteria"]["reward_basis"], "DB"]
+        Task.model_validate(t)
+    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+    write_split(out / "split_tasks.json", splits)
+    summary = {"studies": len(all_studies), "tasks": len(tasks),
+               "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
+               "splits": {k: len(v) for k, v in splits.items()}}
+    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"]}
+    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return summary

@@ -1,0 +1,165 @@
+"""The radiology-report database: imaging studies with structured findings, report templates, and
+the reports radiologists draft, communicate and finalise.
+
+Studies and templates are read-only (shared by every episode). The report state is structured:
+status, category and whether a critical result was communicated. `content_hash` covers that
+structured state only (not the narrative text, not the read-only studies), so two reports that
+reach the same decisions hash equal and a task can be graded by its final database state.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+
+from envs.core.db import DB
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class PatientInfo(_Record):
+    age: int
+    sex: Literal["female", "male"]
+    history: str
+    smoking_pack_years: float = 0
+    lung_cancer_risk: Literal["low", "high"] = "low"
+    risk_factors: list[str] = Field(default_factory=list)
+
+
+class Finding(_Record):
+    finding_id: str
+    kind: Literal["thyroid_nodule", "breast_mass", "breast_calcifications", "breast_distortion", "lung_nodule", "other"]
+    location: str
+    description: str = ""
+    # thyroid (ACR TI-RADS lexicon)
+    dimensions_cm: list[float] | None = None
+    composition: str | None = None
+    echogenicity: str | None = None
+    shape: str | None = None
+    margin: str | None = None
+    echogenic_foci: list[str] | None = None
+    # breast (BI-RADS lexicon)
+    mass_shape: str | None = None
+    mass_margin: str | None = None
+    mass_typically_benign: bool | None = None
+    stable_2_years: bool | None = None
+    calcification_morphology: str | None = None
+    size_mm: float | None = None
+    # lung
+    nodule_type: str | None = None
+    long_axis_mm: float | None = None
+    short_axis_mm: float | None = None
+    solid_long_mm: float | None = None
+    solid_short_mm: float | None = None
+    suspicious_features: list[str] = Field(default_factory=list)
+
+
+class PriorStudy(_Record):
+    study_id: str
+    months_ago: float
+    report: str
+    category: str | None = None
+    findings: list[Finding] = Field(default_factory=list)
+
+
+class Study(_Record):
+    study_id: str
+    modality: Literal["US", "MG", "CT", "LDCT"]
+    region: Literal["thyroid", "breast", "chest"]
+    exam: str
+    indication: str
+    technique: str
+    priority: Literal["routine", "urgent"] = "routine"
+    patient: PatientInfo
+    findings: list[Finding]
+    exam_complete: bool = True
+    known_biopsy_proven_malignancy: bool = False
+    prior: PriorStudy | None = None
+    provenance: dict[str, str] = Field(default_factory=dict)
+
+
+class ReportTemplate(_Record):
+    key: str
+    modality: str
+    region: str
+    title: str
+    sections: list[str]
+    required_elements: list[str]
+    category_system: str
+    category_pattern: str
+    critical_categories: list[str]
+    reference: str
+
+
+class Report(_Record):
+    study_id: str
+    status: Literal["draft", "final"]
+    category: str
+    findings_text: str
+    impression: str
+    recommendation: str
+    revisions: int = 0
+
+
+class CriticalCommunication(_Record):
+    study_id: str
+    recipient: str
+    method: Literal["phone", "in person", "secure message"]
+    finding: str
+
+
+REFERENCE_FIELDS = ("studies", "templates")
+STATE_FIELDS = ("reports", "communications")
+
+
+class RadiologyDB(DB):
+    studies: dict[str, Study]
+    templates: dict[str, ReportTemplate]
+    reports: dict[str, Report] = Field(default_factory=dict)
+    communications: list[CriticalCommunication] = Field(default_factory=list)
+
+    _reference_hash: str | None = PrivateAttr(default=None)
+
+    def reference_hash(self) -> str:
+        if self._reference_hash is None:
+            payload = json.dumps({f: _dump(getattr(self, f)) for f in REFERENCE_FIELDS}, sort_keys=True,
+                                 ensure_ascii=False, separators=(",", ":"))
+            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
+        return self._reference_hash
+
+    def fork(self) -> "RadiologyDB":
+        clone = type(self).model_construct(
+            studies=self.studies, templates=self.templates,
+            reports={k: r.model_copy(deep=True) for k, r in self.reports.items()},
+            communications=[c.model_copy(deep=True) for c in self.communications])
+        clone._reference_hash = self.reference_hash()
+        return clone
+
+    def __deepcopy__(self, memo: dict | None = None) -> "RadiologyDB":
+        return self.fork()
+
+    def decision_state(self) -> dict:
+        """The graded state: per report its status and category; per communication the study and method."""
+        return {"reports": {k: {"status": r.status, "category": r.category} for k, r in sorted(self.reports.items())},
+                "communications": sorted({(c.study_id, c.method) for c in self.communications})}
+
+    def content_hash(self) -> str:
+        """SHA-256 of the decision state only: the read-only studies and templates are the same in
+        every episode, so tasks can carry an expected hash that survives rebuilds of the study set."""
+        state = json.dumps(self.decision_state(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(state.encode("utf-8")).hexdigest()
+
+
+def _dump(value):
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
+    if isinstance(value, dict):
+        return {k: _dump(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_dump(v) for v in value]
+    return value
