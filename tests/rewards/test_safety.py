@@ -275,3 +275,13 @@ def test_drugs_ordered_later_are_not_current_medications_of_earlier_orders():
     # metformin (turn 1) was added to lisinopril only; warfarin came after a check
     assert set(found) == {"process.no_interaction_check"}
     assert "warfarin" not in found["process.no_interaction_check"].evidence
+
+
+def test_only_diagnosis_tasks_treat_the_final_answer_as_a_diagnosis():
+    timeline = patient_task(ticket="On what date was sinusitis first recorded?", correct_answer="1925-12-19",
+                            answer_type="exact", description={"task_type": "timeline_first_diagnosis"},
+                            evaluation_criteria={"actions": [{"name": "get_condition_history", "arguments": {"patient_id": "P1"}}]})
+    traj = episode(timeline, turn(call("get_condition_history", {"patient_id": "P1"})), answer="1925-12-19")
+    assert ids(traj, timeline) == set()
+    dx = timeline.model_copy(update={"description": timeline.description.model_copy(update={"task_type": "diagnostic_workflow"})})
+    assert "workup.no_confirmatory_test" in ids(traj, dx)
