@@ -63,8 +63,10 @@ def _peers() -> dict[str, list[tuple[str, object]]]:
         "calculate_meld_na": [(mc, P.meld_na_medcalc), (om, P.meld_na_open_medicine)],
         "calculate_child_pugh": [(mc, P.child_pugh_medcalc), (om, P.child_pugh_open_medicine)],
         "calculate_glasgow_blatchford": [(mc, P.gbs_medcalc), (om, P.gbs_open_medicine)],
-        "calculate_creatinine_clearance": [(mc, lambda **kw: P.cg_medcalc(**kw, height_cm=175.0)),
-                                           (om, P.cg_open_medicine)],
+        "calculate_creatinine_clearance": [
+            (mc, lambda **kw: P.cg_medcalc(**kw, height_cm=175.0)),
+            (om, P.cg_open_medicine),
+        ],
         "calculate_ckd_epi_2021": [(mc, P.ckd_epi_medcalc), (om, P.ckd_epi_open_medicine)],
         "calculate_fena": [(mc, P.fena_medcalc)],
         "calculate_free_water_deficit": [(mc, P.fwd_medcalc)],
@@ -132,8 +134,11 @@ def _fmt_rate(x: float) -> str:
 
 def markdown(rows: list[dict]) -> str:
     labels = ["medcalc-bench", "open-medicine"]
-    head = ("| instrument | ours calls/s | ours us/call | "
-            + " | ".join(f"{lab} calls/s | ours/{lab}" for lab in labels) + " |")
+    head = (
+        "| instrument | ours calls/s | ours us/call | "
+        + " | ".join(f"{lab} calls/s | ours/{lab}" for lab in labels)
+        + " |"
+    )
     sep = "|" + "---|" * (3 + 2 * len(labels))
     lines = [head, sep]
     for r in rows:
@@ -148,19 +153,26 @@ def markdown(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print JSON instead of a Markdown table")
-    parser.add_argument("--strict", action="store_true", help=f"exit 1 if an instrument exceeds {BUDGET_US} us/call")
+    parser.add_argument(
+        "--strict", action="store_true", help=f"exit 1 if an instrument exceeds {BUDGET_US:g} us/call"
+    )
     args = parser.parse_args(argv)
     rows = run()
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
-        print(f"Clinical calculators: {len(rows)} instruments, Python {sys.version.split()[0]}, "
-              f"budget {BUDGET_US:g} us/call\n")
+        print(
+            f"Clinical calculators: {len(rows)} instruments, Python {sys.version.split()[0]}, "
+            f"budget {BUDGET_US:g} us/call\n"
+        )
         print(markdown(rows))
     slow = [r for r in rows if r["us_per_call"] > BUDGET_US and r["instrument"] not in OVER_BUDGET_OK]
     worst = max(rows, key=lambda r: r["us_per_call"])
-    print(f"\nslowest: {worst['instrument']} {worst['us_per_call']:.1f} us/call; "
-          f"over budget: {', '.join(r['instrument'] for r in slow) or 'none'}", file=sys.stderr)
+    print(
+        f"\nslowest: {worst['instrument']} {worst['us_per_call']:.1f} us/call; "
+        f"over budget: {', '.join(r['instrument'] for r in slow) or 'none'}",
+        file=sys.stderr,
+    )
     return 1 if (args.strict and slow) else 0
 
 

@@ -66,8 +66,8 @@ from .psychiatry import (
 from .pulmonary import (
     calculate_crb65,
     calculate_curb65,
-    calculate_pesi,
     calculate_perc,
+    calculate_pesi,
     calculate_spesi,
     calculate_wells_pe,
 )
@@ -84,33 +84,72 @@ CALCULATORS: dict[str, Callable[..., ScoreResult]] = {
     fn.__name__: fn
     for fn in (
         # critical care
-        calculate_gcs, calculate_qsofa, calculate_sirs, calculate_news2, calculate_sofa, calculate_apache2,
-        calculate_shock_index, calculate_aa_gradient,
+        calculate_gcs,
+        calculate_qsofa,
+        calculate_sirs,
+        calculate_news2,
+        calculate_sofa,
+        calculate_apache2,
+        calculate_shock_index,
+        calculate_aa_gradient,
         # pulmonary
-        calculate_curb65, calculate_crb65, calculate_wells_pe, calculate_perc, calculate_pesi, calculate_spesi,
+        calculate_curb65,
+        calculate_crb65,
+        calculate_wells_pe,
+        calculate_perc,
+        calculate_pesi,
+        calculate_spesi,
         # cardiology
-        calculate_heart_score, calculate_timi_ua, calculate_cha2ds2_vasc, calculate_has_bled, calculate_wells_dvt,
-        calculate_qtc, calculate_map,
+        calculate_heart_score,
+        calculate_timi_ua,
+        calculate_cha2ds2_vasc,
+        calculate_has_bled,
+        calculate_wells_dvt,
+        calculate_qtc,
+        calculate_map,
         # hepatology / GI
-        calculate_meld_na, calculate_child_pugh, calculate_glasgow_blatchford,
+        calculate_meld_na,
+        calculate_child_pugh,
+        calculate_glasgow_blatchford,
         # renal
-        calculate_creatinine_clearance, calculate_ckd_epi_2021, calculate_bedside_schwartz, calculate_fena,
+        calculate_creatinine_clearance,
+        calculate_ckd_epi_2021,
+        calculate_bedside_schwartz,
+        calculate_fena,
         calculate_free_water_deficit,
         # general
-        calculate_bmi, calculate_anion_gap, calculate_corrected_calcium, calculate_corrected_sodium,
+        calculate_bmi,
+        calculate_anion_gap,
+        calculate_corrected_calcium,
+        calculate_corrected_sodium,
         calculate_serum_osmolality,
         # emergency
-        calculate_esi_level, calculate_centor, calculate_revised_trauma_score, calculate_parkland,
-        calculate_alvarado, calculate_ottawa_ankle,
+        calculate_esi_level,
+        calculate_centor,
+        calculate_revised_trauma_score,
+        calculate_parkland,
+        calculate_alvarado,
+        calculate_ottawa_ankle,
         # neurology
-        calculate_nihss, calculate_abcd2,
+        calculate_nihss,
+        calculate_abcd2,
         # obstetrics
-        calculate_bishop_score, calculate_apgar, calculate_biophysical_profile,
+        calculate_bishop_score,
+        calculate_apgar,
+        calculate_biophysical_profile,
         # psychiatry
-        administer_phq9, administer_gad7, assess_suicide_risk, administer_epds, administer_audit_c,
-        administer_cage, calculate_ciwa_ar,
+        administer_phq9,
+        administer_gad7,
+        assess_suicide_risk,
+        administer_epds,
+        administer_audit_c,
+        administer_cage,
+        calculate_ciwa_ar,
         # radiology
-        calculate_tirads, calculate_birads, fleischner_recommendation, calculate_lung_rads,
+        calculate_tirads,
+        calculate_birads,
+        fleischner_recommendation,
+        calculate_lung_rads,
     )
 }
 

@@ -109,10 +109,20 @@ def make_result(
     test suite checks that every calculator's result round-trips through full validation.
     """
     obj = _new(ScoreResult)
-    _set(obj, "__dict__", {
-        "instrument": instrument, "score": score, "unit": unit, "category": category,
-        "interpretation": interpretation, "components": components, "reference": reference, "flags": flags,
-    })
+    _set(
+        obj,
+        "__dict__",
+        {
+            "instrument": instrument,
+            "score": score,
+            "unit": unit,
+            "category": category,
+            "interpretation": interpretation,
+            "components": components,
+            "reference": reference,
+            "flags": flags,
+        },
+    )
     _set(obj, "__pydantic_fields_set__", _ALL_FIELDS)
     _set(obj, "__pydantic_extra__", None)
     _set(obj, "__pydantic_private__", None)

@@ -54,9 +54,16 @@ _HCT = (((60, 4), (50, 2), (46, 1)), ((20, 4), (30, 2)))
 _WBC = (((40, 4), (20, 2), (15, 1)), ((1, 4), (3, 2)))
 
 # Approximate hospital death rates by APACHE II band (Knaus 1985, Fig. 2): nonoperative / postoperative.
-_MORTALITY = ((4, "0-4", "4%", "1%"), (9, "5-9", "8%", "3%"), (14, "10-14", "15%", "7%"),
-              (19, "15-19", "25%", "12%"), (24, "20-24", "40%", "30%"), (29, "25-29", "55%", "35%"),
-              (34, "30-34", "73%", "73%"), (71, "> 34", "85%", "88%"))
+_MORTALITY = (
+    (4, "0-4", "4%", "1%"),
+    (9, "5-9", "8%", "3%"),
+    (14, "10-14", "15%", "7%"),
+    (19, "15-19", "25%", "12%"),
+    (24, "20-24", "40%", "30%"),
+    (29, "25-29", "55%", "35%"),
+    (34, "30-34", "73%", "73%"),
+    (71, "> 34", "85%", "88%"),
+)
 
 
 def calculate_apache2(
@@ -79,7 +86,9 @@ def calculate_apache2(
     aa_gradient_mmhg: float | None = None,
     acute_renal_failure: bool = False,
     severe_organ_insufficiency_or_immunocompromised: bool = False,
-    admission_type: Literal["nonoperative", "emergency_postoperative", "elective_postoperative"] = "nonoperative",
+    admission_type: Literal[
+        "nonoperative", "emergency_postoperative", "elective_postoperative"
+    ] = "nonoperative",
 ) -> ScoreResult:
     """APACHE II severity-of-disease score (0-71) from the worst first-24-hour ICU values.
 
@@ -127,14 +136,17 @@ def calculate_apache2(
     paco2 = check_optional_number(fn, "paco2_mmhg", paco2_mmhg, 5, 200, "mmHg")
     aa = check_optional_number(fn, "aa_gradient_mmhg", aa_gradient_mmhg, 0, 800, "mmHg")
     arf = check_bool(fn, "acute_renal_failure", acute_renal_failure)
-    chronic = check_bool(fn, "severe_organ_insufficiency_or_immunocompromised",
-                         severe_organ_insufficiency_or_immunocompromised)
+    chronic = check_bool(
+        fn, "severe_organ_insufficiency_or_immunocompromised", severe_organ_insufficiency_or_immunocompromised
+    )
     adm = check_choice(fn, "admission_type", admission_type, _ADMISSION)
 
     if f >= 0.5:
         if aa is None:
             if paco2 is None:
-                raise CalculatorInputError(fn, "aa_gradient_mmhg", "given (or paco2_mmhg given) when fio2 >= 0.5", None)
+                raise CalculatorInputError(
+                    fn, "aa_gradient_mmhg", "given (or paco2_mmhg given) when fio2 >= 0.5", None
+                )
             aa = f * 713.0 - paco2 / 0.8 - pao2
         oxygenation = 4 if aa >= 500 else 3 if aa >= 350 else 2 if aa >= 200 else 0
     else:
@@ -147,10 +159,17 @@ def calculate_apache2(
         raise CalculatorInputError(fn, "arterial_ph", "given (or serum_bicarbonate_mmol_l given)", None)
     creat = _up(cr, *_CR) * (2 if arf else 1)
     comps = {
-        "temperature": _up(t, *_TEMP), "mean_arterial_pressure": _up(mp, *_MAP),
-        "heart_rate": _up(hr, *_HR), "respiratory_rate": _up(rr, *_RR), "oxygenation": oxygenation,
-        "acid_base": acid_base, "sodium": _up(na, *_NA), "potassium": _up(k, *_K),
-        "creatinine": creat, "hematocrit": _up(hct, *_HCT), "white_cells": _up(wbc, *_WBC),
+        "temperature": _up(t, *_TEMP),
+        "mean_arterial_pressure": _up(mp, *_MAP),
+        "heart_rate": _up(hr, *_HR),
+        "respiratory_rate": _up(rr, *_RR),
+        "oxygenation": oxygenation,
+        "acid_base": acid_base,
+        "sodium": _up(na, *_NA),
+        "potassium": _up(k, *_K),
+        "creatinine": creat,
+        "hematocrit": _up(hct, *_HCT),
+        "white_cells": _up(wbc, *_WBC),
         "gcs": 15 - g,
     }
     aps = sum(comps.values())
@@ -165,9 +184,13 @@ def calculate_apache2(
             break
     mortality = nonop if adm == "nonoperative" else postop
     return make_result(
-        "APACHE II", total, "points", f"APACHE II {band}",
+        "APACHE II",
+        total,
+        "points",
+        f"APACHE II {band}",
         f"APACHE II {total} (acute physiology {aps}, age {age_points}, chronic health {chronic_points}): "
-        f"approximate hospital mortality {mortality} for {'nonoperative' if adm == 'nonoperative' else 'postoperative'} "
+        f"approximate hospital mortality {mortality} for "
+        f"{'nonoperative' if adm == 'nonoperative' else 'postoperative'} "
         f"patients in the {band} band (Knaus 1985).",
         comps,
         "Knaus WA, Draper EA, Wagner DP, Zimmerman JE. APACHE II: a severity of disease classification "

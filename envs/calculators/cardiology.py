@@ -10,8 +10,8 @@ import math
 from typing import Literal
 
 from ._core import (
-    ScoreResult,
     CalculatorInputError,
+    ScoreResult,
     check_bool,
     check_choice,
     check_int,
@@ -67,7 +67,12 @@ def calculate_heart_score(
     else:
         cat, text = "high risk", "6-week MACE about 50%: early invasive strategy"
     return make_result(
-        "HEART score", total, "points", cat, f"HEART {total}/10 ({cat}): {text}.", comps,
+        "HEART score",
+        total,
+        "points",
+        cat,
+        f"HEART {total}/10 ({cat}): {text}.",
+        comps,
         "Six AJ, Backus BE, Kelder JC. Chest pain in the emergency room: value of the HEART score. "
         "Neth Heart J 2008;16:191-196; Backus BE et al. Int J Cardiol 2013;168:2153-2158.",
     )
@@ -113,10 +118,14 @@ def calculate_timi_ua(
     total = sum(comps.values())
     cat = "low risk" if total <= 2 else "intermediate risk" if total <= 4 else "high risk"
     return make_result(
-        "TIMI UA/NSTEMI", total, "points", cat,
+        "TIMI UA/NSTEMI",
+        total,
+        "points",
+        cat,
         f"TIMI {total}/7 ({cat}): 14-day risk of death, MI or urgent revascularisation {_TIMI_RISK[total]}.",
         comps,
-        "Antman EM et al. The TIMI risk score for unstable angina/non-ST elevation MI. JAMA 2000;284:835-842.",
+        "Antman EM et al. The TIMI risk score for unstable angina/non-ST elevation MI. JAMA "
+        "2000;284:835-842.",
     )
 
 
@@ -152,7 +161,8 @@ def calculate_cha2ds2_vasc(
         "hypertension": int(check_bool(fn, "hypertension", hypertension)),
         "age": 2 if a >= 75 else 1 if a >= 65 else 0,
         "diabetes": int(check_bool(fn, "diabetes", diabetes)),
-        "stroke_tia_thromboembolism": 2 * check_bool(fn, "stroke_tia_thromboembolism", stroke_tia_thromboembolism),
+        "stroke_tia_thromboembolism": 2
+        * check_bool(fn, "stroke_tia_thromboembolism", stroke_tia_thromboembolism),
         "vascular_disease": int(check_bool(fn, "vascular_disease", vascular_disease)),
         "sex_female": int(s == "female"),
     }
@@ -165,11 +175,15 @@ def calculate_cha2ds2_vasc(
     else:
         cat, text = "high risk", "oral anticoagulation recommended"
     return make_result(
-        "CHA2DS2-VASc", total, "points", cat,
+        "CHA2DS2-VASc",
+        total,
+        "points",
+        cat,
         f"CHA2DS2-VASc {total} ({cat}; adjusted stroke rate about {_CHADS_RATE[total]}/year): {text}.",
         comps,
         "Lip GYH et al. Refining clinical risk stratification for predicting stroke and thromboembolism "
-        "in atrial fibrillation. Chest 2010;137:263-272; thresholds: Hindricks G et al. 2020 ESC AF guideline.",
+        "in atrial fibrillation. Chest 2010;137:263-272; thresholds: Hindricks G et al. 2020 ESC AF "
+        "guideline.",
     )
 
 
@@ -208,7 +222,9 @@ def calculate_has_bled(
         "abnormal_renal_function": int(check_bool(fn, "abnormal_renal_function", abnormal_renal_function)),
         "abnormal_liver_function": int(check_bool(fn, "abnormal_liver_function", abnormal_liver_function)),
         "stroke": int(check_bool(fn, "stroke_history", stroke_history)),
-        "bleeding": int(check_bool(fn, "bleeding_history_or_predisposition", bleeding_history_or_predisposition)),
+        "bleeding": int(
+            check_bool(fn, "bleeding_history_or_predisposition", bleeding_history_or_predisposition)
+        ),
         "labile_inr": int(check_bool(fn, "labile_inr", labile_inr)),
         "elderly_gt_65": int(a > 65),
         "drugs": int(check_bool(fn, "antiplatelet_or_nsaid_use", antiplatelet_or_nsaid_use)),
@@ -223,10 +239,14 @@ def calculate_has_bled(
     else:
         cat, text = "low risk", "low bleeding risk"
     return make_result(
-        "HAS-BLED", total, "points", cat,
+        "HAS-BLED",
+        total,
+        "points",
+        cat,
         f"HAS-BLED {total} ({cat}; "
         + (f"about {rate} bleeds per 100 patient-years" if rate else "too few patients above 5 for a rate")
-        + f"): {text}.", comps,
+        + f"): {text}.",
+        comps,
         "Pisters R et al. A novel user-friendly score (HAS-BLED) to assess 1-year risk of major bleeding "
         "in patients with atrial fibrillation. Chest 2010;138:1093-1100.",
     )
@@ -259,21 +279,44 @@ def calculate_wells_dvt(
         alternative_diagnosis_as_likely: True if an alternative diagnosis is at least as likely (-2).
     """
     fn = "calculate_wells_dvt"
-    names = ("active_cancer", "paralysis_paresis_or_cast", "bedridden_or_major_surgery", "localized_tenderness",
-             "entire_leg_swollen", "calf_swelling_3cm", "pitting_edema", "collateral_superficial_veins",
-             "previous_dvt")
-    values = (active_cancer, paralysis_paresis_or_cast, bedridden_or_major_surgery, localized_tenderness,
-              entire_leg_swollen, calf_swelling_3cm, pitting_edema, collateral_superficial_veins, previous_dvt)
+    names = (
+        "active_cancer",
+        "paralysis_paresis_or_cast",
+        "bedridden_or_major_surgery",
+        "localized_tenderness",
+        "entire_leg_swollen",
+        "calf_swelling_3cm",
+        "pitting_edema",
+        "collateral_superficial_veins",
+        "previous_dvt",
+    )
+    values = (
+        active_cancer,
+        paralysis_paresis_or_cast,
+        bedridden_or_major_surgery,
+        localized_tenderness,
+        entire_leg_swollen,
+        calf_swelling_3cm,
+        pitting_edema,
+        collateral_superficial_veins,
+        previous_dvt,
+    )
     comps = {n: int(check_bool(fn, n, v)) for n, v in zip(names, values)}
     comps["alternative_diagnosis_as_likely"] = -2 * check_bool(
-        fn, "alternative_diagnosis_as_likely", alternative_diagnosis_as_likely)
+        fn, "alternative_diagnosis_as_likely", alternative_diagnosis_as_likely
+    )
     total = sum(comps.values())
     if total >= 2:
         cat, text = "DVT likely", "proceed to proximal-leg ultrasound"
     else:
         cat, text = "DVT unlikely", "a negative D-dimer excludes DVT"
     return make_result(
-        "Wells DVT", total, "points", cat, f"Wells DVT {total} ({cat}): {text}.", comps,
+        "Wells DVT",
+        total,
+        "points",
+        cat,
+        f"Wells DVT {total} ({cat}): {text}.",
+        comps,
         "Wells PS et al. Evaluation of D-dimer in the diagnosis of suspected deep-vein thrombosis. "
         "N Engl J Med 2003;349:1227-1235 (two-level score: >= 2 likely).",
     )
@@ -320,7 +363,12 @@ def calculate_qtc(
     else:
         cat, text = "normal", "QTc within normal limits"
     return make_result(
-        "QTc", qtc, "ms", cat, f"QTc ({f}) {qtc:.0f} ms: {text}.", {"rr_interval_s": rr, "formula": f},
+        "QTc",
+        qtc,
+        "ms",
+        cat,
+        f"QTc ({f}) {qtc:.0f} ms: {text}.",
+        {"rr_interval_s": rr, "formula": f},
         "Bazett HC. Heart 1920;7:353-370; Fridericia LS. Acta Med Scand 1920;53:469-486; Sagie A et al. "
         "(Framingham) Am J Cardiol 1992;70:797-801; Hodges M. J Am Coll Cardiol 1983;1:694. Thresholds: "
         "Rautaharju PM et al. AHA/ACCF/HRS recommendations, Circulation 2009;119:e241-e250.",
@@ -345,7 +393,11 @@ def calculate_map(systolic_bp: float, diastolic_bp: float) -> ScoreResult:
     else:
         cat, text = "at or above target", "at or above the 65 mmHg perfusion target"
     return make_result(
-        "Mean arterial pressure", value, "mmHg", cat, f"MAP {value:.0f} mmHg: {text}.",
+        "Mean arterial pressure",
+        value,
+        "mmHg",
+        cat,
+        f"MAP {value:.0f} mmHg: {text}.",
         {"pulse_pressure_mmhg": sbp - dbp},
         "MAP = DBP + (SBP - DBP)/3 (standard estimate); target: Evans L et al. Surviving Sepsis Campaign "
         "2021 guidelines, Crit Care Med 2021;49:e1063-e1143.",

@@ -26,8 +26,10 @@ from ._core import (
     make_result,
 )
 
-_FLEISCHNER_REF = ("MacMahon H et al. Guidelines for management of incidental pulmonary nodules detected on CT "
-                   "images: from the Fleischner Society 2017. Radiology 2017;284:228-243.")
+_FLEISCHNER_REF = (
+    "MacMahon H et al. Guidelines for management of incidental pulmonary nodules detected on CT "
+    "images: from the Fleischner Society 2017. Radiology 2017;284:228-243."
+)
 
 
 def fleischner_recommendation(
@@ -60,12 +62,18 @@ def fleischner_recommendation(
         elif size <= 8:
             if multi:
                 cat = "CT at 3-6 months"
-                text = ("CT at 3-6 months, then consider CT at 18-24 months" if r == "low"
-                        else "CT at 3-6 months, then CT at 18-24 months")
+                text = (
+                    "CT at 3-6 months, then consider CT at 18-24 months"
+                    if r == "low"
+                    else "CT at 3-6 months, then CT at 18-24 months"
+                )
             else:
                 cat = "CT at 6-12 months"
-                text = ("CT at 6-12 months, then consider CT at 18-24 months" if r == "low"
-                        else "CT at 6-12 months, then CT at 18-24 months")
+                text = (
+                    "CT at 6-12 months, then consider CT at 18-24 months"
+                    if r == "low"
+                    else "CT at 6-12 months, then CT at 18-24 months"
+                )
         elif multi:
             cat, text = "CT at 3-6 months", "CT at 3-6 months, then consider CT at 18-24 months"
         else:
@@ -84,14 +92,25 @@ def fleischner_recommendation(
         text = "CT at 6-12 months to confirm persistence, then CT every 2 years until 5 years"
     else:
         cat = "CT at 3-6 months"
-        text = ("CT at 3-6 months to confirm persistence; if unchanged and the solid component remains < 6 mm, "
-                "annual CT for 5 years (a solid component >= 6 mm is highly suspicious)")
+        text = (
+            "CT at 3-6 months to confirm persistence; if unchanged and the solid component remains < 6 mm, "
+            "annual CT for 5 years (a solid component >= 6 mm is highly suspicious)"
+        )
     return make_result(
-        "Fleischner 2017", size, "mm", cat,
+        "Fleischner 2017",
+        size,
+        "mm",
+        cat,
         f"Fleischner 2017, {'multiple' if multi else 'single'} {kind.replace('_', '-')} nodule {band}"
-        + (f" ({r} risk)" if kind == "solid" else "") + f": {text}.",
-        {"size_mm_rounded": size, "size_band": band, "nodule_type": kind, "multiple": multi,
-         "risk_applied": r if kind == "solid" else None},
+        + (f" ({r} risk)" if kind == "solid" else "")
+        + f": {text}.",
+        {
+            "size_mm_rounded": size,
+            "size_band": band,
+            "nodule_type": kind,
+            "multiple": multi,
+            "risk_applied": r if kind == "solid" else None,
+        },
         _FLEISCHNER_REF,
     )
 
@@ -101,7 +120,8 @@ _LR_MANAGEMENT = {
     "1": "continue annual screening with LDCT in 12 months",
     "2": "continue annual screening with LDCT in 12 months",
     "3": "LDCT in 6 months (malignancy 1-2%)",
-    "4A": "LDCT in 3 months; PET/CT may be considered if there is a solid component >= 8 mm (malignancy 5-15%)",
+    "4A": "LDCT in 3 months; PET/CT may be considered if there is a solid component >= 8 mm (malignancy "
+    "5-15%)",
     "4B": "diagnostic chest CT, PET/CT if solid component >= 8 mm, and/or tissue sampling (malignancy > 15%)",
     "4X": "diagnostic chest CT, PET/CT if solid component >= 8 mm, and/or tissue sampling (malignancy > 15%)",
 }
@@ -126,8 +146,16 @@ def _part_solid(size: float, solid: float, context: str) -> str:
 
 
 def calculate_lung_rads(
-    nodule_type: Literal["none", "benign_calcified_or_fat", "solid", "part_solid", "ground_glass",
-                         "perifissural", "airway_subsegmental", "airway_segmental_or_proximal"],
+    nodule_type: Literal[
+        "none",
+        "benign_calcified_or_fat",
+        "solid",
+        "part_solid",
+        "ground_glass",
+        "perifissural",
+        "airway_subsegmental",
+        "airway_segmental_or_proximal",
+    ],
     size_mm: float = 0.0,
     solid_component_mm: float = 0.0,
     context: Literal["baseline", "new", "growing", "stable"] = "baseline",
@@ -154,9 +182,21 @@ def calculate_lung_rads(
         significant_other_finding: True for a clinically significant non-lung-cancer finding (S modifier).
     """
     fn = "calculate_lung_rads"
-    kind = check_choice(fn, "nodule_type", nodule_type, (
-        "none", "benign_calcified_or_fat", "solid", "part_solid", "ground_glass", "perifissural",
-        "airway_subsegmental", "airway_segmental_or_proximal"))
+    kind = check_choice(
+        fn,
+        "nodule_type",
+        nodule_type,
+        (
+            "none",
+            "benign_calcified_or_fat",
+            "solid",
+            "part_solid",
+            "ground_glass",
+            "perifissural",
+            "airway_subsegmental",
+            "airway_segmental_or_proximal",
+        ),
+    )
     size = round(check_number(fn, "size_mm", size_mm, 0, 100, "mm"), 1)
     solid = round(check_number(fn, "solid_component_mm", solid_component_mm, 0, 100, "mm"), 1)
     ctx = check_choice(fn, "context", context, ("baseline", "new", "growing", "stable"))
@@ -169,11 +209,21 @@ def calculate_lung_rads(
     if sized and size <= 0:
         raise CalculatorInputError(fn, "size_mm", f"> 0 mm for a {kind} nodule", size_mm)
     if kind == "part_solid" and not 0 < solid <= size:
-        raise CalculatorInputError(fn, "solid_component_mm", f"> 0 and <= size_mm ({size:g} mm) for a part-solid nodule",
-                                   solid_component_mm)
-    if ctx == "stable" and prior_category is None and kind not in ("none", "benign_calcified_or_fat",
-                                                                   "airway_subsegmental", "airway_segmental_or_proximal"):
-        raise CalculatorInputError(fn, "prior_category", "given ('2', '3', '4A' or '4B') when context is 'stable'", None)
+        raise CalculatorInputError(
+            fn,
+            "solid_component_mm",
+            f"> 0 and <= size_mm ({size:g} mm) for a part-solid nodule",
+            solid_component_mm,
+        )
+    if (
+        ctx == "stable"
+        and prior_category is None
+        and kind
+        not in ("none", "benign_calcified_or_fat", "airway_subsegmental", "airway_segmental_or_proximal")
+    ):
+        raise CalculatorInputError(
+            fn, "prior_category", "given ('2', '3', '4A' or '4B') when context is 'stable'", None
+        )
     if inc:
         cat = "0"
     elif kind in ("none", "benign_calcified_or_fat"):
@@ -196,10 +246,20 @@ def calculate_lung_rads(
         cat = "4X"
     label = cat + ("S" if s_mod else "")
     return make_result(
-        "Lung-RADS v2022", int(cat[0]), "category", label,
-        f"Lung-RADS {label}: {_LR_MANAGEMENT[cat]}" + ("; S: manage the significant other finding." if s_mod else "."),
-        {"nodule_type": kind, "size_mm": size, "solid_component_mm": solid if kind == "part_solid" else None,
-         "context": ctx, "prior_category": prior_category, "s_modifier": s_mod},
+        "Lung-RADS v2022",
+        int(cat[0]),
+        "category",
+        label,
+        f"Lung-RADS {label}: {_LR_MANAGEMENT[cat]}"
+        + ("; S: manage the significant other finding." if s_mod else "."),
+        {
+            "nodule_type": kind,
+            "size_mm": size,
+            "solid_component_mm": solid if kind == "part_solid" else None,
+            "context": ctx,
+            "prior_category": prior_category,
+            "s_modifier": s_mod,
+        },
         "American College of Radiology. Lung-RADS v2022 assessment categories (released November 2022); "
         "Christensen J et al. ACR Lung-RADS v2022: assessment categories and management recommendations. "
         "J Am Coll Radiol 2024;21:473-488.",

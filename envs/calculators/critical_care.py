@@ -19,7 +19,6 @@ from ._core import (
     check_int,
     check_number,
     check_optional_number,
-    fmt,
     make_result,
 )
 
@@ -41,17 +40,24 @@ def calculate_gcs(eye: int, verbal: int, motor: int) -> ScoreResult:
     m = check_int(fn, "motor", motor, 1, 6)
     total = e + v + m
     if total <= 8:
-        cat, text = "severe", "severe impairment of consciousness (GCS 3-8): protect the airway (consider intubation)"
+        cat, text = (
+            "severe",
+            "severe impairment of consciousness (GCS 3-8): protect the airway (consider intubation)",
+        )
     elif total <= 12:
         cat, text = "moderate", "moderate impairment of consciousness (GCS 9-12)"
     else:
         cat, text = "mild", "mild or no impairment of consciousness (GCS 13-15)"
     return make_result(
-        "Glasgow Coma Scale", total, "points", cat,
+        "Glasgow Coma Scale",
+        total,
+        "points",
+        cat,
         f"GCS {total} (E{e} V{v} M{m}): {text}.",
         {"eye": e, "verbal": v, "motor": m},
         "Teasdale G, Jennett B. Assessment of coma and impaired consciousness: a practical scale. "
-        "Lancet 1974;2:81-84; severity bands (3-8 severe, 9-12 moderate, 13-15 mild) as used for head injury.",
+        "Lancet 1974;2:81-84; severity bands (3-8 severe, 9-12 moderate, 13-15 mild) as used for head "
+        "injury.",
     )
 
 
@@ -67,16 +73,31 @@ def calculate_qsofa(respiratory_rate: float, systolic_bp: float, altered_mentati
     rr = check_number(fn, "respiratory_rate", respiratory_rate, 0, 100, "breaths/min")
     sbp = check_number(fn, "systolic_bp", systolic_bp, 0, 350, "mmHg")
     am = check_bool(fn, "altered_mentation", altered_mentation)
-    comps = {"respiratory_rate_ge_22": int(rr >= 22), "systolic_bp_le_100": int(sbp <= 100), "altered_mentation": int(am)}
+    comps = {
+        "respiratory_rate_ge_22": int(rr >= 22),
+        "systolic_bp_le_100": int(sbp <= 100),
+        "altered_mentation": int(am),
+    }
     total = comps["respiratory_rate_ge_22"] + comps["systolic_bp_le_100"] + comps["altered_mentation"]
     if total >= 2:
         cat = "high risk"
-        text = "qSOFA >= 2: high risk of poor outcome in suspected infection; assess for organ dysfunction (full SOFA)."
+        text = (
+            "qSOFA >= 2: high risk of poor outcome in suspected infection; assess for organ "
+            "dysfunction (full SOFA)."
+        )
     else:
         cat = "not high risk"
-        text = "qSOFA < 2: not high risk by qSOFA; keep reassessing if infection is suspected (qSOFA is not a sepsis rule-out)."
+        text = (
+            "qSOFA < 2: not high risk by qSOFA; keep reassessing if infection is suspected (qSOFA is "
+            "not a sepsis rule-out)."
+        )
     return make_result(
-        "qSOFA", total, "points", cat, f"qSOFA {total}/3: {text}", comps,
+        "qSOFA",
+        total,
+        "points",
+        cat,
+        f"qSOFA {total}/3: {text}",
+        comps,
         "Seymour CW et al. Assessment of clinical criteria for sepsis (Sepsis-3). JAMA 2016;315:762-774; "
         "Singer M et al. The Third International Consensus Definitions for Sepsis. JAMA 2016;315:801-810.",
     )
@@ -117,9 +138,16 @@ def calculate_sirs(
     total = comps["temperature"] + comps["heart_rate"] + comps["respiratory"] + comps["white_cells"]
     met = total >= 2
     return make_result(
-        "SIRS criteria", total, "criteria", "SIRS criteria met" if met else "SIRS criteria not met",
-        f"{total}/4 SIRS criteria: " + ("meets the SIRS definition (>= 2 criteria)." if met
-                                        else "does not meet the SIRS definition (< 2 criteria)."),
+        "SIRS criteria",
+        total,
+        "criteria",
+        "SIRS criteria met" if met else "SIRS criteria not met",
+        f"{total}/4 SIRS criteria: "
+        + (
+            "meets the SIRS definition (>= 2 criteria)."
+            if met
+            else "does not meet the SIRS definition (< 2 criteria)."
+        ),
         comps,
         "Bone RC et al. Definitions for sepsis and organ failure (ACCP/SCCM Consensus Conference). "
         "Chest 1992;101:1644-1655.",
@@ -203,23 +231,41 @@ def calculate_news2(
     }
     total = sum(comps.values())
     if total >= 7:
-        cat, text = "high", "emergency response: continuous monitoring and urgent assessment by a critical-care team"
+        cat, text = (
+            "high",
+            "emergency response: continuous monitoring and urgent assessment by a critical-care team",
+        )
     elif total >= 5:
         cat, text = "medium", "urgent response: at least hourly observations and urgent clinician review"
     elif 3 in comps.values():
-        cat, text = "low-medium", "a single parameter scores 3: urgent ward-based review and at least hourly observations"
+        cat, text = (
+            "low-medium",
+            "a single parameter scores 3: urgent ward-based review and at least hourly observations",
+        )
     else:
-        cat, text = "low", ("continue routine observations (at least 12-hourly)" if total == 0
-                            else "ward-based response: observations at least every 4-6 hours")
+        cat, text = (
+            "low",
+            (
+                "continue routine observations (at least 12-hourly)"
+                if total == 0
+                else "ward-based response: observations at least every 4-6 hours"
+            ),
+        )
     return make_result(
-        "NEWS2", total, "points", cat, f"NEWS2 {total} ({cat} clinical risk): {text}.", comps,
+        "NEWS2",
+        total,
+        "points",
+        cat,
+        f"NEWS2 {total} ({cat} clinical risk): {text}.",
+        comps,
         "Royal College of Physicians. National Early Warning Score (NEWS) 2: standardising the "
         "assessment of acute-illness severity in the NHS. London: RCP, 2017.",
     )
 
 
-def _sofa_cardio(map_mmhg: float, dopamine: float, dobutamine: float, epinephrine: float,
-                 norepinephrine: float) -> int:
+def _sofa_cardio(
+    map_mmhg: float, dopamine: float, dobutamine: float, epinephrine: float, norepinephrine: float
+) -> int:
     if dopamine > 15 or epinephrine > 0.1 or norepinephrine > 0.1:
         return 4
     if dopamine > 5 or epinephrine > 0 or norepinephrine > 0:
@@ -230,8 +276,15 @@ def _sofa_cardio(map_mmhg: float, dopamine: float, dobutamine: float, epinephrin
 
 
 # Ferreira FL et al. JAMA 2001;286:1754-1758: ICU mortality by the initial SOFA score.
-_SOFA_MORTALITY = ((1, "0-1", "0%"), (3, "2-3", "6.4%"), (5, "4-5", "20.2%"), (7, "6-7", "21.5%"),
-                   (9, "8-9", "33.3%"), (11, "10-11", "50.0%"), (24, "> 11", "95.2%"))
+_SOFA_MORTALITY = (
+    (1, "0-1", "0%"),
+    (3, "2-3", "6.4%"),
+    (5, "4-5", "20.2%"),
+    (7, "6-7", "21.5%"),
+    (9, "8-9", "33.3%"),
+    (11, "10-11", "50.0%"),
+    (24, "> 11", "95.2%"),
+)
 
 
 def calculate_sofa(
@@ -292,15 +345,22 @@ def calculate_sofa(
     if uo is not None:  # the worse of the creatinine and urine-output criteria
         renal = max(renal, 4 if uo < 200 else 3 if uo < 500 else 0)
     comps = {
-        "respiration": resp, "coagulation": coag, "liver": liver,
-        "cardiovascular": _sofa_cardio(mp, dopa, dobu, epi, norepi), "cns": cns, "renal": renal,
+        "respiration": resp,
+        "coagulation": coag,
+        "liver": liver,
+        "cardiovascular": _sofa_cardio(mp, dopa, dobu, epi, norepi),
+        "cns": cns,
+        "renal": renal,
     }
     total = sum(comps.values())
     for upper, band, mortality in _SOFA_MORTALITY:
         if total <= upper:
             break
     return make_result(
-        "SOFA", total, "points", f"SOFA {band}",
+        "SOFA",
+        total,
+        "points",
+        f"SOFA {band}",
         f"SOFA {total}/24: ICU mortality about {mortality} for an initial score of {band} (Ferreira 2001); "
         "an acute rise of >= 2 points with infection defines sepsis (Sepsis-3).",
         comps,
@@ -322,13 +382,21 @@ def calculate_shock_index(heart_rate: float, systolic_bp: float) -> ScoreResult:
     sbp = check_number(fn, "systolic_bp", systolic_bp, 1, 350, "mmHg")
     si = hr / sbp
     if si >= 1.0:
-        cat, text = "shock likely", "shock index >= 1.0: haemodynamic compromise likely (Allgower: 1.0 threatening, 1.5 manifest shock)"
+        cat, text = (
+            "shock likely",
+            "shock index >= 1.0: haemodynamic compromise likely (Allgower: 1.0 threatening, 1.5 manifest "
+            "shock)",
+        )
     elif si > 0.7:
         cat, text = "elevated", "shock index above the normal 0.5-0.7 range"
     else:
         cat, text = "normal", "shock index within or below the normal 0.5-0.7 range"
     return make_result(
-        "Shock index", si, "bpm/mmHg", cat, f"Shock index {si:.2f}: {text}.",
+        "Shock index",
+        si,
+        "bpm/mmHg",
+        cat,
+        f"Shock index {si:.2f}: {text}.",
         {"heart_rate": hr, "systolic_bp": sbp},
         "Allgower M, Burri C. 'Schockindex'. Dtsch Med Wochenschr 1967;92:1947-1950.",
     )
@@ -371,11 +439,24 @@ def calculate_aa_gradient(
         cat = "not classified"
         text = "the age-expected normal applies to room air only (FiO2 0.21); the gradient widens with FiO2"
     elif gradient > upper:
-        cat, text = "elevated", f"above the age-expected upper normal of {upper:.1f} mmHg: V/Q mismatch, shunt or diffusion defect"
+        cat, text = (
+            "elevated",
+            f"above the age-expected upper normal of {upper:.1f} mmHg: V/Q mismatch, shunt or diffusion "
+            "defect",
+        )
     else:
-        cat, text = "normal", f"within the age-expected normal (<= {upper:.1f} mmHg): hypoxaemia, if any, is from hypoventilation or low FiO2"
+        cat, text = (
+            "normal",
+            f"within the age-expected normal (<= {upper:.1f} mmHg): hypoxaemia, if any, is from "
+            "hypoventilation or low FiO2",
+        )
     return make_result(
-        "A-a gradient", gradient, "mmHg", cat, f"A-a gradient {gradient:.1f} mmHg: {text}.", comps,
+        "A-a gradient",
+        gradient,
+        "mmHg",
+        cat,
+        f"A-a gradient {gradient:.1f} mmHg: {text}.",
+        comps,
         "Alveolar gas equation (PAO2 = FiO2 x (Patm - PH2O) - PaCO2/RQ); West JB. Respiratory "
         "Physiology: The Essentials. Age-expected normal: age/4 + 4 mmHg (room air).",
     )

@@ -69,7 +69,9 @@ def calculate_esi_level(
         uptriage_danger_zone: If True (default), danger-zone vitals in a 2+-resource patient give ESI 2.
     """
     fn = "calculate_esi_level"
-    a = check_bool(fn, "requires_immediate_lifesaving_intervention", requires_immediate_lifesaving_intervention)
+    a = check_bool(
+        fn, "requires_immediate_lifesaving_intervention", requires_immediate_lifesaving_intervention
+    )
     hr_sit = check_bool(fn, "high_risk_situation", high_risk_situation)
     conf = check_bool(fn, "confused_lethargic_or_disoriented", confused_lethargic_or_disoriented)
     pain = check_bool(fn, "severe_pain_or_distress", severe_pain_or_distress)
@@ -84,8 +86,15 @@ def calculate_esi_level(
     if a:
         level, why = 1, "requires immediate life-saving intervention"
     elif hr_sit or conf or pain:
-        reasons = [r for r, v in (("high-risk situation", hr_sit), ("new confusion/lethargy/disorientation", conf),
-                                  ("severe pain or distress", pain)) if v]
+        reasons = [
+            r
+            for r, v in (
+                ("high-risk situation", hr_sit),
+                ("new confusion/lethargy/disorientation", conf),
+                ("severe pain or distress", pain),
+            )
+            if v
+        ]
         level, why = 2, ", ".join(reasons)
     elif res >= 2:
         if danger and up:
@@ -98,12 +107,22 @@ def calculate_esi_level(
         level, why = 4, "one resource expected"
     else:
         level, why = 5, "no resources expected"
-    comps = {"decision_a_lifesaving": a, "decision_b_high_risk": hr_sit or conf or pain,
-             "expected_resources": res, "danger_zone_vitals": bool(danger)}
+    comps = {
+        "decision_a_lifesaving": a,
+        "decision_b_high_risk": hr_sit or conf or pain,
+        "expected_resources": res,
+        "danger_zone_vitals": bool(danger),
+    }
     return make_result(
-        "Emergency Severity Index v4", level, "level", f"ESI {level}", f"ESI {level}: {why}.", comps,
+        "Emergency Severity Index v4",
+        level,
+        "level",
+        f"ESI {level}",
+        f"ESI {level}: {why}.",
+        comps,
         "Gilboy N, Tanabe P, Travers D, Rosenau AM. Emergency Severity Index (ESI): a triage tool for "
-        "emergency department care, version 4. Implementation Handbook 2012 edition. AHRQ Publication 12-0014.",
+        "emergency department care, version 4. Implementation Handbook 2012 edition. AHRQ Publication "
+        "12-0014.",
         flags,
     )
 
@@ -128,10 +147,12 @@ def calculate_centor(
     a = check_int(fn, "age", age, 3, 120, "years")
     t = check_number(fn, "temperature_c", temperature_c, 30, 45, "degrees C")
     comps = {
-        "tonsillar_exudate_or_swelling": int(check_bool(fn, "tonsillar_exudate_or_swelling",
-                                                        tonsillar_exudate_or_swelling)),
-        "tender_anterior_cervical_nodes": int(check_bool(fn, "tender_anterior_cervical_nodes",
-                                                         tender_anterior_cervical_nodes)),
+        "tonsillar_exudate_or_swelling": int(
+            check_bool(fn, "tonsillar_exudate_or_swelling", tonsillar_exudate_or_swelling)
+        ),
+        "tender_anterior_cervical_nodes": int(
+            check_bool(fn, "tender_anterior_cervical_nodes", tender_anterior_cervical_nodes)
+        ),
         "temperature_gt_38": int(t > 38),
         "cough_absent": int(check_bool(fn, "cough_absent", cough_absent)),
         "age": 1 if a <= 14 else 0 if a <= 44 else -1,
@@ -140,11 +161,22 @@ def calculate_centor(
     if total <= 1:
         cat, text = "low risk", "streptococcal infection 1-10%: no testing or antibiotics"
     elif total <= 3:
-        cat, text = "intermediate risk", "streptococcal infection 11-35%: rapid antigen test or culture, treat if positive"
+        cat, text = (
+            "intermediate risk",
+            "streptococcal infection 11-35%: rapid antigen test or culture, treat if positive",
+        )
     else:
-        cat, text = "high risk", "streptococcal infection 51-53%: test (or treat empirically per local guidance)"
+        cat, text = (
+            "high risk",
+            "streptococcal infection 51-53%: test (or treat empirically per local guidance)",
+        )
     return make_result(
-        "Centor score (McIsaac)", total, "points", cat, f"McIsaac {total} ({cat}): {text}.", comps,
+        "Centor score (McIsaac)",
+        total,
+        "points",
+        cat,
+        f"McIsaac {total} ({cat}): {text}.",
+        comps,
         "Centor RM et al. Med Decis Making 1981;1:239-246; McIsaac WJ et al. A clinical score to reduce "
         "unnecessary antibiotic use in patients with sore throat. CMAJ 1998;158:75-83; McIsaac WJ et al. "
         "JAMA 2004;291:1587-1595.",
@@ -182,8 +214,17 @@ def calculate_revised_trauma_score(gcs: int, systolic_bp: float, respiratory_rat
     else:
         cat, text = "no triage criterion", "triage RTS 12 (normal physiology)"
     return make_result(
-        "Revised Trauma Score", rts, "points", cat, f"RTS {rts:.4f} (coded {t_rts}/12): {text}.",
-        {"gcs_code": gcs_code, "systolic_bp_code": sbp_code, "respiratory_rate_code": rr_code, "triage_rts": t_rts},
+        "Revised Trauma Score",
+        rts,
+        "points",
+        cat,
+        f"RTS {rts:.4f} (coded {t_rts}/12): {text}.",
+        {
+            "gcs_code": gcs_code,
+            "systolic_bp_code": sbp_code,
+            "respiratory_rate_code": rr_code,
+            "triage_rts": t_rts,
+        },
         "Champion HR et al. A revision of the Trauma Score. J Trauma 1989;29:623-629.",
     )
 
@@ -207,11 +248,19 @@ def calculate_parkland(weight_kg: float, tbsa_percent: float) -> ScoreResult:
         cat = "below resuscitation threshold"
         text = "TBSA < 20%: formal burn resuscitation usually not required in adults"
     return make_result(
-        "Parkland formula", total, "mL/24 h", cat,
-        f"Parkland {total:.0f} mL lactated Ringer's over 24 h from the time of burn ({first8:.0f} mL in the first "
+        "Parkland formula",
+        total,
+        "mL/24 h",
+        cat,
+        f"Parkland {total:.0f} mL lactated Ringer's over 24 h from the time of burn ({first8:.0f} mL in "
+        "the first "
         f"8 h, {first8:.0f} mL over the next 16 h); {text}.",
-        {"first_8h_ml": first8, "next_16h_ml": first8, "first_8h_rate_ml_h": first8 / 8.0,
-         "next_16h_rate_ml_h": first8 / 16.0},
+        {
+            "first_8h_ml": first8,
+            "next_16h_ml": first8,
+            "first_8h_rate_ml_h": first8 / 8.0,
+            "next_16h_rate_ml_h": first8 / 16.0,
+        },
         "Baxter CR, Shires T. Physiological response to crystalloid resuscitation of severe burns. Ann N Y "
         "Acad Sci 1968;150:874-894.",
     )
@@ -263,7 +312,12 @@ def calculate_alvarado(
     else:
         cat = "unlikely"
     return make_result(
-        "Alvarado score", total, "points", cat, f"Alvarado {total}/10: appendicitis {cat}.", comps,
+        "Alvarado score",
+        total,
+        "points",
+        cat,
+        f"Alvarado {total}/10: appendicitis {cat}.",
+        comps,
         "Alvarado A. A practical score for the early diagnosis of acute appendicitis. Ann Emerg Med "
         "1986;15:557-564.",
     )
@@ -310,8 +364,12 @@ def calculate_ottawa_ankle(
     else:
         cat = "no radiographs"
     return make_result(
-        "Ottawa ankle rules", int(ankle) + int(foot), "radiograph series", cat,
-        f"Ottawa ankle rules: {cat}" + (" indicated." if ankle or foot else " needed (fracture very unlikely)."),
+        "Ottawa ankle rules",
+        int(ankle) + int(foot),
+        "radiograph series",
+        cat,
+        f"Ottawa ankle rules: {cat}"
+        + (" indicated." if ankle or foot else " needed (fracture very unlikely)."),
         {"ankle_series": ankle, "foot_series": foot},
         "Stiell IG et al. Decision rules for the use of radiography in acute ankle injuries. JAMA "
         "1993;269:1127-1132.",

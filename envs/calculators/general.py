@@ -36,7 +36,11 @@ def calculate_bmi(weight_kg: float, height_cm: float) -> ScoreResult:
     else:
         cat = "obesity class III"
     return make_result(
-        "Body-mass index", bmi, "kg/m2", cat, f"BMI {bmi:.1f} kg/m2: {cat} (WHO adult classification).",
+        "Body-mass index",
+        bmi,
+        "kg/m2",
+        cat,
+        f"BMI {bmi:.1f} kg/m2: {cat} (WHO adult classification).",
         {"height_m": h / 100.0},
         "World Health Organization. Obesity: preventing and managing the global epidemic. WHO Technical "
         "Report Series 894, 2000.",
@@ -65,14 +69,26 @@ def calculate_anion_gap(
     judged = corrected if corrected is not None else gap
     # Reference interval 3-11 mmol/L with ion-selective electrodes (Winter 1990); labs vary.
     if judged > 11:
-        cat, text = "elevated", "elevated anion gap: look for unmeasured anions (lactate, ketones, toxins, uraemia)"
+        cat, text = (
+            "elevated",
+            "elevated anion gap: look for unmeasured anions (lactate, ketones, toxins, uraemia)",
+        )
     elif judged < 3:
-        cat, text = "low", "low anion gap: consider hypoalbuminaemia, paraproteins, lithium or laboratory error"
+        cat, text = (
+            "low",
+            "low anion gap: consider hypoalbuminaemia, paraproteins, lithium or laboratory error",
+        )
     else:
         cat, text = "normal", "anion gap within the 3-11 mmol/L reference interval"
-    label = f"anion gap {gap:.1f} mmol/L" + (f" (albumin-corrected {corrected:.1f})" if corrected is not None else "")
+    label = f"anion gap {gap:.1f} mmol/L" + (
+        f" (albumin-corrected {corrected:.1f})" if corrected is not None else ""
+    )
     return make_result(
-        "Anion gap", gap, "mmol/L", cat, f"{label[0].upper()}{label[1:]}: {text}.",
+        "Anion gap",
+        gap,
+        "mmol/L",
+        cat,
+        f"{label[0].upper()}{label[1:]}: {text}.",
         {"albumin_corrected_gap": corrected},
         "Winter SD et al. The fall of the serum anion gap. Arch Intern Med 1990;150:311-313; albumin "
         "correction: Figge J et al. Crit Care Med 1998;26:1807-1810.",
@@ -97,7 +113,10 @@ def calculate_corrected_calcium(calcium_mg_dl: float, albumin_g_dl: float) -> Sc
     else:
         cat = "normal"
     return make_result(
-        "Corrected calcium", corrected, "mg/dL", cat,
+        "Corrected calcium",
+        corrected,
+        "mg/dL",
+        cat,
         f"Albumin-corrected calcium {corrected:.2f} mg/dL: {cat} (reference 8.5-10.5 mg/dL); "
         "measure ionised calcium when it matters.",
         {"correction_mg_dl": corrected - ca},
@@ -124,7 +143,10 @@ def calculate_corrected_sodium(
     corrected = na + k * (glu - 100.0) / 100.0
     cat = "hyponatraemia" if corrected < 135 else "hypernatraemia" if corrected > 145 else "normal"
     return make_result(
-        "Corrected sodium", corrected, "mmol/L", cat,
+        "Corrected sodium",
+        corrected,
+        "mmol/L",
+        cat,
         f"Glucose-corrected sodium ({f}) {corrected:.1f} mmol/L: {cat} (reference 135-145).",
         {"factor_per_100_mg_dl": k},
         "Katz MA. Hyperglycemia-induced hyponatremia: calculation of expected serum sodium depression. "
@@ -154,8 +176,9 @@ def calculate_serum_osmolality(
     glu = check_number(fn, "glucose_mg_dl", glucose_mg_dl, 10, 3000, "mg/dL")
     bun = check_number(fn, "bun_mg_dl", bun_mg_dl, 1, 300, "mg/dL")
     eth = check_optional_number(fn, "ethanol_mg_dl", ethanol_mg_dl, 0, 1000, "mg/dL")
-    measured = check_optional_number(fn, "measured_osmolality_mosm_kg", measured_osmolality_mosm_kg, 150, 500,
-                                     "mOsm/kg")
+    measured = check_optional_number(
+        fn, "measured_osmolality_mosm_kg", measured_osmolality_mosm_kg, 150, 500, "mOsm/kg"
+    )
     osm = 2.0 * na + glu / 18.0 + bun / 2.8 + (eth / 3.7 if eth is not None else 0.0)
     gap = measured - osm if measured is not None else None
     if gap is not None and gap > 10:
@@ -167,8 +190,13 @@ def calculate_serum_osmolality(
     else:
         cat, text = "normal", "within the 275-295 mOsm/kg reference interval"
     return make_result(
-        "Calculated serum osmolality", osm, "mOsm/kg", cat, f"Calculated osmolality {osm:.0f} mOsm/kg: {text}.",
+        "Calculated serum osmolality",
+        osm,
+        "mOsm/kg",
+        cat,
+        f"Calculated osmolality {osm:.0f} mOsm/kg: {text}.",
         {"osmolal_gap": gap},
         "Dorwart WV, Chalmers L. Comparison of methods for calculating serum osmolality from chemical "
-        "concentrations. Clin Chem 1975;21:190-194; ethanol term: Purssell RA et al. Ann Emerg Med 2001;38:653-659.",
+        "concentrations. Clin Chem 1975;21:190-194; ethanol term: Purssell RA et al. Ann Emerg Med "
+        "2001;38:653-659.",
     )

@@ -20,8 +20,13 @@ from typing import Literal
 from ._core import ScoreResult, check_bool, check_choice, check_number, make_result
 
 # Wiesner R et al. Gastroenterology 2003;124:91-96: 90-day mortality by MELD band.
-_MELD_BANDS = ((9, "MELD < 10", "1.9%"), (19, "MELD 10-19", "6.0%"), (29, "MELD 20-29", "19.6%"),
-               (39, "MELD 30-39", "52.6%"), (40, "MELD >= 40", "71.3%"))
+_MELD_BANDS = (
+    (9, "MELD < 10", "1.9%"),
+    (19, "MELD 10-19", "6.0%"),
+    (29, "MELD 20-29", "19.6%"),
+    (39, "MELD 30-39", "52.6%"),
+    (40, "MELD >= 40", "71.3%"),
+)
 
 
 def _round_half_up(x: float) -> int:
@@ -63,10 +68,19 @@ def calculate_meld_na(
         if score <= upper:
             break
     return make_result(
-        "MELD-Na", score, "points", band,
+        "MELD-Na",
+        score,
+        "points",
+        band,
         f"MELD-Na {score}: 90-day mortality about {mortality} ({band}, Wiesner 2003 bands).",
-        {"meld_i": meld_i, "creatinine_used": cr_used, "bilirubin_used": bili_used, "inr_used": inr_used,
-         "sodium_used": na_used, "sodium_term_applied": meld_i > 11},
+        {
+            "meld_i": meld_i,
+            "creatinine_used": cr_used,
+            "bilirubin_used": bili_used,
+            "inr_used": inr_used,
+            "sodium_used": na_used,
+            "sodium_term_applied": meld_i > 11,
+        },
         "OPTN/UNOS Policy 9.1.D (MELD-Na calculation, effective January 2016); Kim WR et al. Hyponatremia "
         "and mortality among patients on the liver-transplant waiting list. N Engl J Med 2008;359:1018-1026.",
     )
@@ -109,7 +123,12 @@ def calculate_child_pugh(
     else:
         cat, text = "Class C", "decompensated disease (1-year survival about 45%, 2-year 35%)"
     return make_result(
-        "Child-Pugh", total, "points", cat, f"Child-Pugh {total} ({cat}): {text}.", comps,
+        "Child-Pugh",
+        total,
+        "points",
+        cat,
+        f"Child-Pugh {total} ({cat}): {text}.",
+        comps,
         "Pugh RNH et al. Transection of the oesophagus for bleeding oesophageal varices. Br J Surg "
         "1973;60:646-649 (INR substituted for prothrombin time as in current practice).",
     )
@@ -166,9 +185,17 @@ def calculate_glasgow_blatchford(
     if total <= 1:
         cat, text = "very low risk", "candidate for outpatient management without endoscopy in hospital"
     else:
-        cat, text = "not low risk", "admit; risk of needing transfusion, endoscopic therapy or surgery rises with the score"
+        cat, text = (
+            "not low risk",
+            "admit; risk of needing transfusion, endoscopic therapy or surgery rises with the score",
+        )
     return make_result(
-        "Glasgow-Blatchford score", total, "points", cat, f"Glasgow-Blatchford {total} ({cat}): {text}.", comps,
+        "Glasgow-Blatchford score",
+        total,
+        "points",
+        cat,
+        f"Glasgow-Blatchford {total} ({cat}): {text}.",
+        comps,
         "Blatchford O, Murray WR, Blatchford M. A risk score to predict need for treatment for upper-"
         "gastrointestinal haemorrhage. Lancet 2000;356:1318-1321; threshold <= 1: Laine L et al. ACG "
         "guideline, Am J Gastroenterol 2021;116:899-917.",

@@ -4,13 +4,32 @@ from __future__ import annotations
 
 from typing import Literal
 
-from ._core import CalculatorInputError, ScoreResult, check_bool, check_choice, check_int, check_number, make_result
+from ._core import (
+    CalculatorInputError,
+    ScoreResult,
+    check_bool,
+    check_choice,
+    check_int,
+    check_number,
+    make_result,
+)
 
 # (argument name, maximum points) in the order of the NIHSS form.
 _NIHSS_ITEMS = (
-    ("loc", 3), ("loc_questions", 2), ("loc_commands", 2), ("best_gaze", 2), ("visual_fields", 3),
-    ("facial_palsy", 3), ("motor_arm_left", 4), ("motor_arm_right", 4), ("motor_leg_left", 4),
-    ("motor_leg_right", 4), ("limb_ataxia", 2), ("sensory", 2), ("best_language", 3), ("dysarthria", 2),
+    ("loc", 3),
+    ("loc_questions", 2),
+    ("loc_commands", 2),
+    ("best_gaze", 2),
+    ("visual_fields", 3),
+    ("facial_palsy", 3),
+    ("motor_arm_left", 4),
+    ("motor_arm_right", 4),
+    ("motor_leg_left", 4),
+    ("motor_leg_right", 4),
+    ("limb_ataxia", 2),
+    ("sensory", 2),
+    ("best_language", 3),
+    ("dysarthria", 2),
     ("extinction_inattention", 2),
 )
 
@@ -53,15 +72,33 @@ def calculate_nihss(
         extinction_inattention: 11 extinction and inattention (neglect), integer 0-2.
     """
     fn = "calculate_nihss"
-    values = (loc, loc_questions, loc_commands, best_gaze, visual_fields, facial_palsy, motor_arm_left,
-              motor_arm_right, motor_leg_left, motor_leg_right, limb_ataxia, sensory, best_language,
-              dysarthria, extinction_inattention)
+    values = (
+        loc,
+        loc_questions,
+        loc_commands,
+        best_gaze,
+        visual_fields,
+        facial_palsy,
+        motor_arm_left,
+        motor_arm_right,
+        motor_leg_left,
+        motor_leg_right,
+        limb_ataxia,
+        sensory,
+        best_language,
+        dysarthria,
+        extinction_inattention,
+    )
     comps = {name: check_int(fn, name, v, 0, hi) for (name, hi), v in zip(_NIHSS_ITEMS, values)}
     if comps["loc"] == 3:  # NIHSS instructions: a coma patient (1a = 3) scores 2 on 1b, 1c and 8 and 3 on 9
         for name, forced in (("loc_questions", 2), ("loc_commands", 2), ("sensory", 2), ("best_language", 3)):
             if comps[name] != forced:
-                raise CalculatorInputError(fn, name, f"{forced} when loc is 3 (the NIHSS scores a coma patient "
-                                           f"{forced} on this item)", comps[name])
+                raise CalculatorInputError(
+                    fn,
+                    name,
+                    f"{forced} when loc is 3 (the NIHSS scores a coma patient {forced} on this item)",
+                    comps[name],
+                )
     total = sum(comps.values())
     if total == 0:
         cat = "no stroke symptoms"
@@ -74,7 +111,12 @@ def calculate_nihss(
     else:
         cat = "severe stroke"
     return make_result(
-        "NIH Stroke Scale", total, "points", cat, f"NIHSS {total}/42: {cat}.", comps,
+        "NIH Stroke Scale",
+        total,
+        "points",
+        cat,
+        f"NIHSS {total}/42: {cat}.",
+        comps,
         "Brott T et al. Measurements of acute cerebral infarction: a clinical examination scale. Stroke "
         "1989;20:864-870; NIH Stroke Scale form (NINDS); severity bands as used by the NIH/NINDS.",
     )
@@ -94,7 +136,8 @@ def calculate_abcd2(
         age: Age in years, integer 18-120 (>= 60 scores 1).
         systolic_bp: First systolic blood pressure after the TIA in mmHg, 0-350 (>= 140 scores 1).
         diastolic_bp: First diastolic blood pressure in mmHg, 0-250 (>= 90 scores 1).
-        clinical_features: "unilateral_weakness" (2), "speech_disturbance" without weakness (1) or "other" (0).
+        clinical_features: "unilateral_weakness" (2), "speech_disturbance" without weakness (1)
+            or "other" (0).
         duration_minutes: Symptom duration in minutes, 0-1440 (10-59: 1, >= 60: 2).
         diabetes: True for diabetes (1).
     """
@@ -102,7 +145,9 @@ def calculate_abcd2(
     a = check_int(fn, "age", age, 18, 120, "years")
     sbp = check_number(fn, "systolic_bp", systolic_bp, 0, 350, "mmHg")
     dbp = check_number(fn, "diastolic_bp", diastolic_bp, 0, 250, "mmHg")
-    cf = check_choice(fn, "clinical_features", clinical_features, ("unilateral_weakness", "speech_disturbance", "other"))
+    cf = check_choice(
+        fn, "clinical_features", clinical_features, ("unilateral_weakness", "speech_disturbance", "other")
+    )
     dur = check_number(fn, "duration_minutes", duration_minutes, 0, 1440, "min")
     comps = {
         "age_ge_60": int(a >= 60),
@@ -119,7 +164,12 @@ def calculate_abcd2(
     else:
         cat, text = "low risk", "2-day stroke risk 1.0%"
     return make_result(
-        "ABCD2", total, "points", cat, f"ABCD2 {total}/7 ({cat}): {text}.", comps,
+        "ABCD2",
+        total,
+        "points",
+        cat,
+        f"ABCD2 {total}/7 ({cat}): {text}.",
+        comps,
         "Johnston SC et al. Validation and refinement of scores to predict very early stroke risk after "
         "transient ischaemic attack. Lancet 2007;369:283-292.",
     )

@@ -44,13 +44,21 @@ def calculate_bishop_score(
     }
     total = sum(comps.values())
     if total >= 9:
-        cat, text = "favorable", "likelihood of vaginal delivery after induction similar to spontaneous labour"
+        cat, text = (
+            "favorable",
+            "likelihood of vaginal delivery after induction similar to spontaneous labour",
+        )
     elif total >= 7:
         cat, text = "intermediate", "neither clearly favourable nor unfavourable"
     else:
         cat, text = "unfavorable", "cervical ripening is recommended before induction"
     return make_result(
-        "Bishop score", total, "points", cat, f"Bishop {total}/13 ({cat}): {text}.", comps,
+        "Bishop score",
+        total,
+        "points",
+        cat,
+        f"Bishop {total}/13 ({cat}): {text}.",
+        comps,
         "Bishop EH. Pelvic scoring for elective induction. Obstet Gynecol 1964;24:266-268; thresholds "
         "(> 8 favourable, <= 6 unfavourable): ACOG Practice Bulletin No. 107, Induction of labor, 2009.",
     )
@@ -69,7 +77,8 @@ def calculate_apgar(
         heart_rate: Heart rate in beats/min, 0-300 (0 absent: 0, < 100: 1, >= 100: 2).
         respiratory_effort: "absent" (0), "weak" (slow/irregular, 1) or "strong" (good cry, 2).
         muscle_tone: "limp" (0), "some_flexion" (1) or "active" (active motion, 2).
-        reflex_irritability: Response to stimulation: "none" (0), "grimace" (1) or "cry" (cough/sneeze/cry, 2).
+        reflex_irritability: Response to stimulation: "none" (0), "grimace" (1) or "cry"
+            (cough, sneeze or cry, 2).
         color: "blue_pale" (0), "acrocyanosis" (body pink, extremities blue, 1) or "pink" (2).
     """
     fn = "calculate_apgar"
@@ -89,11 +98,22 @@ def calculate_apgar(
     if total >= 7:
         cat, text = "reassuring", "reassuring"
     elif total >= 4:
-        cat, text = "moderately abnormal", "moderately abnormal: continue assessment and support; repeat every 5 min to 20 min"
+        cat, text = (
+            "moderately abnormal",
+            "moderately abnormal: continue assessment and support; repeat every 5 min to 20 min",
+        )
     else:
-        cat, text = "low", "low: needs resuscitation per neonatal resuscitation guidance; repeat every 5 min to 20 min"
+        cat, text = (
+            "low",
+            "low: needs resuscitation per neonatal resuscitation guidance; repeat every 5 min to 20 min",
+        )
     return make_result(
-        "Apgar score", total, "points", cat, f"Apgar {total}/10: {text}.", comps,
+        "Apgar score",
+        total,
+        "points",
+        cat,
+        f"Apgar {total}/10: {text}.",
+        comps,
         "Apgar V. A proposal for a new method of evaluation of the newborn infant. Curr Res Anesth Analg "
         "1953;32:260-267; bands: AAP/ACOG Committee Opinion No. 644, The Apgar Score, 2015.",
     )
@@ -135,17 +155,28 @@ def calculate_biophysical_profile(
     oligo = dvp <= 2
     flags: tuple[str, ...] = ("oligohydramnios",) if oligo else ()
     if maximum == 8 and total < 8:
-        cat, text = "incomplete", "an ultrasound component is abnormal: perform the nonstress test for the full profile"
+        cat, text = (
+            "incomplete",
+            "an ultrasound component is abnormal: perform the nonstress test for the full profile",
+        )
     elif total >= 8:
         cat = "normal"
-        text = ("normal score, but oligohydramnios (deepest pocket <= 2 cm) requires further evaluation"
-                if oligo else "normal: low risk of fetal asphyxia")
+        text = (
+            "normal score, but oligohydramnios (deepest pocket <= 2 cm) requires further evaluation"
+            if oligo
+            else "normal: low risk of fetal asphyxia"
+        )
     elif total == 6:
         cat, text = "equivocal", "equivocal: repeat within 24 h or consider delivery at or near term"
     else:
         cat, text = "abnormal", "abnormal (<= 4): evaluate promptly for delivery"
     return make_result(
-        "Biophysical profile", total, "points", cat, f"BPP {total}/{maximum}: {text}.", comps,
+        "Biophysical profile",
+        total,
+        "points",
+        cat,
+        f"BPP {total}/{maximum}: {text}.",
+        comps,
         "Manning FA, Platt LD, Sipos L. Antepartum fetal evaluation: development of a fetal biophysical "
         "profile. Am J Obstet Gynecol 1980;136:787-795; interpretation: ACOG Practice Bulletin No. 229, "
         "Antepartum fetal surveillance, 2021.",

@@ -49,7 +49,12 @@ def administer_phq9(responses: list[int]) -> ScoreResult:
         flags = ("item 9 positive: thoughts of death or self-harm",)
         text += "; item 9 is positive: assess suicide risk today (e.g. C-SSRS)"
     return make_result(
-        "PHQ-9", total, "points", cat, text + ".", {f"item_{k + 1}": v for k, v in enumerate(items)},
+        "PHQ-9",
+        total,
+        "points",
+        cat,
+        text + ".",
+        {f"item_{k + 1}": v for k, v in enumerate(items)},
         "Kroenke K, Spitzer RL, Williams JBW. The PHQ-9: validity of a brief depression severity measure. "
         "J Gen Intern Med 2001;16:606-613.",
         flags,
@@ -69,7 +74,11 @@ def administer_gad7(responses: list[int]) -> ScoreResult:
     cat = "severe" if total >= 15 else "moderate" if total >= 10 else "mild" if total >= 5 else "minimal"
     tail = "; >= 10 warrants further evaluation for an anxiety disorder" if total >= 10 else ""
     return make_result(
-        "GAD-7", total, "points", cat, f"GAD-7 {total}/21: {cat} anxiety{tail}.",
+        "GAD-7",
+        total,
+        "points",
+        cat,
+        f"GAD-7 {total}/21: {cat} anxiety{tail}.",
         {f"item_{k + 1}": v for k, v in enumerate(items)},
         "Spitzer RL, Kroenke K, Williams JBW, Lowe B. A brief measure for assessing generalized anxiety "
         "disorder: the GAD-7. Arch Intern Med 2006;166:1092-1097.",
@@ -109,13 +118,22 @@ def assess_suicide_risk(
     if not q2:  # the screener skips Q3-5 when Q2 is "no"; a "yes" there contradicts Q2
         for name, value in (("thoughts_with_method", q3), ("intent", q4), ("plan_with_intent", q5)):
             if value:
-                raise CalculatorInputError(fn, name, "false when suicidal_thoughts is false (Q3-5 follow a yes to Q2)",
-                                           value)
-    comps = {"q1_wish_to_be_dead": q1, "q2_suicidal_thoughts": q2, "q3_method": q3, "q4_intent": q4,
-             "q5_plan_with_intent": q5, "q6_behavior": q6}
+                raise CalculatorInputError(
+                    fn, name, "false when suicidal_thoughts is false (Q3-5 follow a yes to Q2)", value
+                )
+    comps = {
+        "q1_wish_to_be_dead": q1,
+        "q2_suicidal_thoughts": q2,
+        "q3_method": q3,
+        "q4_intent": q4,
+        "q5_plan_with_intent": q5,
+        "q6_behavior": q6,
+    }
     if q4 or q5 or q6 == "past_3_months":
         level, cat = 3, "high risk"
-        text = "immediate mental-health evaluation and safety precautions (constant observation, remove means)"
+        text = (
+            "immediate mental-health evaluation and safety precautions (constant observation, remove means)"
+        )
     elif q3 or q6 == "over_3_months_ago":
         level, cat = 2, "moderate risk"
         text = "mental-health evaluation before discharge and safety planning"
@@ -127,7 +145,12 @@ def assess_suicide_risk(
         text = "no suicidal ideation or behaviour reported on the screener"
     flags = ("suicidal ideation or behaviour reported",) if level > 0 else ()
     return make_result(
-        "C-SSRS screener", level, "level", cat, f"C-SSRS screen {cat}: {text}.", comps,
+        "C-SSRS screener",
+        level,
+        "level",
+        cat,
+        f"C-SSRS screen {cat}: {text}.",
+        comps,
         "Posner K et al. The Columbia-Suicide Severity Rating Scale. Am J Psychiatry 2011;168:1266-1277; "
         "C-SSRS Screen Version with triage points (Columbia Lighthouse Project).",
         flags,
@@ -155,7 +178,12 @@ def administer_epds(responses: list[int]) -> ScoreResult:
         flags = ("item 10 positive: thoughts of self-harm",)
         text += "; item 10 is positive: assess suicide risk today"
     return make_result(
-        "EPDS", total, "points", cat, f"EPDS {total}/30: {text}.", {f"item_{k + 1}": v for k, v in enumerate(items)},
+        "EPDS",
+        total,
+        "points",
+        cat,
+        f"EPDS {total}/30: {text}.",
+        {f"item_{k + 1}": v for k, v in enumerate(items)},
         "Cox JL, Holden JM, Sagovsky R. Detection of postnatal depression: development of the 10-item "
         "Edinburgh Postnatal Depression Scale. Br J Psychiatry 1987;150:782-786.",
         flags,
@@ -178,11 +206,15 @@ def administer_audit_c(responses: list[int], sex: Literal["male", "female"]) -> 
     positive = total >= threshold
     cat = "positive" if positive else "negative"
     return make_result(
-        "AUDIT-C", total, "points", cat,
+        "AUDIT-C",
+        total,
+        "points",
+        cat,
         f"AUDIT-C {total}/12: {'positive screen for hazardous drinking' if positive else 'negative screen'} "
         f"(threshold {threshold} for {s} patients).",
         {f"item_{k + 1}": v for k, v in enumerate(items)},
-        "Bush K et al. The AUDIT alcohol consumption questions (AUDIT-C). Arch Intern Med 1998;158:1789-1795; "
+        "Bush K et al. The AUDIT alcohol consumption questions (AUDIT-C). Arch Intern Med "
+        "1998;158:1789-1795; "
         "thresholds: Bradley KA et al. Alcohol Clin Exp Res 2007;31:1208-1217.",
     )
 
@@ -206,9 +238,16 @@ def administer_cage(cut_down: bool, annoyed: bool, guilty: bool, eye_opener: boo
     total = sum(comps.values())
     cat = "positive" if total >= 2 else "negative"
     return make_result(
-        "CAGE", total, "points", cat,
-        f"CAGE {total}/4: " + ("clinically significant (>= 2): assess for alcohol-use disorder."
-                              if total >= 2 else "below the threshold of 2."),
+        "CAGE",
+        total,
+        "points",
+        cat,
+        f"CAGE {total}/4: "
+        + (
+            "clinically significant (>= 2): assess for alcohol-use disorder."
+            if total >= 2
+            else "below the threshold of 2."
+        ),
         comps,
         "Ewing JA. Detecting alcoholism: the CAGE questionnaire. JAMA 1984;252:1905-1907.",
     )
@@ -261,7 +300,12 @@ def calculate_ciwa_ar(
     else:
         cat, text = "severe", "severe withdrawal: risk of seizures and delirium tremens; close monitoring"
     return make_result(
-        "CIWA-Ar", total, "points", cat, f"CIWA-Ar {total}/67: {text}.", comps,
+        "CIWA-Ar",
+        total,
+        "points",
+        cat,
+        f"CIWA-Ar {total}/67: {text}.",
+        comps,
         "Sullivan JT et al. Assessment of alcohol withdrawal: the revised Clinical Institute Withdrawal "
         "Assessment for Alcohol scale (CIWA-Ar). Br J Addict 1989;84:1353-1357.",
     )

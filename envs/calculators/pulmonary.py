@@ -47,8 +47,13 @@ def calculate_curb65(
     sbp = check_number(fn, "systolic_bp", systolic_bp, 0, 350, "mmHg")
     dbp = check_number(fn, "diastolic_bp", diastolic_bp, 0, 250, "mmHg")
     a = check_int(fn, "age", age, 18, 120, "years")
-    comps = {"confusion": int(c), "urea": int(bun > 19), "respiratory_rate": int(rr >= 30),
-             "blood_pressure": int(sbp < 90 or dbp <= 60), "age_65": int(a >= 65)}
+    comps = {
+        "confusion": int(c),
+        "urea": int(bun > 19),
+        "respiratory_rate": int(rr >= 30),
+        "blood_pressure": int(sbp < 90 or dbp <= 60),
+        "age_65": int(a >= 65),
+    }
     total = sum(comps.values())
     if total <= 1:
         cat, text = "low risk", "consider home treatment"
@@ -57,8 +62,12 @@ def calculate_curb65(
     else:
         cat, text = "high risk", "manage in hospital as severe pneumonia; assess for ICU if 4-5"
     return make_result(
-        "CURB-65", total, "points", cat,
-        f"CURB-65 {total}/5 ({cat}; 30-day mortality about {_CURB_MORTALITY[total]}): {text}.", comps,
+        "CURB-65",
+        total,
+        "points",
+        cat,
+        f"CURB-65 {total}/5 ({cat}; 30-day mortality about {_CURB_MORTALITY[total]}): {text}.",
+        comps,
         "Lim WS et al. Defining community acquired pneumonia severity on presentation to hospital: an "
         "international derivation and validation study. Thorax 2003;58:377-382.",
     )
@@ -86,8 +95,12 @@ def calculate_crb65(
     sbp = check_number(fn, "systolic_bp", systolic_bp, 0, 350, "mmHg")
     dbp = check_number(fn, "diastolic_bp", diastolic_bp, 0, 250, "mmHg")
     a = check_int(fn, "age", age, 18, 120, "years")
-    comps = {"confusion": int(c), "respiratory_rate": int(rr >= 30),
-             "blood_pressure": int(sbp < 90 or dbp <= 60), "age_65": int(a >= 65)}
+    comps = {
+        "confusion": int(c),
+        "respiratory_rate": int(rr >= 30),
+        "blood_pressure": int(sbp < 90 or dbp <= 60),
+        "age_65": int(a >= 65),
+    }
     total = sum(comps.values())
     if total == 0:
         cat, text = "low risk", "likely suitable for home treatment"
@@ -96,7 +109,12 @@ def calculate_crb65(
     else:
         cat, text = "high risk", "urgent hospital admission"
     return make_result(
-        "CRB-65", total, "points", cat, f"CRB-65 {total}/4 ({cat}): {text}.", comps,
+        "CRB-65",
+        total,
+        "points",
+        cat,
+        f"CRB-65 {total}/4 ({cat}): {text}.",
+        comps,
         "Lim WS et al. Thorax 2003;58:377-382; Lim WS et al. BTS guidelines for the management of community "
         "acquired pneumonia in adults: update 2009. Thorax 2009;64(Suppl 3):iii1-iii55.",
     )
@@ -131,8 +149,8 @@ def calculate_wells_pe(
         "clinical_signs_dvt": 3.0 * check_bool(fn, "clinical_signs_dvt", clinical_signs_dvt),
         "pe_most_likely": 3.0 * check_bool(fn, "pe_most_likely", pe_most_likely),
         "heart_rate_gt_100": 1.5 * (hr > 100),
-        "immobilization_or_recent_surgery": 1.5 * check_bool(
-            fn, "immobilization_or_recent_surgery", immobilization_or_recent_surgery),
+        "immobilization_or_recent_surgery": 1.5
+        * check_bool(fn, "immobilization_or_recent_surgery", immobilization_or_recent_surgery),
         "previous_dvt_pe": 1.5 * check_bool(fn, "previous_dvt_pe", previous_dvt_pe),
         "hemoptysis": 1.0 * check_bool(fn, "hemoptysis", hemoptysis),
         "malignancy": 1.0 * check_bool(fn, "malignancy", malignancy),
@@ -146,11 +164,19 @@ def calculate_wells_pe(
     elif total > 6:
         cat, text = "high probability", "high pretest probability of PE: imaging (CTPA) without D-dimer"
     elif total >= 2:
-        cat, text = "moderate probability", "moderate pretest probability: high-sensitivity D-dimer, imaging if positive"
+        cat, text = (
+            "moderate probability",
+            "moderate pretest probability: high-sensitivity D-dimer, imaging if positive",
+        )
     else:
         cat, text = "low probability", "low pretest probability: apply PERC or D-dimer"
     return make_result(
-        "Wells PE", total, "points", cat, f"Wells PE {total:g} ({cat}): {text}.", comps,
+        "Wells PE",
+        total,
+        "points",
+        cat,
+        f"Wells PE {total:g} ({cat}): {text}.",
+        comps,
         "Wells PS et al. Derivation of a simple clinical model to categorize patients probability of "
         "pulmonary embolism. Thromb Haemost 2000;83:416-420.",
     )
@@ -183,7 +209,9 @@ def calculate_perc(
     hr = check_number(fn, "heart_rate", heart_rate, 0, 350, "beats/min")
     s = check_number(fn, "spo2", spo2, 0, 100, "%")
     comps = {
-        "age_ge_50": int(a >= 50), "heart_rate_ge_100": int(hr >= 100), "spo2_lt_95": int(s < 95),
+        "age_ge_50": int(a >= 50),
+        "heart_rate_ge_100": int(hr >= 100),
+        "spo2_lt_95": int(s < 95),
         "unilateral_leg_swelling": int(check_bool(fn, "unilateral_leg_swelling", unilateral_leg_swelling)),
         "hemoptysis": int(check_bool(fn, "hemoptysis", hemoptysis)),
         "recent_surgery_or_trauma": int(check_bool(fn, "recent_surgery_or_trauma", recent_surgery_or_trauma)),
@@ -192,19 +220,34 @@ def calculate_perc(
     }
     total = sum(comps.values())
     if total == 0:
-        cat, text = "PERC negative", "PE can be ruled out without testing if the gestalt pretest probability is low (< 15%)"
+        cat, text = (
+            "PERC negative",
+            "PE can be ruled out without testing if the gestalt pretest probability is low (< 15%)",
+        )
     else:
-        cat, text = "PERC positive", "PE cannot be ruled out by PERC; use D-dimer or imaging per pretest probability"
+        cat, text = (
+            "PERC positive",
+            "PE cannot be ruled out by PERC; use D-dimer or imaging per pretest probability",
+        )
     return make_result(
-        "PERC rule", total, "criteria", cat, f"PERC {total}/8 ({cat}): {text}.", comps,
+        "PERC rule",
+        total,
+        "criteria",
+        cat,
+        f"PERC {total}/8 ({cat}): {text}.",
+        comps,
         "Kline JA et al. Clinical criteria to prevent unnecessary diagnostic testing in emergency department "
         "patients with suspected pulmonary embolism. J Thromb Haemost 2004;2:1247-1255.",
     )
 
 
-_PESI_CLASSES = ((65, "Class I", "very low", "0-1.6%"), (85, "Class II", "low", "1.7-3.5%"),
-                 (105, "Class III", "intermediate", "3.2-7.1%"), (125, "Class IV", "high", "4.0-11.4%"),
-                 (10_000, "Class V", "very high", "10.0-24.5%"))
+_PESI_CLASSES = (
+    (65, "Class I", "very low", "0-1.6%"),
+    (85, "Class II", "low", "1.7-3.5%"),
+    (105, "Class III", "intermediate", "3.2-7.1%"),
+    (125, "Class IV", "high", "4.0-11.4%"),
+    (10_000, "Class V", "very high", "10.0-24.5%"),
+)
 
 
 def calculate_pesi(
@@ -244,12 +287,15 @@ def calculate_pesi(
     t = check_number(fn, "temperature_c", temperature_c, 25, 45, "degrees C")
     sat = check_number(fn, "spo2", spo2, 0, 100, "%")
     comps = {
-        "age": a, "male_sex": 10 * (s == "male"),
+        "age": a,
+        "male_sex": 10 * (s == "male"),
         "cancer": 30 * check_bool(fn, "cancer", cancer),
         "heart_failure": 10 * check_bool(fn, "heart_failure", heart_failure),
         "chronic_lung_disease": 10 * check_bool(fn, "chronic_lung_disease", chronic_lung_disease),
-        "heart_rate_ge_110": 20 * (hr >= 110), "systolic_bp_lt_100": 30 * (sbp < 100),
-        "respiratory_rate_ge_30": 20 * (rr >= 30), "temperature_lt_36": 20 * (t < 36),
+        "heart_rate_ge_110": 20 * (hr >= 110),
+        "systolic_bp_lt_100": 30 * (sbp < 100),
+        "respiratory_rate_ge_30": 20 * (rr >= 30),
+        "temperature_lt_36": 20 * (t < 36),
         "altered_mental_status": 60 * check_bool(fn, "altered_mental_status", altered_mental_status),
         "spo2_lt_90": 20 * (sat < 90),
     }
@@ -258,7 +304,10 @@ def calculate_pesi(
         if total <= upper:
             break
     return make_result(
-        "PESI", total, "points", cls,
+        "PESI",
+        total,
+        "points",
+        cls,
         f"PESI {total} ({cls}, {risk} risk): 30-day mortality {mortality}"
         + ("; candidate for outpatient treatment." if total <= 85 else "; inpatient management."),
         comps,
@@ -291,10 +340,14 @@ def calculate_spesi(
     sbp = check_number(fn, "systolic_bp", systolic_bp, 0, 350, "mmHg")
     sat = check_number(fn, "spo2", spo2, 0, 100, "%")
     comps = {
-        "age_gt_80": int(a > 80), "cancer": int(check_bool(fn, "cancer", cancer)),
-        "chronic_cardiopulmonary_disease": int(check_bool(
-            fn, "chronic_cardiopulmonary_disease", chronic_cardiopulmonary_disease)),
-        "heart_rate_ge_110": int(hr >= 110), "systolic_bp_lt_100": int(sbp < 100), "spo2_lt_90": int(sat < 90),
+        "age_gt_80": int(a > 80),
+        "cancer": int(check_bool(fn, "cancer", cancer)),
+        "chronic_cardiopulmonary_disease": int(
+            check_bool(fn, "chronic_cardiopulmonary_disease", chronic_cardiopulmonary_disease)
+        ),
+        "heart_rate_ge_110": int(hr >= 110),
+        "systolic_bp_lt_100": int(sbp < 100),
+        "spo2_lt_90": int(sat < 90),
     }
     total = sum(comps.values())
     if total == 0:
@@ -302,7 +355,12 @@ def calculate_spesi(
     else:
         cat, text = "high risk", "30-day mortality about 10.9%"
     return make_result(
-        "sPESI", total, "points", cat, f"sPESI {total} ({cat}): {text}.", comps,
+        "sPESI",
+        total,
+        "points",
+        cat,
+        f"sPESI {total} ({cat}): {text}.",
+        comps,
         "Jimenez D et al. Simplification of the Pulmonary Embolism Severity Index for prognostication in "
         "patients with acute symptomatic pulmonary embolism. Arch Intern Med 2010;170:1383-1389.",
     )

@@ -32,11 +32,22 @@ from ._core import (
 )
 
 _COMPOSITION = {"cystic": 0, "spongiform": 0, "mixed": 1, "solid": 2, "cannot_determine": 2}
-_ECHO = {"anechoic": 0, "hyperechoic": 1, "isoechoic": 1, "hypoechoic": 2, "very_hypoechoic": 3,
-         "cannot_determine": 1}
+_ECHO = {
+    "anechoic": 0,
+    "hyperechoic": 1,
+    "isoechoic": 1,
+    "hypoechoic": 2,
+    "very_hypoechoic": 3,
+    "cannot_determine": 1,
+}
 _SHAPE = {"wider_than_tall": 0, "taller_than_wide": 3}
-_MARGIN = {"smooth": 0, "ill_defined": 0, "lobulated_irregular": 2, "extrathyroidal_extension": 3,
-           "cannot_determine": 0}
+_MARGIN = {
+    "smooth": 0,
+    "ill_defined": 0,
+    "lobulated_irregular": 2,
+    "extrathyroidal_extension": 3,
+    "cannot_determine": 0,
+}
 _FOCI = {"none": 0, "large_comet_tail": 0, "macrocalcifications": 1, "peripheral_rim": 2, "punctate": 3}
 # TR level -> (label, FNA threshold cm, follow-up threshold cm, follow-up schedule)
 _TR = {
@@ -46,16 +57,24 @@ _TR = {
     4: ("moderately suspicious", 1.5, 1.0, "ultrasound at 1, 2, 3 and 5 years"),
     5: ("highly suspicious", 1.0, 0.5, "ultrasound every year for 5 years"),
 }
-_TIRADS_REF = ("Tessler FN et al. ACR Thyroid Imaging, Reporting and Data System (TI-RADS): white paper of "
-               "the ACR TI-RADS Committee. J Am Coll Radiol 2017;14:587-595.")
+_TIRADS_REF = (
+    "Tessler FN et al. ACR Thyroid Imaging, Reporting and Data System (TI-RADS): white paper of "
+    "the ACR TI-RADS Committee. J Am Coll Radiol 2017;14:587-595."
+)
 
 
 def calculate_tirads(
     composition: Literal["cystic", "spongiform", "mixed", "solid", "cannot_determine"],
-    echogenicity: Literal["anechoic", "hyperechoic", "isoechoic", "hypoechoic", "very_hypoechoic", "cannot_determine"],
+    echogenicity: Literal[
+        "anechoic", "hyperechoic", "isoechoic", "hypoechoic", "very_hypoechoic", "cannot_determine"
+    ],
     shape: Literal["wider_than_tall", "taller_than_wide"],
-    margin: Literal["smooth", "ill_defined", "lobulated_irregular", "extrathyroidal_extension", "cannot_determine"],
-    echogenic_foci: list[Literal["none", "large_comet_tail", "macrocalcifications", "peripheral_rim", "punctate"]],
+    margin: Literal[
+        "smooth", "ill_defined", "lobulated_irregular", "extrathyroidal_extension", "cannot_determine"
+    ],
+    echogenic_foci: list[
+        Literal["none", "large_comet_tail", "macrocalcifications", "peripheral_rim", "punctate"]
+    ],
     max_diameter_cm: float | None = None,
 ) -> ScoreResult:
     """ACR TI-RADS points and TR level for a thyroid nodule, with FNA/follow-up advice by size.
@@ -90,8 +109,11 @@ def calculate_tirads(
         raise CalculatorInputError(fn, "echogenic_foci", expected + " ('none' alone)", echogenic_foci)
     size = check_optional_number(fn, "max_diameter_cm", max_diameter_cm, 0.1, 15, "cm")
     comps = {
-        "composition": _COMPOSITION[comp], "echogenicity": _ECHO[echo], "shape": _SHAPE[sh],
-        "margin": _MARGIN[mar], "echogenic_foci": sum(_FOCI[f] for f in foci),
+        "composition": _COMPOSITION[comp],
+        "echogenicity": _ECHO[echo],
+        "shape": _SHAPE[sh],
+        "margin": _MARGIN[mar],
+        "echogenic_foci": sum(_FOCI[f] for f in foci),
     }
     if comp == "spongiform":  # ACR: spongiform nodules are benign; do not add further points
         comps = {k: 0 for k in comps}
@@ -101,7 +123,9 @@ def calculate_tirads(
     if fna_cm is None:
         advice = "no FNA"
     elif size is None:
-        advice = f"FNA if >= {fna_cm:g} cm; follow-up if >= {follow_cm:g} cm (give the size for a recommendation)"
+        advice = (
+            f"FNA if >= {fna_cm:g} cm; follow-up if >= {follow_cm:g} cm (give the size for a recommendation)"
+        )
     elif size >= fna_cm:
         advice = f"FNA recommended (>= {fna_cm:g} cm)"
     elif size >= follow_cm:
@@ -110,8 +134,13 @@ def calculate_tirads(
         advice = f"no FNA or follow-up (< {follow_cm:g} cm)"
     comps["recommendation"] = advice
     return make_result(
-        "ACR TI-RADS", total, "points", f"TR{level}", f"ACR TI-RADS TR{level} ({label}, {total} points): {advice}.",
-        comps, _TIRADS_REF,
+        "ACR TI-RADS",
+        total,
+        "points",
+        f"TR{level}",
+        f"ACR TI-RADS TR{level} ({label}, {total} points): {advice}.",
+        comps,
+        _TIRADS_REF,
     )
 
 
@@ -128,17 +157,30 @@ _BIRADS_TEXT = {
     "5": "highly suggestive of malignancy (>= 95%): tissue diagnosis",
     "6": "known biopsy-proven malignancy: surgical excision when clinically appropriate",
 }
-_CALC = {"none": None, "typically_benign": "2", "coarse_heterogeneous": "4B", "amorphous": "4B",
-         "fine_pleomorphic": "4B", "fine_linear_branching": "4C"}
+_CALC = {
+    "none": None,
+    "typically_benign": "2",
+    "coarse_heterogeneous": "4B",
+    "amorphous": "4B",
+    "fine_pleomorphic": "4B",
+    "fine_linear_branching": "4C",
+}
 
 
 def calculate_birads(
     mass_shape: Literal["none", "oval", "round", "irregular"] = "none",
-    mass_margin: Literal["none", "circumscribed", "obscured", "microlobulated", "indistinct", "spiculated"] = "none",
+    mass_margin: Literal[
+        "none", "circumscribed", "obscured", "microlobulated", "indistinct", "spiculated"
+    ] = "none",
     mass_typically_benign: bool = False,
     mass_stable_2_years: bool = False,
     calcification_morphology: Literal[
-        "none", "typically_benign", "coarse_heterogeneous", "amorphous", "fine_pleomorphic", "fine_linear_branching"
+        "none",
+        "typically_benign",
+        "coarse_heterogeneous",
+        "amorphous",
+        "fine_pleomorphic",
+        "fine_linear_branching",
     ] = "none",
     architectural_distortion: bool = False,
     exam_complete: bool = True,
@@ -161,8 +203,12 @@ def calculate_birads(
     """
     fn = "calculate_birads"
     shape = check_choice(fn, "mass_shape", mass_shape, ("none", "oval", "round", "irregular"))
-    margin = check_choice(fn, "mass_margin", mass_margin,
-                          ("none", "circumscribed", "obscured", "microlobulated", "indistinct", "spiculated"))
+    margin = check_choice(
+        fn,
+        "mass_margin",
+        mass_margin,
+        ("none", "circumscribed", "obscured", "microlobulated", "indistinct", "spiculated"),
+    )
     benign_mass = check_bool(fn, "mass_typically_benign", mass_typically_benign)
     stable = check_bool(fn, "mass_stable_2_years", mass_stable_2_years)
     calc = check_choice(fn, "calcification_morphology", calcification_morphology, tuple(_CALC))
@@ -170,8 +216,9 @@ def calculate_birads(
     complete = check_bool(fn, "exam_complete", exam_complete)
     malignant = check_bool(fn, "known_biopsy_proven_malignancy", known_biopsy_proven_malignancy)
     if (shape == "none") != (margin == "none"):
-        raise CalculatorInputError(fn, "mass_margin", "'none' exactly when mass_shape is 'none' (and vice versa)",
-                                   margin)
+        raise CalculatorInputError(
+            fn, "mass_margin", "'none' exactly when mass_shape is 'none' (and vice versa)", margin
+        )
     findings: dict[str, str] = {}
     if shape != "none":
         if benign_mass:
@@ -197,11 +244,20 @@ def calculate_birads(
     else:
         category = max(findings.values(), key=_BIRADS_RANK.__getitem__)
     score = int(category[0])
-    comps: dict[str, str | None] = {"mass": findings.get("mass"), "calcifications": findings.get("calcifications"),
-                                    "architectural_distortion": findings.get("architectural_distortion")}
+    comps: dict[str, str | None] = {
+        "mass": findings.get("mass"),
+        "calcifications": findings.get("calcifications"),
+        "architectural_distortion": findings.get("architectural_distortion"),
+    }
     return make_result(
-        "BI-RADS assessment", score, "category", f"BI-RADS {category}",
-        f"BI-RADS {category}: {_BIRADS_TEXT[category]}.", comps,
-        "D'Orsi CJ, Sickles EA, Mendelson EB, Morris EA et al. ACR BI-RADS Atlas, Breast Imaging Reporting and "
-        "Data System, 5th ed. Reston, VA: American College of Radiology, 2013; Sickles EA. Radiology 1991;179:463-468.",
+        "BI-RADS assessment",
+        score,
+        "category",
+        f"BI-RADS {category}",
+        f"BI-RADS {category}: {_BIRADS_TEXT[category]}.",
+        comps,
+        "D'Orsi CJ, Sickles EA, Mendelson EB, Morris EA et al. ACR BI-RADS Atlas, Breast Imaging "
+        "Reporting and "
+        "Data System, 5th ed. Reston, VA: American College of Radiology, 2013; Sickles EA. Radiology "
+        "1991;179:463-468.",
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from ._core import ScoreResult, check_choice, check_int, check_number, make_result
+from ._core import ScoreResult, check_choice, check_number, make_result
 
 _SEX = ("male", "female")
 
@@ -29,7 +29,10 @@ def _kdigo_g(gfr: float) -> tuple[str, str]:
     return "G5", "kidney failure range"
 
 
-_KDIGO = "KDIGO 2012 Clinical Practice Guideline for the Evaluation and Management of CKD. Kidney Int Suppl 2013;3:1-150."
+_KDIGO = (
+    "KDIGO 2012 Clinical Practice Guideline for the Evaluation and Management of CKD. Kidney Int "
+    "Suppl 2013;3:1-150."
+)
 
 
 def calculate_creatinine_clearance(
@@ -62,15 +65,21 @@ def calculate_creatinine_clearance(
     else:
         cat = "kidney failure"
     return make_result(
-        "Cockcroft-Gault creatinine clearance", crcl, "mL/min", cat,
+        "Cockcroft-Gault creatinine clearance",
+        crcl,
+        "mL/min",
+        cat,
         f"Creatinine clearance {crcl:.0f} mL/min ({cat}); use for drug-dose adjustment.",
         {"sex_factor": factor},
         "Cockcroft DW, Gault MH. Prediction of creatinine clearance from serum creatinine. Nephron "
-        "1976;16:31-41; categories: FDA guidance, Pharmacokinetics in patients with impaired renal function (2010 draft).",
+        "1976;16:31-41; categories: FDA guidance, Pharmacokinetics in patients with impaired renal "
+        "function (2010 draft).",
     )
 
 
-def calculate_ckd_epi_2021(creatinine_mg_dl: float, age: float, sex: Literal["male", "female"]) -> ScoreResult:
+def calculate_ckd_epi_2021(
+    creatinine_mg_dl: float, age: float, sex: Literal["male", "female"]
+) -> ScoreResult:
     """Race-free CKD-EPI 2021 creatinine eGFR in mL/min/1.73 m2 with its KDIGO G category.
 
     Args:
@@ -87,10 +96,14 @@ def calculate_ckd_epi_2021(creatinine_mg_dl: float, age: float, sex: Literal["ma
     else:
         kappa, alpha, factor = 0.9, -0.302, 1.0
     ratio = cr / kappa
-    gfr = 142.0 * min(ratio, 1.0) ** alpha * max(ratio, 1.0) ** -1.200 * 0.9938 ** a * factor
+    gfr = 142.0 * min(ratio, 1.0) ** alpha * max(ratio, 1.0) ** -1.200 * 0.9938**a * factor
     g, text = _kdigo_g(gfr)
     return make_result(
-        "CKD-EPI 2021 eGFR", gfr, "mL/min/1.73 m2", g, f"eGFR {gfr:.0f} mL/min/1.73 m2: KDIGO {g} ({text}).",
+        "CKD-EPI 2021 eGFR",
+        gfr,
+        "mL/min/1.73 m2",
+        g,
+        f"eGFR {gfr:.0f} mL/min/1.73 m2: KDIGO {g} ({text}).",
         {"kappa": kappa, "alpha": alpha, "sex_factor": factor},
         "Inker LA et al. New creatinine- and cystatin C-based equations to estimate GFR without race. "
         "N Engl J Med 2021;385:1737-1749; " + _KDIGO,
@@ -112,8 +125,12 @@ def calculate_bedside_schwartz(height_cm: float, creatinine_mg_dl: float, age: f
     gfr = 0.413 * h / cr
     g, text = _kdigo_g(gfr)
     return make_result(
-        "Bedside Schwartz eGFR", gfr, "mL/min/1.73 m2", g,
-        f"eGFR {gfr:.0f} mL/min/1.73 m2: KDIGO {g} ({text}).", {"k": 0.413},
+        "Bedside Schwartz eGFR",
+        gfr,
+        "mL/min/1.73 m2",
+        g,
+        f"eGFR {gfr:.0f} mL/min/1.73 m2: KDIGO {g} ({text}).",
+        {"k": 0.413},
         "Schwartz GJ et al. New equations to estimate GFR in children with CKD. J Am Soc Nephrol "
         "2009;20:629-637; " + _KDIGO,
     )
@@ -144,9 +161,16 @@ def calculate_fena(
     elif fena <= 2:
         cat, text = "indeterminate", "FENa 1-2% is indeterminate"
     else:
-        cat, text = "intrinsic renal", "FENa > 2% suggests intrinsic renal injury such as acute tubular necrosis"
+        cat, text = (
+            "intrinsic renal",
+            "FENa > 2% suggests intrinsic renal injury such as acute tubular necrosis",
+        )
     return make_result(
-        "FENa", fena, "%", cat, f"FENa {fena:.2f}%: {text}.",
+        "FENa",
+        fena,
+        "%",
+        cat,
+        f"FENa {fena:.2f}%: {text}.",
         {"urine_to_plasma_sodium": una / pna, "urine_to_plasma_creatinine": ucr / pcr},
         "Espinel CH. The FENa test: use in the differential diagnosis of acute renal failure. JAMA "
         "1976;236:579-581; Miller TR et al. Ann Intern Med 1978;89:47-50.",
@@ -186,13 +210,19 @@ def calculate_free_water_deficit(
     deficit = tbw * (na / target - 1.0)
     if deficit > 0:
         cat = "free-water deficit"
-        text = (f"free-water deficit {deficit:.1f} L; replace over >= 48 h, lowering sodium by no more than "
-                "10-12 mmol/L per 24 h in chronic hypernatraemia")
+        text = (
+            f"free-water deficit {deficit:.1f} L; replace over >= 48 h, lowering sodium by no more than "
+            "10-12 mmol/L per 24 h in chronic hypernatraemia"
+        )
     else:
         cat = "no deficit"
         text = f"sodium at or below target {target:g} mmol/L: no free-water deficit"
     return make_result(
-        "Free-water deficit", deficit, "L", cat, f"{text[0].upper()}{text[1:]}.",
+        "Free-water deficit",
+        deficit,
+        "L",
+        cat,
+        f"{text[0].upper()}{text[1:]}.",
         {"total_body_water_fraction": fraction, "total_body_water_l": tbw},
         "Adrogue HJ, Madias NE. Hypernatremia. N Engl J Med 2000;342:1493-1499.",
     )

