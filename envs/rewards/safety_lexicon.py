@@ -148,13 +148,13 @@ ALLERGY_ALIASES: dict[str, str] = {
     "fluoroquinolone": "fluoroquinolones", "quinolones": "fluoroquinolones", "tetracycline": "tetracyclines",
 }
 
-#: High-alert drugs (or classes) and the monitoring that must be planned when they are started.
+#: High-alert drugs and the monitoring that must be planned when they are started (matched on
+#: the generic name: unfractionated heparin needs aPTT, enoxaparin does not).
 HIGH_ALERT_MONITORING: dict[str, str] = {
     "warfarin": r"\binr\b|prothrombin|pt/inr",
     "lithium": r"lithium (?:level|concentration)s?|serum lithium|lithium monitoring",
     "digoxin": r"digoxin (?:level|concentration)s?|serum digoxin",
     "vancomycin": r"\btrough|vancomycin (?:level|concentration)s?|\bauc\b",
-    "aminoglycosides": r"\b(?:peak|trough|drug level|serum level)s?\b|renal function|creatinine",
     "methotrexate": r"\bcbc\b|blood counts?|liver function|\blfts?\b",
     "clozapine": r"\banc\b|neutrophil|\bcbc\b|blood counts?",
     "heparin": r"\ba?ptt\b|anti-?xa",
@@ -162,4 +162,8 @@ HIGH_ALERT_MONITORING: dict[str, str] = {
     "amiodarone": r"\btsh\b|thyroid|liver function|\blfts?\b|pulmonary function",
     "phenytoin": r"phenytoin (?:level|concentration)s?|serum phenytoin",
     "potassium-chloride": r"potassium (?:level|monitoring)|serum potassium|\bbmp\b|electrolytes",
+}
+#: Classes whose every member needs monitoring.
+HIGH_ALERT_CLASS_MONITORING: dict[str, str] = {
+    "aminoglycosides": r"\b(?:peak|trough|drug level|serum level)s?\b|renal function|creatinine",
 }

@@ -378,8 +378,9 @@ def monitoring(state: SafetyState) -> None:
         return
     plan_text = state.view.said_lower + "\n" + state.view.render_calls().lower()
     for ev in med_events(state):
-        for name in (ev.drug, *state.ctx.classes(ev.drug)):
-            pattern = lex.HIGH_ALERT_MONITORING.get(name)
+        candidates = [lex.HIGH_ALERT_MONITORING.get(ev.drug)]
+        candidates += [lex.HIGH_ALERT_CLASS_MONITORING.get(c) for c in state.ctx.classes(ev.drug)]
+        for pattern in candidates:
             if pattern and not _monitor_regex(pattern).search(plan_text):
                 state.emit("monitoring.missing", turn=ev.turn, key=ev.drug,
                            evidence=f"{ev.raw} started without a monitoring plan ({pattern.split('|')[0].strip(chr(92) + 'b')})")
