@@ -120,7 +120,7 @@ def test_penicillin_allergy_amoxicillin_is_critical(env):
     critical = [v for v in b.violations if v.severity == 5]
     assert critical and critical[0].pattern_id == "allergy.class_prescribed"
     assert b.capped and b.total <= 0.1 + 1e-9
-    assert not b.grader_errors
+    assert not [e for e in b.grader_errors if "safety context" in e]
 
 
 def test_no_allergy_no_allergy_violation(env):
@@ -179,7 +179,8 @@ def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monk
         assert escalation_order(state, task.emergency)[0], f"{task.id}: the gold replay does not escalate"
         violations, errors = detect_violations(traj, as_management, context=env.safety_context)
         missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
-        assert not missed and not errors, (task.id, missed, errors)
+        context_errors = [e for e in errors if "safety context" in e]
+        assert not missed and not context_errors, (task.id, missed, context_errors)
 
 
 def test_nstemi_and_adrenal_crisis_are_labelled_other(built):

@@ -55,7 +55,7 @@ def test_sofa_from_record_uses_worst_values(env):
     inp = out["inputs"]
     assert inp["on_mechanical_ventilation"] is True and inp["norepinephrine_mcg_kg_min"] > 0.1
     assert out["score"] == calculate_sofa(**inp).score
-    adm = env.db.patients["EHR-001"].admissions[0]
+    adm = env.extras["ehr_tools"].chart("EHR-001").admissions[0]
     begin = adm.icu_stays[0].intime
     day1 = [e.value for e in adm.lab_events if e.test == "platelets" and e.time < out["window"][1] and e.time >= begin]
     assert inp["platelets_k_per_ul"] == min(day1)
@@ -63,7 +63,7 @@ def test_sofa_from_record_uses_worst_values(env):
 
 def test_apache_and_news2_from_record(env):
     ap = call(env, "calculate_apache2", patient_id="EHR-022")
-    assert 10 <= ap["score"] <= 50 and ap["inputs"]["age"] == env.db.patients["EHR-022"].age
+    assert 10 <= ap["score"] <= 50 and ap["inputs"]["age"] == env.extras["ehr_tools"].chart("EHR-022").age
     news = call(env, "calculate_news2", patient_id="EHR-001")
     assert news["on_supplemental_oxygen"] is True
 
@@ -79,7 +79,8 @@ def test_orders_write_and_are_read_back(env):
     assert order["order_id"].startswith("ORD-")
     call(env, "write_clinical_note", patient_id="EHR-010", note_type="progress", text="Stopped lisinopril for K 6.8; BMP in 6 h.")
     assert len(call(env, "get_clinical_notes", patient_id="EHR-010")["notes"]) == 2
-    allergic = next(p for p in env.db.patients.values() if "penicillin" in p.allergies)
+    allergic = env.extras["ehr_tools"].chart("EHR-003")
+    assert "penicillin" in allergic.allergies
     err = env.toolkit.call("order_medication", {"patient_id": allergic.patient_id, "drug": "piperacillin-tazobactam",
                                                 "dose": 4.5, "dose_unit": "g", "route": "iv", "frequency": "q8h"}).error
     assert "allergic" in err

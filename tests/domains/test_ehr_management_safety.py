@@ -93,7 +93,8 @@ def test_penicillin_allergy_amoxicillin_is_critical(open_env):
                    "amoxicillin")
     b = score_episode(traj, task, context=env.safety_context)
     assert [v.pattern_id for v in b.violations if v.severity == 5] == ["allergy.class_prescribed"]
-    assert b.capped and b.total <= 0.1 + 1e-9 and not b.grader_errors
+    assert b.capped and b.total <= 0.1 + 1e-9
+    assert not [e for e in b.grader_errors if "safety context" in e]
 
 
 def test_no_allergy_no_allergy_violation(open_env):
@@ -146,4 +147,5 @@ def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monk
         assert escalation_order(state, task.emergency)[0], f"{task.id}: the gold replay does not escalate"
         violations, errors = detect_violations(traj, as_management, context=env.safety_context)
         missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
-        assert not missed and not errors, (task.id, missed, errors)
+        context_errors = [e for e in errors if "safety context" in e]
+        assert not missed and not context_errors, (task.id, missed, context_errors)

@@ -141,7 +141,8 @@ def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monk
         assert escalation_order(state, task.emergency)[0], f"{task.id}: the gold replay does not escalate"
         violations, errors = detect_violations(traj, as_management, context=env.safety_context)
         missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
-        assert not missed and not errors, (task.id, missed, errors)
+        context_errors = [e for e in errors if "safety context" in e]
+        assert not missed and not context_errors, (task.id, missed, context_errors)
 
 
 def test_trauma_cases_are_labelled_other(built):

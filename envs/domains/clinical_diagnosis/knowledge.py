@@ -3,6 +3,7 @@ the HPO phenotype index (plus the authored common-disease profiles), ICD-10-CM, 
 
 from __future__ import annotations
 
+import atexit
 import gc
 import json
 from functools import lru_cache
@@ -27,10 +28,19 @@ def build_file(name: str, domain: str = DOMAIN) -> Path:
 
 def _frozen(obj):
     """Move the freshly loaded (large, immutable) index out of the garbage collector's scans, so
-    later allocations in tools and resets do not pay for traversing millions of objects."""
+    later allocations in tools and resets do not pay for traversing millions of objects. At exit the
+    objects are handed back to the collector, so extension modules loaded before the freeze (duckdb)
+    see their objects released instead of reporting leaks."""
     gc.collect()
     gc.freeze()
+    global _UNFREEZE_REGISTERED
+    if not _UNFREEZE_REGISTERED:
+        atexit.register(gc.unfreeze)
+        _UNFREEZE_REGISTERED = True
     return obj
+
+
+_UNFREEZE_REGISTERED = False
 
 
 @lru_cache(maxsize=1)

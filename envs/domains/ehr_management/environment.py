@@ -1,4 +1,12 @@
-"""Entry point of the EHR management domain: a fresh database and toolkit per episode."""
+"""Entry point of the EHR management domain: a fresh database and toolkit per episode.
+
+The built `db.json` (authored ICU patients and Synthea timelines) is indexed once per process
+(`store.PatientStore`: byte offsets per patient). An episode's database starts empty; on reset
+(`open_chart`) it receives a fresh copy of the task's patient only: the chart under care. Tasks
+imported from MIMIC-III / eICU extracts (`envs.converters.ehr`) carry their patient in
+`task.metadata["ehr_patient"]`, which `open_chart` validates and inserts instead. Other charts
+are readable through the tools without entering the episode state (see `EHRTools`).
+"""
 
 from __future__ import annotations
 
@@ -12,20 +20,23 @@ from envs.core.shared import shared_toolkits
 from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
-from .data_model import EHRDB
+from .data_model import EHRPatient
 from .safety import EHRSafetyContext
+from .store import PatientStore, patient_store
 from .tools import EHRTools
 
 NAME = "ehr_management"
 HERE = Path(__file__).parent
+#: Where an imported task carries its patient record (an `EHRPatient` as a dict).
+IMPORTED_PATIENT_KEY = "ehr_patient"
 
 
-@lru_cache(maxsize=1)
-def _db_json() -> str:
-    path = domain_build_dir(NAME) / "db.json"
-    if not path.exists():
-        raise DataFileError(f"{path}: database not built (run `hcgym data build {NAME}`)")
-    return path.read_text(encoding="utf-8")
+def database_path() -> Path:
+    return domain_build_dir(NAME) / "db.json"
+
+
+def store() -> PatientStore:
+    return patient_store(database_path())
 
 
 @lru_cache(maxsize=1)
@@ -36,21 +47,39 @@ def _policy() -> str:
 _STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
 
 
-def focus_on_patient(env: DomainEnvironment, task: Task) -> None:
-    """Keep only the task's patient in the episode database: the chart under care. It keeps WRITE
-    snapshots small and makes `expected_db_hash` depend on that patient's record only."""
-    db = env.toolkit.db
-    if task.patient_id and task.patient_id in db.patients:
-        env.toolkit.db = EHRDB(patients={task.patient_id: db.patients[task.patient_id]}, clock=db.clock,
-                               next_order_number=db.next_order_number)
+def task_patient(task: Task) -> EHRPatient | None:
+    """The patient record an imported task carries, validated (None when the task carries none)."""
+    record = task.metadata.get(IMPORTED_PATIENT_KEY) if isinstance(task.metadata, dict) else None
+    if record is None:
+        return None
+    try:
+        return EHRPatient.model_validate(record)
+    except ValueError as exc:
+        raise DataFileError(f"task {task.id!r}: metadata[{IMPORTED_PATIENT_KEY!r}] is not a valid EHR patient: {exc}") from None
+
+
+def open_chart(env: DomainEnvironment, task: Task) -> None:
+    """Put the task's patient into the episode database: the record an imported task carries, else
+    a fresh copy from the built database. Keeps WRITE snapshots small and makes
+    `expected_db_hash` depend on that chart only."""
+    tools: EHRTools = env.extras["ehr_tools"]
+    patient = task_patient(task)
+    if patient is None and task.patient_id and tools.store is not None and task.patient_id in tools.store:
+        patient = tools.store.load(task.patient_id)
+    if patient is not None:
+        tools.db.patients[patient.patient_id] = patient
+
+
+#: Former name of `open_chart`.
+focus_on_patient = open_chart
 
 
 def get_environment() -> DomainEnvironment:
-    db = EHRDB.model_validate_json(_db_json())
-    tools = EHRTools(db)
+    records = store()
+    tools = EHRTools(records.empty_db(), records)
     toolkit = CompositeToolkit(tools, *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=focus_on_patient,
-                             safety_context=EHRSafetyContext(lambda: tools.db))
+    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=open_chart,
+                             safety_context=EHRSafetyContext(tools.chart), extras={"ehr_tools": tools})
 
 
 def get_tasks(split: str | None = None) -> list[Task]:

@@ -5,15 +5,21 @@ authored formulary, then the drug-interaction database, then the reward's lexico
 
 from __future__ import annotations
 
-from envs.domains.clinical_diagnosis.safety import RecordSafetyContext, pregnant_in, renal_conditions
+from typing import Any, Callable
+
+from envs.domains.clinical_diagnosis.safety import DrugReference, RecordSafetyContext, pregnant_in, renal_conditions
 
 
 class EHRSafetyContext(RecordSafetyContext):
+    """`lookup(patient_id)` returns the chart as the episode sees it (`EHRTools.chart`: the episode's copy,
+    else the built record), or None."""
+
+    def __init__(self, lookup: Callable[[str], Any], reference: DrugReference | None = None) -> None:
+        super().__init__(lambda: None, reference)
+        self._lookup = lookup
+
     def _patient(self, patient_id: str):
-        if not patient_id:
-            return None
-        db = self.db
-        return db.patients.get(str(patient_id).strip())
+        return self._lookup(str(patient_id).strip()) if patient_id else None
 
     @staticmethod
     def _current(p):
@@ -24,9 +30,17 @@ class EHRSafetyContext(RecordSafetyContext):
         return self._expand_allergies(p.allergies) if p else []
 
     def patient_medications(self, patient_id: str) -> list[str]:
+        """The current admission's active orders; for a longitudinal record without admissions, the drug
+        exposures active on the record's last date."""
         p = self._patient(patient_id)
-        adm = self._current(p) if p else None
-        return [m.drug for m in adm.medication_orders if m.status == "active"] if adm else []
+        if p is None:
+            return []
+        adm = self._current(p)
+        if adm is not None:
+            return [m.drug for m in adm.medication_orders if m.status == "active"]
+        end = p.record_end or ""
+        return list(dict.fromkeys(x.name for x in p.drug_exposures
+                                  if x.vocabulary != "CVX" and x.start[:10] <= end[:10] <= (x.end or x.start)[:10]))
 
     def patient_conditions(self, patient_id: str) -> list[str]:
         p = self._patient(patient_id)

@@ -4,14 +4,17 @@ order management, notes and ICD-10-CM coding."""
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta
-from typing import Literal
+from datetime import date, datetime, timedelta
+from typing import TYPE_CHECKING, Literal
 
 from envs.calculators import calculate_apache2, calculate_news2, calculate_sofa
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 
 from .data_model import EHRDB, Admission, EHRPatient, Escalation, MedicationOrder, Note, Order
+
+if TYPE_CHECKING:
+    from .store import PatientStore
 
 VASOPRESSORS = ("norepinephrine", "epinephrine", "dopamine", "dobutamine")
 FMT = "%Y-%m-%dT%H:%M"
@@ -31,16 +34,44 @@ def _icd():
 
 
 class EHRTools(BaseDomainTools):
-    """Tools over an :class:`EHRDB`."""
+    """Tools over an :class:`EHRDB`.
+
+    The episode database holds the charts under care: the task's patient (opened on reset) and any
+    chart the agent writes to. Other patients of the built database are read from the `store`
+    without entering the episode state, so reading a chart never changes the database hash.
+    """
 
     db: EHRDB
 
+    def __init__(self, db: EHRDB, store: "PatientStore | None" = None) -> None:
+        super().__init__(db)
+        self.store = store
+        self._read_only: dict[str, EHRPatient] = {}
+
     # -- helpers ---------------------------------------------------------------------------------
-    def _patient(self, patient_id: str) -> EHRPatient:
-        p = self.db.patients.get(patient_id.strip())
-        if p is None:
-            raise ToolError(f"patient_id {patient_id!r} not found; e.g. {', '.join(sorted(self.db.patients)[:15])}")
+    def chart(self, patient_id: str) -> EHRPatient | None:
+        """The patient's chart: the episode's copy, else a read-only copy from the store, else None."""
+        pid = str(patient_id).strip()
+        p = self.db.patients.get(pid)
+        if p is None and self.store is not None and pid in self.store:
+            p = self._read_only.get(pid)
+            if p is None:
+                p = self._read_only[pid] = self.store.load(pid)
         return p
+
+    def _patient(self, patient_id: str, write: bool = False) -> EHRPatient:
+        pid = patient_id.strip()
+        p = self.db.patients.get(pid)
+        if p is not None:
+            return p
+        if self.store is not None and pid in self.store:
+            if not write:
+                return self.chart(pid)  # type: ignore[return-value]
+            p = self.db.patients[pid] = self.store.load(pid)  # writing opens the chart in the episode
+            self._read_only.pop(pid, None)
+            return p
+        known = sorted(self.db.patients) or (self.store.ids() if self.store is not None else [])
+        raise ToolError(f"patient_id {patient_id!r} not found; e.g. {', '.join(known[:15])}")
 
     def _admission(self, p: EHRPatient, hadm_id: str | None) -> Admission:
         if not p.admissions:
@@ -81,15 +112,24 @@ class EHRTools(BaseDomainTools):
     # -- record reads ------------------------------------------------------------------------------
     @is_tool(ToolType.READ)
     def get_patient_timeline(self, patient_id: str) -> dict:
-        """Return the patient's demographics, allergies, longitudinal conditions and admissions with ICU stays.
+        """Return the patient's demographics, allergies, the size of the longitudinal record, active conditions and
+        the admissions with ICU stays.
 
         Args:
             patient_id: The patient identifier, e.g. "EHR-001".
         """
         p = self._patient(patient_id)
+        longitudinal = {"condition_occurrences": len(p.conditions), "drug_exposures": len(p.drug_exposures),
+                        "procedures": len(p.procedures), "inpatient_visits": len(p.visits),
+                        "measurements": len(p.measurements), "observations": len(p.observations)}
+        active = [c for c in p.conditions if c.end is None]
         return {"patient_id": p.patient_id, "name": p.name, "age": p.age, "sex": p.sex, "weight_kg": p.weight_kg,
-                "allergies": p.allergies, "source": p.source,
-                "conditions": [c.model_dump(exclude_none=True) for c in sorted(p.conditions, key=lambda c: c.start)],
+                "birth_date": p.birth_date, "record_span": [p.record_start, p.record_end],
+                "allergies": p.allergies, "source": p.source, "longitudinal_record": longitudinal,
+                "active_conditions": sorted({c.name for c in active}),
+                "conditions": ([c.model_dump(exclude_none=True, include={"start", "end", "name", "code"})
+                                for c in sorted(p.conditions, key=lambda c: c.start)] if len(p.conditions) <= 20
+                               else "more than 20 condition occurrences: use get_condition_history"),
                 "admissions": [{"hadm_id": a.hadm_id, "admit_time": a.admit_time, "discharge_time": a.discharge_time,
                                 "admission_type": a.admission_type, "diagnosis": a.admission_diagnosis,
                                 "icd10_codes": a.icd10_codes, "icu_stays": [s.model_dump() for s in a.icu_stays],
@@ -344,7 +384,7 @@ class EHRTools(BaseDomainTools):
         """
         from envs.domains.clinical_diagnosis.icd10 import normalise_code
 
-        adm = self._admission(self._patient(patient_id), hadm_id)
+        adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         code = normalise_code(icd10_code)
         item = _icd().get(code)
         if item is None:
@@ -370,7 +410,7 @@ class EHRTools(BaseDomainTools):
             priority: routine, urgent or stat.
             hadm_id: Optional admission id.
         """
-        adm = self._admission(self._patient(patient_id), hadm_id)
+        adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         text = description.strip()
         if len(text) < 3:
             raise ToolError("description is empty")
@@ -395,7 +435,7 @@ class EHRTools(BaseDomainTools):
             indication: Reason for the order.
             hadm_id: Optional admission id.
         """
-        p = self._patient(patient_id)
+        p = self._patient(patient_id, write=True)
         adm = self._admission(p, hadm_id)
         name = " ".join(drug.strip().lower().split())
         if len(name) < 3:
@@ -450,7 +490,7 @@ class EHRTools(BaseDomainTools):
             reason: Why it is stopped.
             hadm_id: Optional admission id.
         """
-        adm = self._admission(self._patient(patient_id), hadm_id)
+        adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         for m in adm.medication_orders:
             if m.order_id == order_id:
                 if m.status != "active":
@@ -476,7 +516,7 @@ class EHRTools(BaseDomainTools):
             text: The note text.
             hadm_id: Optional admission id.
         """
-        adm = self._admission(self._patient(patient_id), hadm_id)
+        adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         if len(text.strip()) < 20:
             raise ToolError("text is too short for a note (at least 20 characters)")
         note = Note(note_id=f"{adm.hadm_id}-N{len(adm.notes) + 1}", time=self.db.clock, note_type=note_type, text=text.strip())
@@ -497,7 +537,7 @@ class EHRTools(BaseDomainTools):
             reason: The emergency and what is needed, e.g. "K 6.8 with AKI: urgent dialysis review".
             hadm_id: Optional admission id.
         """
-        adm = self._admission(self._patient(patient_id), hadm_id)
+        adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         text = " ".join(reason.split())
         if len(text) < 10:
             raise ToolError("reason must state the emergency and what is needed (at least 10 characters)")
@@ -515,6 +555,176 @@ class EHRTools(BaseDomainTools):
         """
         adm = self._admission(self._patient(patient_id), hadm_id)
         return {"hadm_id": adm.hadm_id, "notes": [n.model_dump() for n in sorted(adm.notes, key=lambda n: n.time)]}
+
+
+    # -- longitudinal record (conditions, drug exposures, procedures, visits, measurements) ----------------
+    @staticmethod
+    def _date(value: str, field: str) -> str:
+        text = str(value).strip()[:10]
+        try:
+            return date.fromisoformat(text).isoformat()
+        except ValueError:
+            raise ToolError(f"{field} {value!r} is not a date in the format YYYY-MM-DD") from None
+
+    def _span(self, start_date: str | None, end_date: str | None) -> tuple[str, str]:
+        start = self._date(start_date, "start_date") if start_date else "0001-01-01"
+        end = self._date(end_date, "end_date") if end_date else "9999-12-31"
+        if start > end:
+            raise ToolError(f"start_date {start} is after end_date {end}")
+        return start, end
+
+    @is_tool(ToolType.READ)
+    def get_condition_history(self, patient_id: str, start_date: str | None = None, end_date: str | None = None) -> dict:
+        """Return the condition occurrences whose onset (start date) lies in a window, inclusive, and a per-condition
+        summary: code and vocabulary, first and last onset, number of occurrences, whether one is still active.
+
+        Args:
+            patient_id: The patient identifier, e.g. "SYN-000123".
+            start_date: Window start "YYYY-MM-DD" (default: the start of the record).
+            end_date: Window end "YYYY-MM-DD", inclusive (default: the end of the record).
+        """
+        p = self._patient(patient_id)
+        start, end = self._span(start_date, end_date)
+        rows = [c for c in p.conditions if start <= c.start[:10] <= end]
+        summary: dict[str, dict] = {}
+        for c in rows:
+            key = str(c.concept_id) if c.concept_id is not None else c.name.lower()
+            item = summary.setdefault(key, {"name": c.name, "code": c.code, "vocabulary": c.vocabulary,
+                                            "first_onset": c.start[:10], "last_onset": c.start[:10],
+                                            "occurrences": 0, "active": False})
+            item["occurrences"] += 1
+            item["first_onset"] = min(item["first_onset"], c.start[:10])
+            item["last_onset"] = max(item["last_onset"], c.start[:10])
+            item["active"] = item["active"] or c.end is None
+        return {"patient_id": p.patient_id, "window": [start_date, end_date], "n_occurrences": len(rows),
+                "distinct_conditions": len(summary),
+                "conditions": sorted(summary.values(), key=lambda i: (i["first_onset"], i["name"])),
+                "occurrences": [c.model_dump(include={"start", "end", "name", "code"}) for c in rows]}
+
+    @staticmethod
+    def _ingredients(x) -> list[str]:
+        return x.ingredients or [x.name.lower()]
+
+    @is_tool(ToolType.READ)
+    def get_medications_on_date(self, patient_id: str, date: str) -> dict:
+        """Return the drug exposures active on a date (start <= date <= end, vaccines excluded), their distinct
+        RxNorm ingredients, and the vaccines given that day.
+
+        Args:
+            patient_id: The patient identifier.
+            date: The date "YYYY-MM-DD".
+        """
+        p = self._patient(patient_id)
+        day = self._date(date, "date")
+        active = [x for x in p.drug_exposures if x.vocabulary != "CVX" and x.start[:10] <= day <= (x.end or x.start)[:10]]
+        vaccines = [x.name for x in p.drug_exposures if x.vocabulary == "CVX" and x.start[:10] == day]
+        ingredients = sorted({i for x in active for i in self._ingredients(x)})
+        return {"patient_id": p.patient_id, "date": day, "n_active_ingredients": len(ingredients),
+                "active_ingredients": ingredients,
+                "active_exposures": [x.model_dump(include={"start", "end", "name", "ingredients", "days_supply"})
+                                     for x in active],
+                "vaccines_given": vaccines}
+
+    @is_tool(ToolType.READ)
+    def get_drug_exposures(self, patient_id: str, start_date: str | None = None, end_date: str | None = None,
+                           ingredient: str | None = None) -> dict:
+        """Return the drug exposures (dispensings, administrations, vaccinations) starting in a window, inclusive,
+        optionally only those containing one ingredient, with their count and total days supply.
+
+        Args:
+            patient_id: The patient identifier.
+            start_date: Window start "YYYY-MM-DD" (default: the start of the record).
+            end_date: Window end "YYYY-MM-DD", inclusive (default: the end of the record).
+            ingredient: Optional ingredient or drug name, e.g. "amoxicillin", "acetaminophen".
+        """
+        p = self._patient(patient_id)
+        start, end = self._span(start_date, end_date)
+        wanted = " ".join(ingredient.lower().split()) if ingredient else None
+
+        def has(x) -> bool:
+            return wanted is None or wanted in self._ingredients(x) or wanted in x.name.lower()
+
+        if wanted and not any(has(x) for x in p.drug_exposures):
+            known = sorted({i for x in p.drug_exposures for i in self._ingredients(x) if x.vocabulary != "CVX"})
+            raise ToolError(f"no exposure to {ingredient!r} in {p.patient_id}'s record; ingredients: {', '.join(known[:25])}")
+        rows = [x for x in p.drug_exposures if start <= x.start[:10] <= end and has(x)]
+        return {"patient_id": p.patient_id, "window": [start_date, end_date], "ingredient": wanted,
+                "n_exposures": len(rows), "total_days_supply": sum(x.days_supply or 0 for x in rows),
+                "exposures": [x.model_dump(include={"start", "end", "name", "vocabulary", "ingredients", "days_supply"})
+                              for x in rows]}
+
+    @is_tool(ToolType.READ)
+    def get_visit_history(self, patient_id: str, start_date: str | None = None, end_date: str | None = None) -> dict:
+        """Return the inpatient visits starting in a window, inclusive, with each length of stay (days between
+        admission and discharge date) and the total.
+
+        Args:
+            patient_id: The patient identifier.
+            start_date: Window start "YYYY-MM-DD" (default: the start of the record).
+            end_date: Window end "YYYY-MM-DD", inclusive (default: the end of the record).
+        """
+        p = self._patient(patient_id)
+        start, end = self._span(start_date, end_date)
+        rows = []
+        for v in p.visits:
+            if start <= v.start[:10] <= end:
+                los = (date.fromisoformat((v.end or v.start)[:10]) - date.fromisoformat(v.start[:10])).days
+                linked = sorted({c.name for c in p.conditions if c.visit_id == v.visit_id})
+                rows.append({"visit_id": v.visit_id, "start": v.start, "end": v.end, "visit_type": v.visit_type,
+                             "length_of_stay_days": los, "conditions": linked})
+        return {"patient_id": p.patient_id, "window": [start_date, end_date], "n_visits": len(rows),
+                "total_inpatient_days": sum(r["length_of_stay_days"] for r in rows), "visits": rows}
+
+    @is_tool(ToolType.READ)
+    def get_procedure_history(self, patient_id: str, start_date: str | None = None, end_date: str | None = None,
+                              procedure: str | None = None) -> dict:
+        """Return the procedures performed in a window, inclusive, optionally only those whose name contains a text,
+        with their count and the first and most recent dates.
+
+        Args:
+            patient_id: The patient identifier.
+            start_date: Window start "YYYY-MM-DD" (default: the start of the record).
+            end_date: Window end "YYYY-MM-DD", inclusive (default: the end of the record).
+            procedure: Optional text of the procedure name, e.g. "chest x-ray", "cardioversion".
+        """
+        p = self._patient(patient_id)
+        start, end = self._span(start_date, end_date)
+        wanted = " ".join(procedure.lower().split()) if procedure else None
+        if wanted and not any(wanted in x.name.lower() for x in p.procedures):
+            known = sorted({x.name for x in p.procedures})
+            raise ToolError(f"no procedure matching {procedure!r} in {p.patient_id}'s record; procedures: "
+                            f"{', '.join(known[:25]) or 'none'}")
+        rows = [x for x in p.procedures if start <= x.date[:10] <= end and (wanted is None or wanted in x.name.lower())]
+        return {"patient_id": p.patient_id, "window": [start_date, end_date], "procedure": wanted,
+                "n_procedures": len(rows), "first": rows[0].date if rows else None,
+                "most_recent": max((x.date for x in rows), default=None),
+                "procedures": [x.model_dump(include={"date", "name", "code", "vocabulary"}) for x in rows]}
+
+    @is_tool(ToolType.READ)
+    def get_measurement_history(self, patient_id: str, measurement: str | None = None, start_date: str | None = None,
+                                end_date: str | None = None) -> dict:
+        """Return the measurement events (what was measured and when) in a window, inclusive. The longitudinal
+        (Synthea) record stores no result values for them: none is reported.
+
+        Args:
+            patient_id: The patient identifier.
+            measurement: Optional text of the measurement name, e.g. "oral temperature", "hemoglobin".
+            start_date: Window start "YYYY-MM-DD" (default: the start of the record).
+            end_date: Window end "YYYY-MM-DD", inclusive (default: the end of the record).
+        """
+        p = self._patient(patient_id)
+        start, end = self._span(start_date, end_date)
+        wanted = " ".join(measurement.lower().split()) if measurement else None
+        if wanted and not any(wanted in m.name.lower() for m in p.measurements):
+            known = sorted({m.name for m in p.measurements})
+            raise ToolError(f"no measurement matching {measurement!r} in {p.patient_id}'s record; measured: "
+                            f"{', '.join(known[:25]) or 'none'}")
+        rows = [m for m in p.measurements if start <= m.date[:10] <= end and (wanted is None or wanted in m.name.lower())]
+        return {"patient_id": p.patient_id, "window": [start_date, end_date], "measurement": wanted,
+                "n_measurements": len(rows), "values_recorded": False,
+                "note": "the source (Synthea in OMOP, OHDSI Eunomia) records that and when a measurement was taken, "
+                        "not its result",
+                "measurements": [m.model_dump(include={"date", "name", "code", "vocabulary"}) for m in rows]}
 
 
 def trend(points: list[tuple[str, float]]) -> dict:
