@@ -14,6 +14,7 @@ gas is available, as the paper allows.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from typing import Literal
 
 from ._core import (
@@ -30,28 +31,36 @@ from ._core import (
 _ADMISSION = ("nonoperative", "emergency_postoperative", "elective_postoperative")
 
 
-def _up(value: float, high: tuple, low: tuple) -> int:
-    """Score with (threshold, points) pairs: high side ">= t", low side "< t" (else 0)."""
-    for threshold, points in high:
-        if value >= threshold:
-            return points
-    for threshold, points in low:
-        if value < threshold:
-            return points
-    return 0
+def _bands(high: tuple, low: tuple) -> tuple[tuple[float, ...], tuple[int, ...]]:
+    """Compile (threshold, points) pairs into a bisect table.
+
+    ``high`` pairs score "value >= threshold", ``low`` pairs "value < threshold", anything in
+    between scores 0. The result is (ascending thresholds, points per interval), so that
+    ``points[bisect_right(thresholds, value)]`` is the score (one C-level search per variable).
+    """
+    low_sorted = sorted(low)
+    high_sorted = sorted(high)
+    thresholds = tuple(t for t, _ in low_sorted) + tuple(t for t, _ in high_sorted)
+    points = tuple(p for _, p in low_sorted) + (0,) + tuple(p for _, p in high_sorted)
+    return thresholds, points
 
 
-_TEMP = (((41, 4), (39, 3), (38.5, 1)), ((30, 4), (32, 3), (34, 2), (36, 1)))
-_MAP = (((160, 4), (130, 3), (110, 2)), ((50, 4), (70, 2)))
-_HR = (((180, 4), (140, 3), (110, 2)), ((40, 4), (55, 3), (70, 2)))
-_RR = (((50, 4), (35, 3), (25, 1)), ((6, 4), (10, 2), (12, 1)))
-_PH = (((7.7, 4), (7.6, 3), (7.5, 1)), ((7.15, 4), (7.25, 3), (7.33, 2)))
-_HCO3 = (((52, 4), (41, 3), (32, 1)), ((15, 4), (18, 3), (22, 2)))
-_NA = (((180, 4), (160, 3), (155, 2), (150, 1)), ((111, 4), (120, 3), (130, 2)))
-_K = (((7, 4), (6, 3), (5.5, 1)), ((2.5, 4), (3, 2), (3.5, 1)))
-_CR = (((3.5, 4), (2, 3), (1.5, 2)), ((0.6, 2),))
-_HCT = (((60, 4), (50, 2), (46, 1)), ((20, 4), (30, 2)))
-_WBC = (((40, 4), (20, 2), (15, 1)), ((1, 4), (3, 2)))
+def _up(value: float, bands: tuple[tuple[float, ...], tuple[int, ...]]) -> int:
+    return bands[1][bisect_right(bands[0], value)]
+
+
+# (high side, low side) as printed in Knaus 1985, Fig. 1
+_TEMP = _bands(((41, 4), (39, 3), (38.5, 1)), ((30, 4), (32, 3), (34, 2), (36, 1)))
+_MAP = _bands(((160, 4), (130, 3), (110, 2)), ((50, 4), (70, 2)))
+_HR = _bands(((180, 4), (140, 3), (110, 2)), ((40, 4), (55, 3), (70, 2)))
+_RR = _bands(((50, 4), (35, 3), (25, 1)), ((6, 4), (10, 2), (12, 1)))
+_PH = _bands(((7.7, 4), (7.6, 3), (7.5, 1)), ((7.15, 4), (7.25, 3), (7.33, 2)))
+_HCO3 = _bands(((52, 4), (41, 3), (32, 1)), ((15, 4), (18, 3), (22, 2)))
+_NA = _bands(((180, 4), (160, 3), (155, 2), (150, 1)), ((111, 4), (120, 3), (130, 2)))
+_K = _bands(((7, 4), (6, 3), (5.5, 1)), ((2.5, 4), (3, 2), (3.5, 1)))
+_CR = _bands(((3.5, 4), (2, 3), (1.5, 2)), ((0.6, 2),))
+_HCT = _bands(((60, 4), (50, 2), (46, 1)), ((20, 4), (30, 2)))
+_WBC = _bands(((40, 4), (20, 2), (15, 1)), ((1, 4), (3, 2)))
 
 # Approximate hospital death rates by APACHE II band (Knaus 1985, Fig. 2): nonoperative / postoperative.
 _MORTALITY = (
@@ -152,24 +161,24 @@ def calculate_apache2(
     else:
         oxygenation = 0 if pao2 > 70 else 1 if pao2 >= 61 else 3 if pao2 >= 55 else 4
     if ph is not None:
-        acid_base = _up(ph, *_PH)
+        acid_base = _up(ph, _PH)
     elif hco3 is not None:
-        acid_base = _up(hco3, *_HCO3)
+        acid_base = _up(hco3, _HCO3)
     else:
         raise CalculatorInputError(fn, "arterial_ph", "given (or serum_bicarbonate_mmol_l given)", None)
-    creat = _up(cr, *_CR) * (2 if arf else 1)
+    creat = _up(cr, _CR) * (2 if arf else 1)
     comps = {
-        "temperature": _up(t, *_TEMP),
-        "mean_arterial_pressure": _up(mp, *_MAP),
-        "heart_rate": _up(hr, *_HR),
-        "respiratory_rate": _up(rr, *_RR),
+        "temperature": _up(t, _TEMP),
+        "mean_arterial_pressure": _up(mp, _MAP),
+        "heart_rate": _up(hr, _HR),
+        "respiratory_rate": _up(rr, _RR),
         "oxygenation": oxygenation,
         "acid_base": acid_base,
-        "sodium": _up(na, *_NA),
-        "potassium": _up(k, *_K),
+        "sodium": _up(na, _NA),
+        "potassium": _up(k, _K),
         "creatinine": creat,
-        "hematocrit": _up(hct, *_HCT),
-        "white_cells": _up(wbc, *_WBC),
+        "hematocrit": _up(hct, _HCT),
+        "white_cells": _up(wbc, _WBC),
         "gcs": 15 - g,
     }
     aps = sum(comps.values())

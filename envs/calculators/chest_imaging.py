@@ -260,7 +260,6 @@ def calculate_lung_rads(
             "prior_category": prior_category,
             "s_modifier": s_mod,
         },
-        "American College of Radiology. Lung-RADS v2022 assessment categories (released November 2022); "
-        "Christensen J et al. ACR Lung-RADS v2022: assessment categories and management recommendations. "
-        "J Am Coll Radiol 2024;21:473-488.",
+        "American College of Radiology. Lung CT Screening Reporting & Data System (Lung-RADS) v2022: "
+        "assessment categories and management (released November 2022).",
     )

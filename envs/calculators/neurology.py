@@ -118,7 +118,8 @@ def calculate_nihss(
         f"NIHSS {total}/42: {cat}.",
         comps,
         "Brott T et al. Measurements of acute cerebral infarction: a clinical examination scale. Stroke "
-        "1989;20:864-870; NIH Stroke Scale form (NINDS); severity bands as used by the NIH/NINDS.",
+        "1989;20:864-870; NIH Stroke Scale form (NINDS); severity bands (0, 1-4, 5-15, 16-20, 21-42) as "
+        "commonly used in stroke practice, not part of the scale itself.",
     )
 
 

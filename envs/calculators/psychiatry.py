@@ -307,5 +307,6 @@ def calculate_ciwa_ar(
         f"CIWA-Ar {total}/67: {text}.",
         comps,
         "Sullivan JT et al. Assessment of alcohol withdrawal: the revised Clinical Institute Withdrawal "
-        "Assessment for Alcohol scale (CIWA-Ar). Br J Addict 1989;84:1353-1357.",
+        "Assessment for Alcohol scale (CIWA-Ar). Br J Addict 1989;84:1353-1357; severity bands (<= 8, "
+        "9-15, >= 16) as used in symptom-triggered withdrawal protocols.",
     )
