@@ -22,7 +22,7 @@ Conventions (see README.md in this package):
 from __future__ import annotations
 
 from numbers import Integral, Real
-from typing import Any, Iterable
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict
 
@@ -205,11 +205,3 @@ def check_responses(fn: str, name: str, value: Any, count: int, lo: int, hi: int
         else:
             raise CalculatorInputError(fn, name, expected, value)
     return out
-
-
-def first_match(value: float, bands: Iterable[tuple[float, Any]]) -> Any:
-    """Return the payload of the first ``(upper_bound, payload)`` band with value < bound."""
-    for bound, payload in bands:
-        if value < bound:
-            return payload
-    raise AssertionError("bands must end with an infinite bound")
