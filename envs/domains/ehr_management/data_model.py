@@ -20,6 +20,7 @@ class LabEvent(_Strict):
     test: str
     value: float
     unit: str
+    source_id: str | None = None       # provenance of an imported row, e.g. "LABEVENTS.csv:ROW_ID=281"
 
 
 class VitalEvent(_Strict):
@@ -65,6 +66,17 @@ class ICUStay(_Strict):
     outtime: str | None = None
 
 
+class CodedDiagnosis(_Strict):
+    """A coded discharge diagnosis of an admission (e.g. MIMIC-III DIAGNOSES_ICD, eICU diagnosis)."""
+
+    seq: int                           # 1 = primary / principal
+    code: str                          # as the source writes it (MIMIC-III: ICD-9 without the dot, "0389")
+    system: Literal["ICD-9-CM", "ICD-10-CM"]
+    title: str = ""
+    primary: bool = False
+    source_id: str | None = None
+
+
 class Ventilation(_Strict):
     start: str
     end: str | None = None
@@ -91,9 +103,10 @@ class Admission(_Strict):
     hadm_id: str
     admit_time: str
     discharge_time: str | None = None
-    admission_type: Literal["emergency", "elective", "urgent"] = "emergency"
+    admission_type: Literal["emergency", "elective", "urgent", "newborn", "unknown"] = "emergency"
     admission_diagnosis: str
     icd10_codes: list[str] = Field(default_factory=list)
+    coded_diagnoses: list[CodedDiagnosis] = Field(default_factory=list)
     icu_stays: list[ICUStay] = Field(default_factory=list)
     lab_events: list[LabEvent] = Field(default_factory=list)
     vital_events: list[VitalEvent] = Field(default_factory=list)

@@ -136,35 +136,61 @@ class EHRTools(BaseDomainTools):
                                 "n_lab_events": len(a.lab_events), "n_vital_events": len(a.vital_events)}
                                for a in sorted(p.admissions, key=lambda a: a.admit_time)]}
 
+    def _stay_window(self, adm: Admission, stay_id: str | None) -> tuple[str, str]:
+        """The [intime, outtime] of an ICU stay of the admission as "YYYY-MM-DDTHH:MM" strings (whole range when None)."""
+        if stay_id is None:
+            return "0000", "9999"
+        for stay in adm.icu_stays:
+            if stay.stay_id == str(stay_id).strip():
+                return stay.intime[:16], (stay.outtime or "9999")[:16]
+        raise ToolError(f"stay_id {stay_id!r} is not an ICU stay of {adm.hadm_id}; stays: "
+                        f"{', '.join(s.stay_id for s in adm.icu_stays) or 'none'}")
+
     @is_tool(ToolType.READ)
-    def get_lab_events(self, patient_id: str, test: str | None = None, hadm_id: str | None = None) -> dict:
-        """Return timestamped lab events of an admission (default: the latest), optionally one test.
+    def get_lab_events(self, patient_id: str, test: str | None = None, hadm_id: str | None = None,
+                       stay_id: str | None = None) -> dict:
+        """Return timestamped lab events of an admission (default: the latest), optionally one test, optionally only
+        those charted during one ICU stay (intime to outtime, inclusive).
 
         Args:
             patient_id: The patient identifier.
             test: Optional test name, e.g. "creatinine", "potassium", "lactate".
             hadm_id: Optional admission id.
+            stay_id: Optional ICU stay id of that admission.
         """
         adm = self._admission(self._patient(patient_id), hadm_id)
-        events = [e for e in adm.lab_events if test is None or e.test == test.strip().lower()]
+        begin, end = self._stay_window(adm, stay_id)
+        events = [e for e in adm.lab_events if (test is None or e.test == test.strip().lower())
+                  and begin <= e.time[:16] <= end]
         if test is not None and not events:
-            raise ToolError(f"no {test!r} results in {adm.hadm_id}; tests: {', '.join(sorted({e.test for e in adm.lab_events}))}")
-        return {"hadm_id": adm.hadm_id, "events": [e.model_dump() for e in sorted(events, key=lambda e: (e.time, e.test))]}
+            where = f"ICU stay {stay_id} of {adm.hadm_id}" if stay_id else adm.hadm_id
+            raise ToolError(f"no {test!r} results in {where}; tests: {', '.join(sorted({e.test for e in adm.lab_events}))}")
+        return {"hadm_id": adm.hadm_id, "stay_id": stay_id,
+                "events": [e.model_dump(exclude_none=True) for e in sorted(events, key=lambda e: (e.time, e.test))]}
 
     @is_tool(ToolType.READ)
-    def get_lab_trend(self, patient_id: str, test: str, hadm_id: str | None = None) -> dict:
-        """Compute a lab test's trend over an admission: first, last, delta, min, max, and the least-squares slope per day.
+    def get_lab_trend(self, patient_id: str, test: str, hadm_id: str | None = None, stay_id: str | None = None) -> dict:
+        """Compute a lab test's trend over an admission, or over one ICU stay: first, last, delta, min, max, and the
+        least-squares slope per day.
 
         Args:
             patient_id: The patient identifier.
             test: The lab test, e.g. "creatinine".
             hadm_id: Optional admission id (default: the latest admission).
+            stay_id: Optional ICU stay id: only results charted during that stay (intime to outtime, inclusive).
         """
         adm = self._admission(self._patient(patient_id), hadm_id)
-        events = sorted((e for e in adm.lab_events if e.test == test.strip().lower()), key=lambda e: e.time)
+        begin, end = self._stay_window(adm, stay_id)
+        events = sorted((e for e in adm.lab_events if e.test == test.strip().lower() and begin <= e.time[:16] <= end),
+                        key=lambda e: e.time)
         if len(events) < 2:
-            raise ToolError(f"test {test!r} needs at least 2 results in {adm.hadm_id} for a trend (found {len(events)})")
-        return {"hadm_id": adm.hadm_id, "test": events[0].test, "unit": events[0].unit, **trend([(e.time, e.value) for e in events])}
+            where = f"ICU stay {stay_id} of {adm.hadm_id}" if stay_id else adm.hadm_id
+            raise ToolError(f"test {test!r} needs at least 2 results in {where} for a trend (found {len(events)})")
+        out = {"hadm_id": adm.hadm_id, "test": events[0].test, "unit": events[0].unit,
+               **trend([(e.time, e.value) for e in events])}
+        if stay_id is not None:
+            out["stay_id"] = stay_id
+        return out
 
     @is_tool(ToolType.READ)
     def get_vital_trend(self, patient_id: str, vital: Literal["heart_rate", "systolic_bp", "diastolic_bp", "map_mmhg",
@@ -201,8 +227,8 @@ class EHRTools(BaseDomainTools):
 
     @is_tool(ToolType.READ)
     def summarize_admission(self, patient_id: str, hadm_id: str | None = None) -> dict:
-        """Summarise an admission from the record: diagnosis, ICU days, ventilation and vasopressor hours, and
-        each lab's first/last/worst values.
+        """Summarise an admission from the record: diagnosis, hospital and ICU lengths of stay (days, from the
+        admission/discharge and ICU in/out times), ventilation and vasopressor hours, and each lab's first/last/worst values.
 
         Args:
             patient_id: The patient identifier.
@@ -218,11 +244,33 @@ class EHRTools(BaseDomainTools):
         vent_h = sum(((_t(v.end) if v.end else _t(self.db.clock)) - _t(v.start)).total_seconds() / 3600 for v in adm.ventilation)
         pressor_h = sum(((_t(m.stop) if m.stop else _t(self.db.clock)) - _t(m.start)).total_seconds() / 3600
                         for m in adm.medication_orders if m.drug in VASOPRESSORS)
+        stays = [{**s.model_dump(), "los_days": round((_t(s.outtime) - _t(s.intime)).total_seconds() / 86400, 4)
+                  if s.outtime else None} for s in adm.icu_stays]
+        hospital_los = (round((_t(adm.discharge_time) - _t(adm.admit_time)).total_seconds() / 86400, 4)
+                        if adm.discharge_time else None)
         return {"patient_id": p.patient_id, "hadm_id": adm.hadm_id, "diagnosis": adm.admission_diagnosis,
-                "icd10_codes": adm.icd10_codes, "icu_stays": [s.model_dump() for s in adm.icu_stays],
+                "admit_time": adm.admit_time, "discharge_time": adm.discharge_time, "hospital_los_days": hospital_los,
+                "icd10_codes": adm.icd10_codes, "icu_stays": stays,
                 "ventilation_hours": round(vent_h, 1), "vasopressor_hours": round(pressor_h, 1),
                 "active_medications": [m.drug for m in adm.medication_orders if m.status == "active"],
                 "labs": labs, "notes": len(adm.notes), "escalations": [e.model_dump() for e in adm.escalations]}
+
+    @is_tool(ToolType.READ)
+    def get_admission_diagnoses(self, patient_id: str, hadm_id: str | None = None) -> dict:
+        """Return the admission's coded diagnoses in sequence (sequence 1 / "primary" is the principal diagnosis), with
+        the code system (ICD-9-CM or ICD-10-CM), titles, and the ICD-10-CM codes assigned in this record.
+
+        Args:
+            patient_id: The patient identifier.
+            hadm_id: Optional admission id (default: the latest admission).
+        """
+        adm = self._admission(self._patient(patient_id), hadm_id)
+        coded = sorted(adm.coded_diagnoses, key=lambda d: d.seq)  # stable: a row's codes keep their order
+        primary = [d for d in coded if d.primary] or coded[:1]
+        return {"patient_id": patient_id.strip(), "hadm_id": adm.hadm_id, "admission_diagnosis": adm.admission_diagnosis,
+                "primary": primary[0].model_dump(exclude_none=True) if primary else None,
+                "diagnoses": [d.model_dump(exclude_none=True) for d in coded],
+                "assigned_icd10_codes": adm.icd10_codes}
 
     # -- scores from the record ------------------------------------------------------------------
     def _pressor(self, adm: Admission, drug: str, begin: datetime, end: datetime) -> float:
