@@ -1,0 +1,73 @@
+"""Build the visual-diagnosis images, database and generated tasks under `domain_build_dir("visual_diagnosis")`.
+
+    build(offline=False, force=False) -> dict
+
+Renders every study to `images/<study_id>.png` (numpy + the minimal PNG writer), keeps a study
+only when the pixel analysis recovers its specification, writes `db.json` (studies, reference
+archive, glossary of signs), `tasks.json` and `split_tasks.json`. All inputs are ours (seeded
+code, `signs.json`, `studies_authored.json`); deterministic; skipped when unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from collections import Counter
+from pathlib import Path
+
+from envs.core.domain import write_split
+from envs.core.paths import domain_build_dir
+from envs.core.task import Task
+from envs.domains.psychiatry.build import assign_splits
+from envs.domains.visual_diagnosis import generate as G
+from envs.domains.visual_diagnosis.data_model import ImagingSign, Study, VisualDB
+
+HERE = Path(__file__).parent
+NAME = "visual_diagnosis"
+SEED = 8080
+SPLIT_SIZES = {"validation": 37, "test": 60}
+
+
+def _fingerprint() -> str:
+    h = hashlib.sha256()
+    for name in ("build.py", "generate.py", "render.py", "analysis.py", "png.py", "data_model.py", "signs.json", "authored.py"):
+        h.update((HERE / name).read_bytes())
+    return h.hexdigest()
+
+
+def build(offline: bool = False, force: bool = False) -> dict:
+    out = domain_build_dir(NAME)
+    manifest_path = out / "manifest.json"
+    fingerprint = _fingerprint()
+    if not force and manifest_path.exists():
+        manifest = json.loads(manifest_path.read_text())
+        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
+            return {"skipped": "up to date", **manifest["summary"]}
+    if (out / "images").exists():
+        shutil.rmtree(out / "images")
+    out.mkdir(parents=True, exist_ok=True)
+    studies, archive, tasks = G.generate(SEED, out)
+    from envs.domains.visual_diagnosis import authored
+
+    a_studies, a_tasks = authored.build_authored(out)
+    all_studies = {s.study_id: s for s in [*studies, *a_studies]}
+    if len(all_studies) != len(studies) + len(a_studies):
+        raise ValueError("visual_diagnosis: duplicate study ids")
+    signs = {k: ImagingSign(term=k, **v) for k, v in json.loads((HERE / "signs.json").read_text())["signs"].items()}
+    VisualDB(studies=all_studies, archive=archive, signs=signs).dump(out / "db.json")
+    for t in [*tasks, *a_tasks]:
+        Task.model_validate(t)
+    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    ids = [t["id"] for t in a_tasks]
+    splits["train"] = sorted(splits["train"] + [i for k, i in enumerate(ids) if k % 3 != 1])
+    splits["test"] = sorted(splits["test"] + [i for k, i in enumerate(ids) if k % 3 == 1])
+    all_tasks = [*tasks, *a_tasks]
+    (out / "tasks.json").write_text(json.dumps(all_tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+    write_split(out / "split_tasks.json", splits)
+    summary = {"studies": len(all_studies), "images": len(list((out / "images").glob("*.png"))), "archive_cases": len(archive),
+               "tasks": len(all_tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in all_tasks).items())),
+               "splits": {k: len(v) for k, v in splits.items()}}
+    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"]}
+    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return summary

@@ -1,0 +1,131 @@
+"""The visual-diagnosis database: imaging studies whose pixels live in PNG files of the build folder,
+an archive of confirmed reference cases, a glossary of imaging signs, and what the reader records.
+
+The ground truth a study was rendered from is not stored here (tools see only the pixels and the
+metadata); it lives in the generated task's metadata for grading.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+
+from envs.core.db import DB
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class PatientInfo(_Record):
+    age: int
+    sex: Literal["female", "male"]
+    history: str
+    smoking_pack_years: float = 0
+    lung_cancer_risk: Literal["low", "high"] = "low"
+    symptoms: list[str] = Field(default_factory=list)
+
+
+class Study(_Record):
+    study_id: str
+    modality: Literal["CR", "CT"]
+    body_part: str
+    view: str
+    image_file: str = Field(description="PNG path relative to the domain build folder")
+    width: int
+    height: int
+    pixel_spacing_mm: float
+    orientation: str
+    indication: str
+    acquired: str
+    patient: PatientInfo
+    prior_study_id: str | None = None
+    provenance: dict[str, str] = Field(default_factory=dict)
+
+
+class ArchivedCase(_Record):
+    """A reference case with a confirmed diagnosis and its structured findings."""
+
+    case_id: str
+    modality: Literal["CR", "CT"]
+    finding: str
+    side: str
+    zone: str
+    size_mm: float | None = None
+    nodule_type: str | None = None
+    age: int
+    sex: Literal["female", "male"]
+    smoking_pack_years: float
+    confirmed_diagnosis: str
+    confirmation: str
+    summary: str
+
+
+class ImagingSign(_Record):
+    term: str
+    definition: str
+    significance: str
+    synonyms: list[str] = Field(default_factory=list)
+
+
+class RecordedFinding(_Record):
+    study_id: str
+    finding: str
+    side: str
+    location: str
+    size_mm: float | None = None
+
+
+class CriticalEscalation(_Record):
+    study_id: str
+    finding: str
+    recipient: str
+
+
+REFERENCE_FIELDS = ("studies", "archive", "signs")
+STATE_FIELDS = ("recorded_findings", "escalations")
+
+
+class VisualDB(DB):
+    studies: dict[str, Study]
+    archive: dict[str, ArchivedCase]
+    signs: dict[str, ImagingSign]
+    recorded_findings: list[RecordedFinding] = Field(default_factory=list)
+    escalations: list[CriticalEscalation] = Field(default_factory=list)
+
+    _reference_hash: str | None = PrivateAttr(default=None)
+
+    def reference_hash(self) -> str:
+        if self._reference_hash is None:
+            payload = json.dumps({f: _dump(getattr(self, f)) for f in REFERENCE_FIELDS}, sort_keys=True,
+                                 ensure_ascii=False, separators=(",", ":"))
+            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
+        return self._reference_hash
+
+    def fork(self) -> "VisualDB":
+        clone = type(self).model_construct(
+            **{f: getattr(self, f) for f in REFERENCE_FIELDS},
+            **{f: [r.model_copy(deep=True) for r in getattr(self, f)] for f in STATE_FIELDS})
+        clone._reference_hash = self.reference_hash()
+        return clone
+
+    def __deepcopy__(self, memo: dict | None = None) -> "VisualDB":
+        return self.fork()
+
+    def content_hash(self) -> str:
+        state = json.dumps({f: _dump(getattr(self, f)) for f in STATE_FIELDS}, sort_keys=True, ensure_ascii=False,
+                           separators=(",", ":"))
+        return hashlib.sha256((self.reference_hash() + state).encode("utf-8")).hexdigest()
+
+
+def _dump(value):
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
+    if isinstance(value, dict):
+        return {k: _dump(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_dump(v) for v in value]
+    return value
