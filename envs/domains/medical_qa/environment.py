@@ -20,14 +20,19 @@ from envs.domains.medical_qa.tools import MedicalQATools
 
 NAME = "medical_qa"
 HERE = Path(__file__).parent
-_STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
+_stores: dict[Path, DomainTaskStore] = {}
+
+
+@lru_cache(maxsize=4)
+def _db_json(build_dir: Path) -> str:
+    path = build_dir / "db.json"
+    MedicalQADB.load(path)  # a clear error if the build is missing or malformed
+    return path.read_text(encoding="utf-8")
 
 
 @lru_cache(maxsize=1)
-def _db_json() -> str:
-    path = domain_build_dir(NAME) / "db.json"
-    MedicalQADB.load(path)  # a clear error if the build is missing or malformed
-    return path.read_text(encoding="utf-8")
+def _policy() -> str:
+    return read_policy(HERE)
 
 
 def _on_reset(env: DomainEnvironment, task: Task) -> None:
@@ -37,14 +42,22 @@ def _on_reset(env: DomainEnvironment, task: Task) -> None:
 
 
 def get_environment() -> DomainEnvironment:
-    db = MedicalQADB.model_validate_json(_db_json())
-    toolkit = CompositeToolkit(MedicalQATools(db, load_knowledge()), *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=read_policy(HERE), toolkit=toolkit, on_reset=_on_reset)
+    build = domain_build_dir(NAME)
+    db = MedicalQADB.model_validate_json(_db_json(build))
+    toolkit = CompositeToolkit(MedicalQATools(db, load_knowledge(str(build))), *shared_toolkits())
+    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=_on_reset)
+
+
+def _store() -> DomainTaskStore:
+    build = domain_build_dir(NAME)
+    if build not in _stores:
+        _stores[build] = DomainTaskStore(NAME, HERE, build)
+    return _stores[build]
 
 
 def get_tasks(split: str | None = None) -> list[Task]:
-    return _STORE.tasks(split)
+    return _store().tasks(split)
 
 
 def get_splits() -> dict[str, list[str]]:
-    return _STORE.splits()
+    return _store().splits()
