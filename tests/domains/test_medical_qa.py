@@ -100,7 +100,7 @@ def test_drug_tools(tools):
 
 
 def test_guideline_tools(tools):
-    hits = use(tools, "search_guidelines", query="nimodipine delayed cerebral ischemia")["results"]
+    hits = use(tools, "search_guideline_sections", query="nimodipine delayed cerebral ischemia")["results"]
     assert hits[0]["section_id"] == "aha_asa_sah_2023/delayed_cerebral_ischemia"
     assert "cerebral ischemia" in hits[0]["excerpt"].lower()
     sec = use(tools, "read_guideline_section", section_id="kdigo_aki_2012/definition_and_staging")

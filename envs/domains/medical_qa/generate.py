@@ -420,7 +420,7 @@ def guideline_tasks(kb: MedicalKnowledge, specs: list[dict], rng: random.Random)
         prov = provenance("open-medicine", spec["section"]) | {"doi": str(sec["doi"]), "question": "authored"}
         tasks.append(make_choice_task(f"mqa_guideline_{spec['id']}", spec["question"], spec["answer"], spec["distractors"], rng,
                                       task_type="guideline_fact", category="clinical guidelines", prov=prov,
-                                      actions=[action("search_guidelines", {"query": spec["question"]}, [],
+                                      actions=[action("search_guideline_sections", {"query": spec["question"]}, [],
                                                       f"the answer is stated in {spec['section']}")],
                                       metadata={"section": spec["section"], "evidence": spec["evidence"]}))
     return tasks

@@ -446,7 +446,7 @@ class MedicalQATools(BaseDomainTools):
 
     # -- guidelines ----------------------------------------------------------------------------
     @is_tool(ToolType.READ)
-    def search_guidelines(self, query: str, limit: int = 5) -> dict:
+    def search_guideline_sections(self, query: str, limit: int = 5) -> dict:
         """Search the clinical guideline sections (BM25) and return section ids with a matching excerpt.
 
         Args:
@@ -475,14 +475,14 @@ class MedicalQATools(BaseDomainTools):
         """Read a guideline section's text (12,000 characters per call; page with offset).
 
         Args:
-            section_id: A section id from search_guidelines, e.g. "kdigo_aki_2012/definition_and_staging".
+            section_id: A section id from search_guideline_sections, e.g. "kdigo_aki_2012/definition_and_staging".
             offset: Character offset to start reading from.
         """
         sec = self.kb.guidelines.get(section_id.strip())
         if sec is None:
             near = [s for s in self.kb.guidelines if s.split("/")[0] == section_id.split("/")[0]]
             raise ToolError(f"guideline section {section_id!r} not found" +
-                            (f"; sections of that guideline: {', '.join(near)}" if near else "; use search_guidelines"))
+                            (f"; sections of that guideline: {', '.join(near)}" if near else "; use search_guideline_sections"))
         if offset < 0 or offset > len(sec["text"]):
             raise ToolError(f"argument 'offset' must be between 0 and {len(sec['text'])}")
         chunk = sec["text"][offset:offset + 12000]
