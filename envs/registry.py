@@ -19,6 +19,11 @@ DOMAINS: dict[str, str] = {
     "clinical_diagnosis": "envs.domains.clinical_diagnosis.environment",
     "triage_emergency": "envs.domains.triage_emergency.environment",
     "ehr_management": "envs.domains.ehr_management.environment",
+    "medical_qa": "envs.domains.medical_qa.environment",
+    "psychiatry": "envs.domains.psychiatry.environment",
+    "obstetrics": "envs.domains.obstetrics.environment",
+    "radiology_report": "envs.domains.radiology_report.environment",
+    "visual_diagnosis": "envs.domains.visual_diagnosis.environment",
 }
 
 

@@ -3,9 +3,11 @@
 Two tests per held-out task against every training task:
   * exact: the normalised text (lower case, punctuation and whitespace collapsed) of ticket +
     options is identical;
-  * near-duplicate: the Jaccard similarity of word 5-gram shingles is >= `threshold` (0.7) and the gold
-    answers agree (templated generators legitimately produce tickets that differ in one entity;
-    the same answer to a near-identical question is what leaks).
+  * near-duplicate: the Jaccard similarity of word 5-gram shingles is >= `threshold` (0.8), the gold
+    answers agree and the case material is the same (same patient record and image, or none):
+    templated generators legitimately produce tickets that differ in one entity or point at a
+    different patient's chart; the same answer to a near-identical question about the same case
+    is what leaks.
 Candidates come from an inverted index over shingles, so the check is linear in practice.
 """
 
@@ -46,7 +48,7 @@ class Leak:
     similarity: float
 
 
-def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.7) -> list[Leak]:
+def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.8) -> list[Leak]:
     exact: dict[str, str] = {}
     index: dict[int, list[int]] = defaultdict(list)
     train_shingles: list[frozenset[int]] = []
@@ -72,13 +74,15 @@ def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.7) 
             union = len(sh) + len(train_shingles[i]) - shared
             similarity = shared / union if union else 0.0
             other = train[i]
+            if (other.patient_id, other.image_path) != (task.patient_id, task.image_path):
+                continue
             if similarity >= threshold and (other.correct_answer or "").strip().lower() == (task.correct_answer or "").strip().lower():
                 leaks.append(Leak(task.id, other.id, "near", similarity))
                 break
     return leaks
 
 
-def check_domain(domain: str, threshold: float = 0.7) -> list[Leak]:
+def check_domain(domain: str, threshold: float = 0.8) -> list[Leak]:
     from envs import registry
 
     splits = registry.get_splits(domain)

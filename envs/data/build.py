@@ -15,6 +15,11 @@ BUILDERS: list[str] = [
     "envs.domains.clinical_diagnosis.build",   # before ehr_management, which reuses its ICD-10 index
     "envs.domains.triage_emergency.build",
     "envs.domains.ehr_management.build",
+    "envs.domains.medical_qa.build",
+    "envs.domains.psychiatry.build",         # after medical_qa (reuses its parsers)
+    "envs.domains.obstetrics.build",         # obstetrics, radiology and visual reuse psychiatry's split helper
+    "envs.domains.radiology_report.build",
+    "envs.domains.visual_diagnosis.build",
     "kb_service.build_default",
 ]
 

@@ -15,8 +15,8 @@ def test_exact_and_near_duplicates_are_found():
     train = [t("tr1", long), t("tr2", "Which drug treats absence seizures in children best?")]
     held = [
         t("te1", long.upper() + "!!"),                                  # same text after normalisation
-        t("te2", long.replace("today", "yesterday")),                     # one word changed, same answer
-        t("te3", long.replace("today", "yesterday"), answer="B"),         # same template, other answer
+        t("te2", "please " + long),                                      # one word added, same answer
+        t("te3", "please " + long, answer="B"),                          # same question, other answer
         t("te4", "Completely different question about asthma inhalers and technique"),
     ]
     leaks = {leak.held_out_id: leak.kind for leak in find_leaks(train, held)}
@@ -28,3 +28,13 @@ def test_exact_and_near_duplicates_are_found():
 def test_no_held_out_task_appears_in_train(domain):
     leaks = check_domain(domain)
     assert leaks == [], f"{domain}: {len(leaks)} held-out tasks leak into train, e.g. {leaks[:3]}"
+
+
+def test_templated_tickets_about_different_patients_are_not_leaks():
+    ticket = ("Patient {} has just arrived at the emergency department triage desk. Review the presentation and "
+              "vital signs, assign an ESI level and answer with the level.")
+    a = Task(id="a", ticket=ticket.format("E-1"), correct_answer="3", answer_type="exact", patient_id="E-1")
+    b = Task(id="b", ticket=ticket.format("E-2"), correct_answer="3", answer_type="exact", patient_id="E-2")
+    c = Task(id="c", ticket=ticket.format("E-1") + " Be quick.", correct_answer="3", answer_type="exact", patient_id="E-1")
+    assert find_leaks([a], [b]) == []
+    assert [leak.kind for leak in find_leaks([a], [c])] == ["near"]
