@@ -61,6 +61,26 @@ def pathway_task(pathway: Pathway) -> Task:
     )
 
 
+def add_patient_hook(domain: str):
+    """A domain's `add_patient(domain_env, record)`: from its `pathway_hooks` module if it has one,
+    else from its environment module."""
+    import importlib
+
+    from envs import registry
+
+    package = registry.DOMAINS[domain].rsplit(".", 1)[0]
+    for module_name in (f"{package}.pathway_hooks", registry.DOMAINS[domain]):
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name == module_name:
+                continue
+            raise
+        if hasattr(module, "add_patient"):
+            return module.add_patient
+    raise DataFileError(f"domain {domain!r} has no add_patient hook (pathway_hooks.add_patient)")
+
+
 def _reset(domain_env: DomainEnvironment, task: Task, pathways: dict[str, Pathway] | None = None) -> None:
     from envs import registry
 
@@ -70,10 +90,7 @@ def _reset(domain_env: DomainEnvironment, task: Task, pathways: dict[str, Pathwa
         env = registry.get_environment(domain)
         record = pathway.patients.get(domain)
         if record is not None:
-            module = registry.domain_module(domain)
-            if not hasattr(module, "add_patient"):
-                raise DataFileError(f"pathway {pathway.id!r}: domain {domain!r} has no add_patient hook")
-            module.add_patient(env, record)
+            add_patient_hook(domain)(env, record)
         envs_by_domain[domain] = env
     engine = PathwayEngine(pathway, envs_by_domain)
     domain_env.toolkit = engine
