@@ -191,3 +191,13 @@ def test_nstemi_and_adrenal_crisis_are_labelled_other(built):
     ecg = next(p for p in patients if p["patient_id"] == "CD-P06")["hidden_results"]["ecg"]["value"]
     assert "no ST elevation" in ecg  # "acs" would be "stemi" only for an ST-elevation ECG
     assert tasks["cd_case_cd_p22"].emergency == "other"  # adrenal crisis is not a reward emergency type
+
+
+def test_schedule_follow_up_records_and_reads_back(env):
+    out = env.toolkit.call("schedule_follow_up", {"patient_id": "CD-P09", "service": "gynaecology", "within_days": 42,
+                                                  "reason": "menorrhagia causing iron deficiency anaemia"})
+    assert out.ok and out.result["appointment_id"] == "FU-CD-P09-1" and out.result["by_date"] == "2025-04-12"
+    notes = env.toolkit.call("get_clinical_notes", {"patient_id": "CD-P09"}).result
+    assert [f["service"] for f in notes["follow_ups"]] == ["gynaecology"]
+    assert "within_days must be 1-365" in env.toolkit.call(
+        "schedule_follow_up", {"patient_id": "CD-P09", "service": "gp", "within_days": 0, "reason": "recheck"}).error

@@ -95,6 +95,13 @@ class ClinicalNote(_Strict):
     content: str
 
 
+class FollowUp(_Strict):
+    appointment_id: str
+    service: str
+    within_days: int
+    reason: str
+
+
 class Patient(_Strict):
     patient_id: str
     name: str
@@ -119,6 +126,7 @@ class Patient(_Strict):
     diagnoses: list[DiagnosisRecord] = Field(default_factory=list)
     prescriptions: list[Prescription] = Field(default_factory=list)
     notes: list[ClinicalNote] = Field(default_factory=list)
+    follow_ups: list[FollowUp] = Field(default_factory=list)
     provenance: str = "authored"
 
 

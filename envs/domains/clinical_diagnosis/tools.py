@@ -12,7 +12,9 @@ from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 
 from . import knowledge
-from .data_model import ClinicalDiagnosisDB, ClinicalNote, DiagnosisRecord, LabOrder, LabResult, Patient, Prescription
+from .data_model import (
+    ClinicalDiagnosisDB, ClinicalNote, DiagnosisRecord, FollowUp, LabOrder, LabResult, Patient, Prescription,
+)
 from .icd10 import normalise_code
 
 # Doses per day for the usual frequency abbreviations (None: as needed / single dose).
@@ -539,6 +541,28 @@ class ClinicalDiagnosisTools(BaseDomainTools):
         p.notes.append(ClinicalNote(note_id=note_id, note_type="escalation", content=f"Escalated to {team}: {reason.strip()}"))
         return {"escalated_to": team, "reason": reason.strip(), "note_id": note_id, "time": self._clock()}
 
+    @is_tool(ToolType.WRITE)
+    def schedule_follow_up(self, patient_id: str, service: str, within_days: int, reason: str) -> dict:
+        """Book a follow-up appointment (a clinic, a specialty or primary care) within a number of days; recorded in the chart.
+
+        Args:
+            patient_id: The patient identifier.
+            service: Who sees the patient, e.g. "gynaecology", "primary care", "cardiology clinic".
+            within_days: Within how many days, 1-365.
+            reason: What the follow-up is for, e.g. "repeat haemoglobin after 4 weeks of iron".
+        """
+        p = self._patient(patient_id)
+        if not 1 <= within_days <= 365:
+            raise ToolError(f"within_days must be 1-365, got {within_days}")
+        if len(service.strip()) < 3:
+            raise ToolError("service must name the clinic or specialty")
+        if len(reason.strip()) < 5:
+            raise ToolError("reason must say what the follow-up is for")
+        appointment = FollowUp(appointment_id=f"FU-{p.patient_id}-{len(p.follow_ups) + 1}", service=service.strip(),
+                               within_days=within_days, reason=reason.strip())
+        p.follow_ups.append(appointment)
+        return {**appointment.model_dump(), "by_date": self._clock(within_days * 24 * 60)[:10]}
+
     @is_tool(ToolType.READ)
     def get_clinical_notes(self, patient_id: str) -> dict:
         """Return the notes in the patient's chart and the recorded diagnoses.
@@ -547,4 +571,5 @@ class ClinicalDiagnosisTools(BaseDomainTools):
             patient_id: The patient identifier.
         """
         p = self._patient(patient_id)
-        return {"notes": [n.model_dump() for n in p.notes], "diagnoses": [d.model_dump() for d in p.diagnoses]}
+        return {"notes": [n.model_dump() for n in p.notes], "diagnoses": [d.model_dump() for d in p.diagnoses],
+                "follow_ups": [f.model_dump() for f in p.follow_ups]}
