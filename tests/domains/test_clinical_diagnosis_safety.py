@@ -201,3 +201,17 @@ def test_schedule_follow_up_records_and_reads_back(env):
     assert [f["service"] for f in notes["follow_ups"]] == ["gynaecology"]
     assert "within_days must be 1-365" in env.toolkit.call(
         "schedule_follow_up", {"patient_id": "CD-P09", "service": "gp", "within_days": 0, "reason": "recheck"}).error
+
+
+def test_pathway_hook_adds_a_patient(env):
+    from envs.core.db import DataFileError
+    from envs.domains.clinical_diagnosis.pathway_hooks import add_patient
+
+    record = {"patient_id": "PW-1", "name": "Pat Way", "age": 60, "sex": "male", "chief_complaint": "chest pain",
+              "history_of_present_illness": "30 minutes of central chest pain",
+              "allergies": [{"substance": "penicillin", "reaction": "rash"}]}
+    assert add_patient(env, record) == "PW-1"
+    assert env.toolkit.call("get_patient_info", {"patient_id": "PW-1"}).result["chief_complaint"] == "chest pain"
+    assert env.safety_context.patient_allergies("PW-1") == ["penicillin"]
+    with pytest.raises(DataFileError, match="field 'age'"):
+        add_patient(env, {**record, "age": 300})

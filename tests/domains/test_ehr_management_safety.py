@@ -149,3 +149,17 @@ def test_emergency_labels_are_reward_types_and_gold_replays_escalate(built, monk
         missed = [v.pattern_id for v in violations if v.category == "missed_emergency"]
         context_errors = [e for e in errors if "safety context" in e]
         assert not missed and not context_errors, (task.id, missed, context_errors)
+
+
+def test_pathway_hook_adds_a_patient(built, monkeypatch):
+    import envs.domains.ehr_management.environment as m
+    from envs.domains.ehr_management.pathway_hooks import add_patient
+
+    monkeypatch.setattr(m, "shared_toolkits", lambda: [])
+    env = m.get_environment()
+    record = {"patient_id": "PW-3", "name": "Pat Way", "age": 58, "sex": "male",
+              "admissions": [{"hadm_id": "PW-3-A1", "admit_time": "2025-03-05T06:00", "admission_diagnosis": "STEMI",
+                              "lab_events": [{"time": "2025-03-05T06:10", "test": "troponin_i", "value": 2.4, "unit": "ng/mL"},
+                                             {"time": "2025-03-05T09:10", "test": "troponin_i", "value": 8.1, "unit": "ng/mL"}]}]}
+    assert add_patient(env, record) == "PW-3" and list(env.db.patients) == ["PW-3"]
+    assert env.toolkit.call("get_lab_trend", {"patient_id": "PW-3", "test": "troponin_i"}).result["direction"] == "rising"

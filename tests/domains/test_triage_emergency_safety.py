@@ -149,3 +149,12 @@ def test_trauma_cases_are_labelled_other(built):
     tasks = {t.id: t for t in registry.get_tasks("triage_emergency")}
     assert tasks["tr_case_ed_105"].emergency == "other"
     assert tasks["tr_esi_handbook_esi_014"].emergency == "other"  # motor vehicle crash with shock, ESI 1
+
+
+def test_pathway_hook_adds_a_patient(env):
+    from envs.domains.triage_emergency.pathway_hooks import add_patient
+
+    record = {"patient_id": "PW-2", "age": 58, "sex": "male", "chief_complaint": "crushing chest pain",
+              "vitals": [{"time": "2025-03-01T13:55", "heart_rate": 104, "systolic_bp": 150}]}
+    assert add_patient(env, record) == "PW-2"
+    assert env.toolkit.call("calculate_shock_index", {"patient_id": "PW-2"}).result["score"] == pytest.approx(104 / 150)
