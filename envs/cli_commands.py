@@ -35,9 +35,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     stats.add_argument("--json", action="store_true")
     stats.set_defaults(func=cmd_tasks_stats)
     imp = tasks_sub.add_parser("import", help="convert benchmark files (MedQA, MedMCQA, MMLU, PubMedQA, "
-                               "MedLFQA, VQA-RAD, SLAKE, PathVQA) or reference-format task files")
+                               "MedLFQA, VQA-RAD, SLAKE, PathVQA, MIMIC-III, eICU) or reference-format task files")
     imp.add_argument("--format", required=True,
-                     help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | reference")
+                     help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | "
+                          "mimic3 | eicu (PATH is the CSV folder) | reference")
+    imp.add_argument("--max-stays", type=int, default=None, help="mimic3/eicu: convert at most this many ICU stays")
     imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA)")
     imp.add_argument("--output", help="tasks JSON to write (default: the domain's imported-task folder, "
                      "loaded as split 'imported')")
@@ -154,8 +156,10 @@ def cmd_tasks_import(args: argparse.Namespace) -> int:
     else:
         from envs.converters import convert
 
-        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa") else "medical_qa")
-        result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base)
+        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa")
+                                 else "ehr_management" if args.format in ("mimic3", "eicu") else "medical_qa")
+        result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base,
+                         max_stays=args.max_stays)
         tasks, issues = result.tasks, [str(e) for e in result.errors]
     output = Path(args.output) if args.output else imported_tasks_dir(domain) / f"{args.format}.json"
     dump_tasks(tasks, output)

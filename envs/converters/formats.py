@@ -10,6 +10,8 @@
 | vqa-rad | JSON list: image_name, question, answer, answer_type (CLOSED/OPEN) + image folder | visual_diagnosis | yes/no choice or exact |
 | slake | JSON list: img_name, question, answer, answer_type, q_lang + image folder | visual_diagnosis | same |
 | pathvqa | JSON list: image, question, answer + image folder | visual_diagnosis | same |
+| mimic3 | folder: PATIENTS, ADMISSIONS, ICUSTAYS, LABEVENTS, D_LABITEMS, DIAGNOSES_ICD, D_ICD_DIAGNOSES (.csv/.csv.gz) | ehr_management | tool-computed |
+| eicu | folder: patient, lab, diagnosis (.csv/.csv.gz) | ehr_management | tool-computed |
 """
 
 from __future__ import annotations
@@ -209,6 +211,15 @@ def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[.
     return convert
 
 
+def _ehr(name: str) -> Callable[..., ConversionResult]:
+    def convert(path: Path, **options: Any) -> ConversionResult:
+        from envs.converters import ehr  # imported on use: it pulls in the EHR domain
+
+        return getattr(ehr, name)(path, **options)
+
+    return convert
+
+
 CONVERTERS: dict[str, Callable[..., ConversionResult]] = {
     "medqa": convert_medqa,
     "medmcqa": convert_medmcqa,
@@ -218,6 +229,8 @@ CONVERTERS: dict[str, Callable[..., ConversionResult]] = {
     "vqa-rad": _vqa("vqa-rad", "image_name"),
     "slake": _vqa("slake", "img_name", lang_key="q_lang"),
     "pathvqa": _vqa("pathvqa", "image"),
+    "mimic3": _ehr("convert_mimic3"),
+    "eicu": _ehr("convert_eicu"),
 }
 
 
