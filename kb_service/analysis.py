@@ -298,6 +298,7 @@ class Highlighter:
     def __init__(self, start: str = "**", end: str = "**", chars: int = SNIPPET_CHARS) -> None:
         self.start, self.end, self.chars = start, end, chars
         self._cache: dict[str, str | None] = {}
+        self._prefix_cache: dict[frozenset, tuple[str, ...]] = {}
         self._lock = threading.Lock()
 
     def _term(self, word: str) -> str | None:
@@ -312,6 +313,21 @@ class Highlighter:
         self._cache[word] = term
         return term
 
+    def _prefixes(self, terms: set[str]) -> tuple[str, ...]:
+        """Prefixes every word stemming to one of `terms` starts with.
+
+        A Snowball English stem keeps all but at most the last four letters of its word (suffix
+        replacements such as -ational -> -ate, -biliti -> -ble, -y -> -i touch only the end).
+        """
+        key = frozenset(terms)
+        pre = self._prefix_cache.get(key)
+        if pre is None:
+            pre = tuple(sorted({t if len(t) <= 2 else t[: max(2, len(t) - 4)] for t in terms if t}))
+            if len(self._prefix_cache) > 1024:
+                self._prefix_cache.clear()
+            self._prefix_cache[key] = pre
+        return pre
+
     def matches(self, text: str, terms: set[str]) -> list[tuple[int, int, str]]:
         """(start, end, term) of every word of `text` whose analysed form is one of `terms`."""
         if not terms:
@@ -322,8 +338,11 @@ class Highlighter:
             # Fast path: the distinct words (regex in C), their terms from the cache, then the
             # positions of just the matching words with str.find.
             cache = self._cache
+            prefixes = self._prefixes(terms)
             hit = {}
             for w in set(_ASCII_WORD.findall(low)):
+                if not w.startswith(prefixes):  # cannot stem to a query term: skip without analysing
+                    continue
                 t = cache.get(w, "")
                 if t == "":
                     t = self._term(w)
