@@ -29,7 +29,7 @@ import asyncio
 import hashlib
 import json
 import time
-from typing import Any, Awaitable, Callable, Protocol
+from typing import Any, Awaitable, Callable, Literal, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -45,6 +45,26 @@ class RolloutLimits(BaseModel):
     max_prompt_tokens: int = Field(default=8192, ge=1)
     max_response_tokens: int = Field(default=12288, ge=1)
     max_new_tokens_per_turn: int = Field(default=2048, ge=1)
+    # Tool results longer than this many characters are cut (with a marker) before tokenization;
+    # None keeps them whole. Tiny CPU configs use it to keep sequences short.
+    max_observation_chars: int | None = Field(default=None, ge=16)
+
+
+PromptStyle = Literal["env", "compact"]
+
+
+def compact_system_prompt(tools: list[dict[str, Any]]) -> str:
+    """A short system prompt for tiny CPU models: the call format and the tool names.
+
+    The environment's own system prompt (policy text plus full JSON schemas, 15-22K characters)
+    is what large models should see; a 1M-parameter model on 2 CPU cores cannot afford a
+    4K-token prompt on every turn, so the tiny configs use this instead (`rollout.system_prompt`)
+    and learn the arguments from the gold-replay warm start.
+    """
+    from envs.core.env import CALL_FORMAT_HELP
+
+    names = [schema.get("function", schema)["name"] for schema in tools]
+    return f"{CALL_FORMAT_HELP}\nTools: " + ", ".join(names)
 
 
 class EpisodeSpec(BaseModel):
@@ -146,13 +166,18 @@ class AgentLoop:
     Args:
         tokenizer: The policy's tokenizer (ChatML template, `<|im_end|>` as EOS).
         limits: Turn and token limits.
+        prompt_style: "env" renders the environment's system prompt (policy and tool schemas);
+            "compact" renders `compact_system_prompt` (tiny CPU models).
     """
 
-    def __init__(self, tokenizer, limits: RolloutLimits) -> None:
+    def __init__(self, tokenizer, limits: RolloutLimits, prompt_style: PromptStyle = "env") -> None:
         from learner.model import IM_END, IM_START
 
+        if prompt_style not in ("env", "compact"):
+            raise ValueError(f"prompt_style must be 'env' or 'compact', got {prompt_style!r}")
         self.tokenizer = tokenizer
         self.limits = limits
+        self.prompt_style = prompt_style
         self.im_end_id = tokenizer.convert_tokens_to_ids(IM_END)
         self.im_start = IM_START
         self.im_end = IM_END
@@ -162,8 +187,8 @@ class AgentLoop:
     # -- rendering -----------------------------------------------------------------------------
     def render_prompt(self, info: dict[str, Any]) -> list[int]:
         """Render the first prompt once with the chat template (system policy + tools, then the ticket)."""
-        messages = [{"role": "system", "content": info["system_prompt"]},
-                    {"role": "user", "content": info["ticket"]}]
+        system = info["system_prompt"] if self.prompt_style == "env" else compact_system_prompt(info["tools"])
+        messages = [{"role": "system", "content": system}, {"role": "user", "content": info["ticket"]}]
         text = self.tokenizer.apply_chat_template(messages, tokenize=False, add_generation_prompt=True)
         return list(self.tokenizer.encode(text, add_special_tokens=False))
 
@@ -171,6 +196,9 @@ class AgentLoop:
         """What the template renders after a finished assistant turn, up to the next generation prompt."""
         from learner.model import tool_turn_text
 
+        cap = self.limits.max_observation_chars
+        if cap is not None and len(observation) > cap:
+            observation = observation[:cap] + f" ...[{len(observation) - cap} more characters]"
         if had_tool_calls:
             return tool_turn_text(observation)
         return f"\n{self.im_start}user\n{observation}{self.im_end}\n{self.im_start}assistant\n"

@@ -92,7 +92,7 @@ class EnvActor:
         obs, info = env.reset(seed=spec.seed, options={"task_id": spec.task_id})
         self._active[key] = (env, (spec.domain, spec.split))
         self.episodes_started += 1
-        return obs, {k: v for k, v in info.items() if k != "tools"}
+        return obs, info
 
     def _env(self, key: str):
         try:

@@ -22,11 +22,12 @@ Example:
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
@@ -90,11 +91,27 @@ class DataConfig(_Strict):
     max_val_tasks: int | None = Field(default=None, ge=1)
     # Tasks whose prompt exceeds rollout.max_prompt_tokens are dropped up front (counted, logged).
     filter_long_prompts: bool = True
+    # Keep only tasks whose id matches this regular expression (e.g. "^tr_calc_" for the calculator
+    # tasks of triage_emergency); None keeps all.
+    task_id_pattern: str | None = None
+
+    @field_validator("task_id_pattern")
+    @classmethod
+    def _regex(cls, value: str | None) -> str | None:
+        if value is not None:
+            try:
+                re.compile(value)
+            except re.error as exc:
+                raise ValueError(f"not a valid regular expression: {exc}") from None
+        return value
 
 
 class RolloutConfig(RolloutLimits):
     """Episode limits (from `RolloutLimits`) plus how rollouts are produced."""
 
+    # "env": the environment's system prompt (policy + JSON tool schemas); "compact": the call format
+    # and one signature line per tool (tiny CPU models; see actors.agent_loop.compact_system_prompt).
+    system_prompt: Literal["env", "compact"] = "env"
     group_size: int = Field(default=3, ge=1, description="G rollouts per prompt")
     num_env_actors: int = Field(default=2, ge=1)
     slots_per_env_actor: int = Field(default=8, ge=1)

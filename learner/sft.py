@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import re
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -28,17 +29,22 @@ from actors.types import RolloutSample
 POLICY_RECORD = "policy.json"
 
 
-def task_corpus(domains: list[str], split: str | None) -> list[str]:
-    """Text for the tokenizer: each domain's system prompt (policy + tool schemas), the tickets,
-    the gold actions and the real tool results of gold replays."""
+def task_corpus(domains: list[str], split: str | None, pattern: str | None = None) -> list[str]:
+    """Text for the tokenizer: each domain's system prompts (full and compact), the tickets, the
+    gold actions and the real tool results of gold replays."""
+    from actors.agent_loop import compact_system_prompt
     from envs import registry
     from envs.core.env import build_system_prompt, render_ticket
     from envs.core.validate import gold_replay
 
     texts: list[str] = []
     for domain in domains:
-        texts.append(build_system_prompt(registry.get_environment(domain)))
+        domain_env = registry.get_environment(domain)
+        texts.append(build_system_prompt(domain_env))
+        texts.append(compact_system_prompt(domain_env.toolkit.schemas()))
         for task in registry.get_tasks(domain, split):
+            if pattern is not None and not re.search(pattern, task.id):
+                continue
             texts.append(render_ticket(task))
             trajectory, _ = gold_replay(task, domain)
             for turn in trajectory.turns:
@@ -48,7 +54,7 @@ def task_corpus(domains: list[str], split: str | None) -> list[str]:
 
 
 def gold_replay_samples(tokenizer, refs: list[tuple[str, str, str | None]], limits: RolloutLimits,
-                        *, log: Callable[[str], None] = print) -> list[RolloutSample]:
+                        *, prompt_style: str = "env", log: Callable[[str], None] = print) -> list[RolloutSample]:
     """Run the gold solution of each (domain, task_id, split) through the TITO agent loop.
 
     Returns only the episodes the grader counts as correct (a gold answer the env rejects would
@@ -56,7 +62,7 @@ def gold_replay_samples(tokenizer, refs: list[tuple[str, str, str | None]], limi
     """
     from envs import registry
 
-    loop = AgentLoop(tokenizer, limits)
+    loop = AgentLoop(tokenizer, limits, prompt_style)
     tasks = {}
     for domain, task_id, split in refs:
         key = (domain, split)
@@ -175,7 +181,7 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
     else:
         t0 = time.perf_counter()
         tiny = cfg.model.tiny
-        corpus = task_corpus(cfg.data.domains, cfg.data.train_split)
+        corpus = task_corpus(cfg.data.domains, cfg.data.train_split, cfg.data.task_id_pattern)
         tok_dir = train_tokenizer(corpus, tiny.vocab_size, root / "tokenizer",
                                   include_stdlib=tiny.include_stdlib_corpus, max_stdlib_files=tiny.max_stdlib_files)
         base = build_tiny_model(root / "init", tok_dir, architecture=tiny.architecture, seed=cfg.seed,
@@ -188,9 +194,10 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
         tokenizer = load_tokenizer(base)
         limits = RolloutLimits(**{k: getattr(cfg.rollout, k) for k in RolloutLimits.model_fields})
         refs = [(r.domain, r.task_id, r.split)
-                for r in load_task_refs(cfg.data.domains, cfg.data.train_split, cfg.sft.max_tasks)]
+                for r in load_task_refs(cfg.data.domains, cfg.data.train_split, cfg.sft.max_tasks,
+                                        cfg.data.task_id_pattern)]
         t0 = time.perf_counter()
-        samples = gold_replay_samples(tokenizer, refs, limits, log=log)
+        samples = gold_replay_samples(tokenizer, refs, limits, prompt_style=cfg.rollout.system_prompt, log=log)
         log(f"[sft] {len(samples)} gold-replay trajectories in {time.perf_counter() - t0:.1f}s")
         s = cfg.sft
         info["sft"] = run_sft(base, root / "sft", samples, epochs=s.epochs, lr=s.lr, batch_size=s.batch_size,

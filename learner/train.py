@@ -63,8 +63,18 @@ class TaskRef:
     split: str | None
 
 
-def load_task_refs(domains: list[str], split: str | None, limit: int | None = None) -> list[TaskRef]:
-    """Task references of a split over domains, in a stable order (domain, then file order)."""
+def load_task_refs(domains: list[str], split: str | None, limit: int | None = None,
+                   pattern: str | None = None) -> list[TaskRef]:
+    """Task references of a split over domains, in a stable order (domain, then file order).
+
+    Args:
+        domains: Registered domain names.
+        split: The split ("train", "test", ...).
+        limit: Keep the first `limit` references.
+        pattern: Keep only task ids matching this regular expression.
+    """
+    import re
+
     from envs import registry
 
     refs: list[TaskRef] = []
@@ -74,7 +84,9 @@ def load_task_refs(domains: list[str], split: str | None, limit: int | None = No
         tasks = registry.get_tasks(domain, split)
         if not tasks:
             raise ValueError(f"data: domain {domain!r} has no tasks in split {split!r} (run `hcgym data build`?)")
-        refs.extend(TaskRef(domain, t.id, split) for t in tasks)
+        refs.extend(TaskRef(domain, t.id, split) for t in tasks if pattern is None or re.search(pattern, t.id))
+    if not refs:
+        raise ValueError(f"data: no task of {domains} in split {split!r} matches task_id_pattern {pattern!r}")
     return refs[:limit] if limit else refs
 
 
@@ -83,16 +95,18 @@ def prompt_lengths(refs: list[TaskRef], loop: AgentLoop) -> list[int]:
     from envs import registry
     from envs.core.env import build_system_prompt, render_ticket
 
-    systems: dict[str, str] = {}
+    systems: dict[str, tuple[str, list]] = {}
     tasks: dict[tuple[str, str | None], dict[str, Any]] = {}
     out = []
     for ref in refs:
         if ref.domain not in systems:
-            systems[ref.domain] = build_system_prompt(registry.get_environment(ref.domain))
+            domain_env = registry.get_environment(ref.domain)
+            systems[ref.domain] = (build_system_prompt(domain_env), domain_env.toolkit.schemas())
         key = (ref.domain, ref.split)
         if key not in tasks:
             tasks[key] = {t.id: t for t in registry.get_tasks(ref.domain, ref.split)}
-        info = {"system_prompt": systems[ref.domain], "ticket": render_ticket(tasks[key][ref.task_id])}
+        info = {"system_prompt": systems[ref.domain][0], "tools": systems[ref.domain][1],
+                "ticket": render_ticket(tasks[key][ref.task_id])}
         out.append(len(loop.render_prompt(info)))
     return out
 
@@ -185,6 +199,7 @@ class Group:
     failed: str | None = None
     error: BaseException | None = None
     teacher_submitted: bool = False
+    teacher_submit_ref: Any = None  # the submit call; fetch waits for it (the teacher is a threaded actor)
     teacher_floor: int = 0      # teacher version confirmed when it was submitted: a valid score is >= it
     completed_at: float = 0.0
 
@@ -261,7 +276,7 @@ class Trainer:
         self.policy_dir = prepare_policy(cfg, self.run_dir, log=self.log)
         self.tokenizer = load_tokenizer(self.policy_dir)
         limits = RolloutLimits(**{k: getattr(cfg.rollout, k) for k in RolloutLimits.model_fields})
-        self.loop = AgentLoop(self.tokenizer, limits)
+        self.loop = AgentLoop(self.tokenizer, limits, cfg.rollout.system_prompt)
 
         self.train_refs = self._tasks(cfg.data.train_split, cfg.data.max_train_tasks, "train")
         self.val_refs = self._tasks(cfg.data.val_split, cfg.data.max_val_tasks, "validation") \
@@ -306,7 +321,7 @@ class Trainer:
             .remote(self.cfg.teacher.model_dump(), str(self.policy_dir), self.cfg.seed)
 
     def _tasks(self, split: str, limit: int | None, what: str) -> list[TaskRef]:
-        refs = load_task_refs(self.cfg.data.domains, split, limit)
+        refs = load_task_refs(self.cfg.data.domains, split, limit, self.cfg.data.task_id_pattern)
         if self.cfg.data.filter_long_prompts:
             lengths = prompt_lengths(refs, self.loop)
             kept = [r for r, n in zip(refs, lengths) if n <= self.cfg.rollout.max_prompt_tokens]
@@ -444,7 +459,7 @@ class Trainer:
     # -- teacher -----------------------------------------------------------------------------------
     def _submit_teacher(self, group: Group) -> None:
         """Queue a finished group for teacher scoring; the teacher computes while rollouts go on."""
-        self.teacher.submit.remote(group.samples)
+        group.teacher_submit_ref = self.teacher.submit.remote(group.samples)
         group.teacher_submitted = True
         group.teacher_floor = self.teacher_confirmed
         self.teacher_outstanding[group.seq] = group
@@ -498,6 +513,8 @@ class Trainer:
         timeout = self.cfg.trainer.teacher_timeout_s
         for _ in range(5):
             try:
+                # Threaded actor: a fetch may overtake a submit sent just before it; wait for those.
+                await asyncio.gather(*[g.teacher_submit_ref for g in groups])
                 fetched = await asyncio.wait_for(self.teacher.fetch.remote(ids, timeout), timeout + 30)
             except (RayActorError, KeyError) as exc:
                 # Died mid-fetch, or restarted and never heard of these samples.
@@ -757,6 +774,10 @@ class Trainer:
         if self.val_refs and cfg.trainer.val_interval and self.step % cfg.trainer.val_interval != 0:
             await self._validate()
         self.sink.close()
+        from learner.plot import plot_runs
+
+        plot_path = plot_runs([self.run_dir])
+        self.log(f"[done] {self.step} steps; figure {plot_path}")
         summary = {"steps": self.step, "wall_s": time.perf_counter() - started, "run_dir": str(self.run_dir),
                    "policy_dir": str(self.policy_dir), "counters": dict(self.counters),
                    "ledger": self.ledger.balance(), "generator_failures": self.gen_client.failures,
