@@ -1,20 +1,75 @@
-"""Cross-domain pathway hook (`envs.domains.cross_domain`): put the pathway's patient into this domain's episode."""
+"""Cross-domain pathway hook: put a pathway's patient into a fresh clinical-diagnosis database.
+
+`add_patient(domain_env, record)` validates `record` as a clinical-diagnosis `Patient` and
+inserts it. Coded findings must name HPO terms the phenotype index knows and held-back results
+must be orderable tests of the laboratory catalogue (otherwise `generate_ddx` and `order_lab`
+could never reach them). The record may carry `encounter_time` ("YYYY-MM-DDTHH:MM"): the clock
+from which ordered results are timed.
+"""
 
 from __future__ import annotations
+
+from datetime import datetime
 
 from pydantic import ValidationError
 
 from envs.core.db import DataFileError, format_validation_error
 from envs.core.domain import DomainEnvironment
 
-from .data_model import Patient
+from . import knowledge
+from .data_model import ClinicalDiagnosisDB, Patient
+
+DOMAIN = "clinical_diagnosis"
 
 
-def add_patient(env: DomainEnvironment, record: dict) -> str:
-    """Validate a patient record of this domain and insert it into the fresh episode database; returns its id."""
+def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
+    """Validate `record` against the clinical-diagnosis patient model and insert it; returns the id."""
+    if not isinstance(record, dict):
+        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
+    fields = dict(record)
+    clock = fields.pop("encounter_time", None)
+    label = str(fields.get("patient_id") or "<no patient_id>")
+    where = f"{DOMAIN} patient record [{label}]"
     try:
-        patient = Patient.model_validate(record)
+        patient = Patient.model_validate(fields)
     except ValidationError as exc:
-        raise DataFileError(format_validation_error(exc, source="pathway patient record (clinical_diagnosis)")) from None
-    env.toolkit.db.patients[patient.patient_id] = patient
+        raise DataFileError(
+            format_validation_error(exc, source=f"{DOMAIN} patient record", item=label)
+        ) from None
+    index = knowledge.hpo_index()
+    for i, finding in enumerate(patient.findings):
+        if finding.hpo_id not in index.terms:
+            raise DataFileError(f"{where} field 'findings.{i}.hpo_id': {finding.hpo_id!r} is not an HPO term")
+    catalog = knowledge.lab_catalog()
+    for test in patient.hidden_results:
+        if catalog.resolve(test) != test:
+            raise DataFileError(
+                f"{where} field 'hidden_results.{test}': not an orderable test key of the "
+                f"laboratory catalogue"
+            )
+    for i, finding in enumerate(patient.findings):
+        if (
+            finding.requires_test is not None
+            and finding.requires_test not in patient.hidden_results
+            and finding.requires_test not in {r.test for r in patient.lab_results}
+        ):
+            raise DataFileError(
+                f"{where} field 'findings.{i}.requires_test': {finding.requires_test!r} is neither "
+                f"resulted nor held back for this patient"
+            )
+    db = domain_env.toolkit.db
+    if not isinstance(db, ClinicalDiagnosisDB):
+        raise DataFileError(
+            f"{DOMAIN}: the environment's database is {type(db).__name__}, not ClinicalDiagnosisDB"
+        )
+    if patient.patient_id in db.patients:
+        raise DataFileError(f"{where} field 'patient_id': already in the database")
+    if clock is not None:
+        try:
+            db.clock = datetime.strptime(str(clock), "%Y-%m-%dT%H:%M").strftime("%Y-%m-%dT%H:%M")
+        except ValueError:
+            raise DataFileError(
+                f"{where} field 'encounter_time': expected YYYY-MM-DDTHH:MM, got {clock!r}"
+            ) from None
+    db.patients[patient.patient_id] = patient
     return patient.patient_id

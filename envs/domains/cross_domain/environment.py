@@ -16,7 +16,7 @@ from typing import Any
 
 from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment, read_policy
-from envs.core.task import Task
+from envs.core.task import ExpectedAction, Task
 from envs.domains.cross_domain.pathway import Pathway, PathwayEngine
 
 HERE = Path(__file__).parent
@@ -44,7 +44,12 @@ def load_pathways(path: Path = PATHWAY_FILE) -> dict[str, Pathway]:
 
 
 def pathway_task(pathway: Pathway) -> Task:
-    actions = [a for phase in pathway.phases for a in phase.required_actions]
+    actions: list[ExpectedAction] = []
+    for phase in pathway.phases:
+        actions += phase.required_actions
+        if phase.transition == "agent_declares":  # the gold solution ends such a phase itself
+            actions.append(ExpectedAction(name="complete_phase", arguments={"summary": f"{phase.name} complete"},
+                                          compare_args=[], info=f"declare the end of phase {phase.name!r}"))
     assertions = [s for phase in pathway.phases for s in phase.nl_assertions]
     phases = " -> ".join(f"{p.name} ({p.domain})" for p in pathway.phases)
     ticket = (f"{pathway.presentation}\n\nThis is a multi-phase clinical pathway: {phases}. Work through each "
@@ -114,6 +119,31 @@ def score_pathway(engine: PathwayEngine, trajectory: Any, task: Task, weights: A
         total = min(total, base.total)
     details = {**base.details, "pathway_phases": phases, "pathway_overall": overall, "five_d_total": base.total}
     return base.model_copy(update={"total": total, "details": details})
+
+
+def task_tool_definitions(task: Task) -> dict[str, Any]:
+    """The tool definitions a pathway task's expected actions are checked against (`validate_task`):
+    the control tools plus, for each required action, the tool of its own phase's domain. The
+    environment's pre-reset toolkit has only the control tools, because the phase tools are built at
+    reset; use this with `envs.core.validate.validate_task(task, "cross_domain", definitions)`."""
+    from envs import registry
+    from envs.domains.cross_domain.pathway import PathwayControlTools
+
+    pathway = load_pathways()[task.metadata["pathway_id"]]
+    definitions: dict[str, Any] = dict(PathwayControlTools(None).definitions)
+    toolkits: dict[str, Any] = {}
+    for phase in pathway.phases:
+        if phase.domain not in toolkits:
+            toolkits[phase.domain] = registry.get_environment(phase.domain).toolkit.definitions
+        for action in phase.required_actions:
+            own = toolkits[phase.domain].get(action.name)
+            if own is None:
+                continue  # validate_task reports the unknown tool
+            other = definitions.setdefault(action.name, own)
+            if other.parameters != own.parameters:
+                raise DataFileError(f"pathway {pathway.id!r}: tool {action.name!r} is required in two phases with "
+                                    f"different signatures")
+    return definitions
 
 
 def get_environment() -> DomainEnvironment:

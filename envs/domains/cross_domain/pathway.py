@@ -50,6 +50,18 @@ class Pathway(BaseModel):
     emergency: str | None = None
 
 
+def tool_signature(definition: ToolDefinition) -> str:
+    """A one-line signature from the tool's schema, e.g.
+    "order_lab(patient_id: string, test: string, priority: 'routine'|'urgent'|'stat' = 'routine')"."""
+    params = definition.parameters.get("properties", {})
+    required = set(definition.parameters.get("required", []))
+    parts = []
+    for name, spec in params.items():
+        kind = "|".join(repr(v) for v in spec["enum"]) if "enum" in spec else definition.arg_types.get(name, "any")
+        parts.append(f"{name}: {kind}" if name in required else f"{name}: {kind} = {spec.get('default')!r}")
+    return f"{definition.name}({', '.join(parts)})"
+
+
 def action_matches(expected: ExpectedAction, name: str, arguments: dict[str, Any]) -> bool:
     """The reward's matching rule (name plus normalised compare_args), so phases and the process
     score agree on what counts as done."""
@@ -166,8 +178,19 @@ class PathwayEngine(Toolkit):
                     "message": f"All phases complete. {self.pathway.final_question} Call submit_answer."}
         nxt = self.phase
         return {"completed_phase": done.name, "next_phase": nxt.name, "domain": nxt.domain, "goal": nxt.goal,
-                "time_pressure": nxt.time_pressure,
-                "tools": sorted(self.domain_envs[nxt.domain].toolkit.tool_names)}
+                "time_pressure": nxt.time_pressure, "max_calls": nxt.max_calls,
+                "tools": sorted(self.domain_envs[nxt.domain].toolkit.tool_names),
+                # The system prompt listed the first phase's tools only: give the new ones' signatures.
+                "tool_signatures": self.phase_tool_signatures()}
+
+    def phase_tool_signatures(self) -> dict[str, str]:
+        """Signature -> description of the active domain's tools (the control tools are always listed)."""
+        if self.finished:
+            return {}
+        own = self.control.definitions
+        return {tool_signature(d): d.description
+                for name, d in sorted(self.domain_envs[self.phase.domain].toolkit.definitions.items())
+                if name not in own}
 
     def status(self) -> dict:
         return {
@@ -177,7 +200,10 @@ class PathwayEngine(Toolkit):
             "active_phase": None if self.finished else self.phase.name,
             "goal": None if self.finished else self.phase.goal,
             "time_pressure": None if self.finished else self.phase.time_pressure,
+            "calls_left": (None if self.finished or not self.phase.max_calls else
+                           max(0, self.phase.max_calls - len(self.logs[self.phase_index].calls))),
             "still_required": [] if self.finished else [a.name for a in self.missing_actions()],
+            "tools": [] if self.finished else sorted(self.phase_tool_signatures()),
         }
 
     def phase_scores(self) -> list[dict[str, Any]]:

@@ -1,20 +1,55 @@
-"""Cross-domain pathway hook (`envs.domains.cross_domain`): put the pathway's patient into this domain's episode."""
+"""Cross-domain pathway hook: put a pathway's patient into a fresh triage database.
+
+`add_patient(domain_env, record)` validates `record` as an `EDPatient` and inserts it. The record
+may also carry `encounter_time` ("YYYY-MM-DDTHH:MM"): the department clock of the encounter (the
+time stamped on medications given at triage), so the pathway's phases share one timeline.
+"""
 
 from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
 
 from pydantic import ValidationError
 
 from envs.core.db import DataFileError, format_validation_error
 from envs.core.domain import DomainEnvironment
 
-from .data_model import EDPatient
+from .data_model import EDPatient, TriageDB
+
+DOMAIN = "triage_emergency"
 
 
-def add_patient(env: DomainEnvironment, record: dict) -> str:
-    """Validate a patient record of this domain and insert it into the fresh episode database; returns its id."""
+def encounter_clock(value: Any, domain: str, patient_id: str) -> str:
+    """A validated "YYYY-MM-DDTHH:MM" encounter time, or a DataFileError naming the field."""
     try:
-        patient = EDPatient.model_validate(record)
+        return datetime.strptime(str(value), "%Y-%m-%dT%H:%M").strftime("%Y-%m-%dT%H:%M")
+    except ValueError:
+        raise DataFileError(
+            f"{domain} patient record {patient_id!r} field 'encounter_time': expected "
+            f"YYYY-MM-DDTHH:MM, got {value!r}"
+        ) from None
+
+
+def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
+    """Validate `record` against the triage patient model and insert it; returns the patient id."""
+    if not isinstance(record, dict):
+        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
+    fields = dict(record)
+    clock = fields.pop("encounter_time", None)
+    label = str(fields.get("patient_id") or "<no patient_id>")
+    try:
+        patient = EDPatient.model_validate(fields)
     except ValidationError as exc:
-        raise DataFileError(format_validation_error(exc, source="pathway patient record (triage_emergency)")) from None
-    env.toolkit.db.patients[patient.patient_id] = patient
+        raise DataFileError(
+            format_validation_error(exc, source=f"{DOMAIN} patient record", item=label)
+        ) from None
+    db = domain_env.toolkit.db
+    if not isinstance(db, TriageDB):
+        raise DataFileError(f"{DOMAIN}: the environment's database is {type(db).__name__}, not TriageDB")
+    if patient.patient_id in db.patients:
+        raise DataFileError(f"{DOMAIN} patient record {label!r} field 'patient_id': already in the database")
+    if clock is not None:
+        db.clock = encounter_clock(clock, DOMAIN, label)
+    db.patients[patient.patient_id] = patient
     return patient.patient_id
