@@ -24,6 +24,7 @@ DOMAINS: dict[str, str] = {
     "obstetrics": "envs.domains.obstetrics.environment",
     "radiology_report": "envs.domains.radiology_report.environment",
     "visual_diagnosis": "envs.domains.visual_diagnosis.environment",
+    "cross_domain": "envs.domains.cross_domain.environment",
 }
 
 

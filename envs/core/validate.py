@@ -103,7 +103,10 @@ def validate_domain(domain: str, *, replay: bool = True, limit: int | None = Non
 
     tasks = registry.get_tasks(domain)
     definitions = registry.get_environment(domain).toolkit.definitions
+    # Domains whose tools depend on the task (pathways build their phase toolkits at reset) say
+    # which tools each task may use.
+    per_task = getattr(registry.domain_module(domain), "task_tool_definitions", None)
     reports = []
     for task in tasks[:limit] if limit else tasks:
-        reports.append(validate_task(task, domain, definitions, replay=replay))
+        reports.append(validate_task(task, domain, per_task(task) if per_task else definitions, replay=replay))
     return reports
