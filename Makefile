@@ -16,7 +16,7 @@ export TRANSFORMERS_OFFLINE := 1
 export DS_ACCELERATOR := cpu
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: setup data demo test validate bench clean
+.PHONY: setup data demo tour test validate bench clean
 
 setup: $(STAMP)
 
@@ -30,7 +30,14 @@ $(STAMP): pyproject.toml constraints-cpu.txt
 data: setup
 	$(BIN)/hcgym data build
 
+# The main job: tiny-model TT-OPD on a local 2-CPU Ray cluster (SFT warm start on gold replays,
+# then RL), writing runs/demo/ with metrics.jsonl and training_dynamics.png.
 demo: data
+	$(BIN)/hcgym train --config configs/tiny_cpu_ttopd.yaml --output-dir runs/demo
+	$(BIN)/hcgym plot runs/demo
+
+# A scripted gold-replay tour of every domain (no model).
+tour: data
 	$(BIN)/hcgym demo
 
 validate: data
