@@ -282,6 +282,8 @@ def _simplify(node: Node) -> Node | None:
 # --------------------------------------------------------------------------------------------
 
 _WORD = re.compile(r"[^\W_]+")
+# Snowball English's exceptional forms whose stem is not a prefix: lying -> lie, skies -> sky.
+_IRREGULAR = {"lie": "ly", "die": "dy", "tie": "ty", "sky": "sk"}
 _ASCII_WORD = re.compile(r"[a-z0-9]+")  # the same words in lower-cased ASCII text, 3x faster
 SNIPPET_CHARS = 240
 SNIPPET_SCAN_CHARS = 50_000
@@ -314,15 +316,20 @@ class Highlighter:
         return term
 
     def _prefixes(self, terms: set[str]) -> tuple[str, ...]:
-        """Prefixes every word stemming to one of `terms` starts with.
+        """Prefixes that every word stemming to one of `terms` starts with.
 
-        A Snowball English stem keeps all but at most the last four letters of its word (suffix
-        replacements such as -ational -> -ate, -biliti -> -ble, -y -> -i touch only the end).
+        The Snowball English stemmer only rewrites the end of a word: it drops suffixes, turns a
+        final y into i, adds back a final e, and replaces suffixes by shorter ones (-ational ->
+        -ate, -biliti -> -ble, -enci -> -ence). A stem therefore shares all but at most its last
+        two letters with its word ("any" -> "ani"); prefixes keep at least two letters. The few
+        irregular forms of the stemmer (lying, dying, tying, skies) are added explicitly.
         """
         key = frozenset(terms)
         pre = self._prefix_cache.get(key)
         if pre is None:
-            pre = tuple(sorted({t if len(t) <= 2 else t[: max(2, len(t) - 4)] for t in terms if t}))
+            cut = {t if len(t) <= 2 else t[: max(2, len(t) - 2)] for t in terms if t}
+            cut |= {_IRREGULAR[t] for t in terms if t in _IRREGULAR}
+            pre = tuple(sorted(p for p in cut if not any(p != q and p.startswith(q) for q in cut)))
             if len(self._prefix_cache) > 1024:
                 self._prefix_cache.clear()
             self._prefix_cache[key] = pre
@@ -335,29 +342,33 @@ class Highlighter:
         out = []
         low = text.lower()
         if text.isascii() and len(low) == len(text):
-            # Fast path: the distinct words (regex in C), their terms from the cache, then the
-            # positions of just the matching words with str.find.
+            # Fast path: str.find of each term's prefix (C speed); only words starting there are
+            # analysed (cached), so a passage costs a few microseconds.
             cache = self._cache
-            prefixes = self._prefixes(terms)
-            hit = {}
-            for w in set(_ASCII_WORD.findall(low)):
-                if not w.startswith(prefixes):  # cannot stem to a query term: skip without analysing
-                    continue
-                t = cache.get(w, "")
-                if t == "":
-                    t = self._term(w)
-                if t is not None and t in terms:
-                    hit[w] = t
             n = len(low)
-            for w, t in hit.items():
-                i = low.find(w)
+            for pre in self._prefixes(terms):
+                i = low.find(pre)
                 while i >= 0:
-                    j = i + len(w)
-                    if (i == 0 or not low[i - 1].isalnum()) and (j == n or not low[j].isalnum()):
+                    if i and low[i - 1].isalnum():  # not the start of a word
+                        i = low.find(pre, i + 1)
+                        continue
+                    j = i + len(pre)
+                    while j < n and low[j].isalnum():
+                        j += 1
+                    w = low[i:j]
+                    t = cache.get(w, "")
+                    if t == "":
+                        t = self._term(w)
+                    if t is not None and t in terms:
                         out.append((i, j, t))
-                    i = low.find(w, j)
+                    i = low.find(pre, j)
             out.sort()
             return out
+        return self.matches_slow(text, terms)
+
+    def matches_slow(self, text: str, terms: set[str]) -> list[tuple[int, int, str]]:
+        """Reference implementation: analyse every word."""
+        out = []
         for m in _WORD.finditer(text):
             t = self._term(m.group().lower())
             if t in terms:

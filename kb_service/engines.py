@@ -53,9 +53,12 @@ class BM25Builder:
 
     def add(self, tokens: list[str]) -> None:
         vocab = self.vocab
-        ids = [vocab.setdefault(t, len(vocab)) for t in tokens]
-        self._buf_ids.extend(ids)
-        self._buf_lens.append(len(ids))
+        if not vocab.keys() >= set(tokens):  # new terms: number them in order of appearance
+            for t in tokens:
+                if t not in vocab:
+                    vocab[t] = len(vocab)
+        self._buf_ids.extend(map(vocab.__getitem__, tokens))  # C-level loop
+        self._buf_lens.append(len(tokens))
         self.n_docs += 1
         if len(self._buf_ids) >= self.flush_tokens:
             self._flush()

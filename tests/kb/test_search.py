@@ -132,3 +132,25 @@ def test_structured_and_free_engines_agree(kb):
         assert set(ids(free)) == set(ids(forced)), term
         for a, b in zip(sorted(free, key=lambda r: r.doc_id), sorted(forced, key=lambda r: r.doc_id)):
             assert a.score == pytest.approx(b.score, rel=0.05)
+
+
+def test_fast_snippet_matching_equals_word_by_word_analysis(corpus):
+    """The str.find fast path finds exactly the words the analyzer maps to the query terms."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from kb_service.analysis import Highlighter
+
+    h = Highlighter()
+    words = sorted({w for d in corpus[:60] for w in d["content"].split()} | {
+        "lying", "dies", "tying", "skies", "any", "happiness", "relational", "possibilities", "hoping",
+        "valency", "generalization", "reasonably", "cafe", "x_y", "COVID-19", "re-entry", "Coughs"})
+
+    @settings(max_examples=300, deadline=None, derandomize=True)
+    @given(st.lists(st.sampled_from(words), min_size=1, max_size=60), st.lists(st.sampled_from(words), max_size=6))
+    def check(text_words, query_words):
+        text = " ".join(text_words)
+        terms = set(analyze(" ".join(query_words)))
+        assert h.matches(text, terms) == h.matches_slow(text, terms)
+
+    check()
