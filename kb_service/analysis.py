@@ -345,16 +345,13 @@ class Highlighter:
             # Fast path: str.find of each term's prefix (C speed); only words starting there are
             # analysed (cached), so a passage costs a few microseconds.
             cache = self._cache
-            n = len(low)
             for pre in self._prefixes(terms):
                 i = low.find(pre)
                 while i >= 0:
                     if i and low[i - 1].isalnum():  # not the start of a word
                         i = low.find(pre, i + 1)
                         continue
-                    j = i + len(pre)
-                    while j < n and low[j].isalnum():
-                        j += 1
+                    j = _ASCII_WORD.match(low, i).end()
                     w = low[i:j]
                     t = cache.get(w, "")
                     if t == "":
@@ -412,13 +409,16 @@ class Highlighter:
             we = cut if cut >= 0 else we
         parts: list[str] = []
         pos = ws
+        # Marker characters already in the text (markdown bold) would garble the highlighting.
+        clean = (lambda x: x.replace(self.start, "").replace(self.end, "")) if (
+            self.start in text or self.end in text) else (lambda x: x)
         for s, e, _t in found:
             if s < ws or e > we:
                 continue
-            parts.append(text[pos:s].replace(self.start, "").replace(self.end, ""))
+            parts.append(clean(text[pos:s]))
             parts.append(f"{self.start}{text[s:e]}{self.end}")
             pos = e
-        parts.append(text[pos:we].replace(self.start, "").replace(self.end, ""))
+        parts.append(clean(text[pos:we]))
         out = " ".join("".join(parts).split())
         if ws > 0:
             out = "… " + out

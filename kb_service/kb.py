@@ -227,29 +227,40 @@ class KnowledgeBase:
             source: Restrict to one source name or a list of them.
             category: Restrict to one category.
         """
+        docs, scores, terms = self._rank(query, k, source, category)
+        return self._passages(docs, scores, terms) if docs else []
+
+    def rank(self, query: str, k: int = 10, source: str | Iterable[str] | None = None,
+             category: str | None = None) -> list[tuple[int, float]]:
+        """Ranking only: (document number, BM25 score) best first, without fetching passages.
+
+        Document number ``i`` is the passage in SQLite row ``i + 1``; `search` is `rank` plus
+        fetching those rows and building snippets.
+        """
+        docs, scores, _terms = self._rank(query, k, source, category)
+        return list(zip(docs, scores))
+
+    def _rank(self, query, k, source, category) -> tuple[list[int], list[float], set[str]]:
         try:
             k = int(k)
         except (TypeError, ValueError):
             k = 10
         k = max(0, min(k, MAX_K))
         sources = self._normalise_sources(source)
-        if k == 0:
-            return []
-        if category is not None and category not in self._category_index:
-            return []
+        if k == 0 or (category is not None and category not in self._category_index):
+            return [], [], set()
         plan = plan_query(query)
         if plan.kind == "empty":
-            return []
+            return [], [], set()
         if plan.kind == "free":
             ids = self.bm25.term_ids(plan.terms, MAX_QUERY_TERMS)
             if not ids:
-                return []
+                return [], [], set()
             docs, scores = self.bm25.search(ids, k, self._mask(sources, category))
-            docs, scores = docs.tolist(), scores.tolist()
-        else:
-            q = self.tantivy.to_query(plan.tree, sources, category)
-            docs, scores = self.tantivy.search(q, k)
-        return self._passages(docs, scores, plan.highlight)
+            return docs.tolist(), scores.tolist(), plan.highlight
+        q = self.tantivy.to_query(plan.tree, sources, category)
+        docs, scores = self.tantivy.search(q, k)
+        return docs, scores, plan.highlight
 
     def _passages(self, docs: list[int], scores: list[float], terms: set[str]) -> list[Passage]:
         rows = self.store.rows_by_index(docs)
@@ -259,11 +270,8 @@ class KnowledgeBase:
             if row is None:  # cannot happen with a validated KB; never hide it
                 raise KBCorruptError(f"knowledge base at {self.path}: document {d} is in the index but not in the store")
             _, doc_id, source, title, content, category, dataset_name, prov_id = row
-            # Trusted, already-typed values from our own store: skip pydantic validation.
-            out.append(Passage.model_construct(doc_id=doc_id, source=source, title=title, category=category,
-                                               dataset_name=dataset_name, score=float(s),
-                                               snippet=self.highlighter.snippet(content, terms), content=None,
-                                               provenance=self.store.provenance.get(prov_id)))
+            out.append(Passage(doc_id, source, title, self.highlighter.snippet(content, terms), float(s), category,
+                               dataset_name, None, self.store.provenance.get(prov_id)))
         return out
 
     # ---------------------------------------------------------------------------- lookups
