@@ -103,6 +103,15 @@ class Generator(ABC):
     def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
         """Load a full state dict (parameter name -> tensor) and record its policy version."""
 
+    # -- collective weight sync (optional; `weight_sync.transport: collective`) ---------------------
+    def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
+        """Join the learner's weight-sync group as receiver `rank` (blocks until every member joined)."""
+        raise NotImplementedError(f"the {self.name} generator backend has no collective weight sync")
+
+    def receive_weights(self, version: int) -> None:
+        """Receive the learner's broadcast of `version` (the learner sends at the same time)."""
+        raise NotImplementedError(f"the {self.name} generator backend has no collective weight sync")
+
     def check_version(self, requests: list[GenerationRequest]) -> None:
         need = max(r.min_version for r in requests)
         if self.version < need:
@@ -188,6 +197,21 @@ class HFGenerator(Generator):
                 f"update_weights(version={version}): state dict does not match the model: "
                 f"missing {sorted(missing)[:5]}, unexpected {sorted(unexpected)[:5]}"
             )
+        self.version = int(version)
+
+    def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
+        from learner.config_models import WeightSyncConfig
+        from learner.weight_sync import WeightSyncGroup
+
+        device = "cuda" if self.device.type == "cuda" else "cpu"
+        self._sync_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,
+                                           device=device)
+
+    def receive_weights(self, version: int) -> None:
+        group = getattr(self, "_sync_group", None)
+        if group is None:
+            raise RuntimeError("receive_weights before join_weight_sync")
+        group.receive_into(self.model, version)
         self.version = int(version)
 
     def generate(self, requests: list[GenerationRequest]) -> list[GenerationResult]:
@@ -323,6 +347,19 @@ class GeneratorService:
             await asyncio.to_thread(self.generator.update_weights, state_dict, version)
         return self.generator.version
 
+    async def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int,
+                               peer_names: list[str]) -> None:
+        """Join the learner's collective weight-sync group (runs in a thread: it blocks until all joined)."""
+        self._ensure_started()
+        await asyncio.to_thread(self.generator.join_weight_sync, config, rank, world_size, peer_names)
+
+    async def receive_weights(self, version: int) -> int:
+        """Receive a broadcast between batches (the learner sends concurrently); returns the new version."""
+        self._ensure_started()
+        async with self._lock:
+            await asyncio.to_thread(self.generator.receive_weights, version)
+        return self.generator.version
+
     def version(self) -> int:
         return self.generator.version
 
@@ -389,10 +426,14 @@ class GeneratorClient:
         sync_timeout_s: Limit for one weight push; a generator that misses it is named in the error.
     """
 
-    def __init__(self, handles: list, max_attempts: int = 5, sync_timeout_s: float = 120.0) -> None:
+    def __init__(self, handles: list, max_attempts: int = 5, sync_timeout_s: float = 120.0,
+                 weights_provider=None) -> None:
         if not handles:
             raise ValueError("GeneratorClient needs at least one generator handle")
         self.handles = list(handles)
+        # Called for a weights ref when a restarted generator must catch up and none was published
+        # (the collective transport sends weights without the object store).
+        self.weights_provider = weights_provider
         self.max_attempts = max_attempts
         self.sync_timeout_s = sync_timeout_s
         self.outstanding = [0] * len(handles)
@@ -430,9 +471,14 @@ class GeneratorClient:
             for _ in range(self.max_attempts):
                 try:
                     current = await asyncio.wait_for(self.handles[index].version.remote(), self.sync_timeout_s)
-                    if current >= self.version or self.weights_ref is None:
+                    if current >= self.version:
                         return
-                    await asyncio.wait_for(self.handles[index].update_weights.remote(self.weights_ref, self.version),
+                    ref = self.weights_ref
+                    if ref is None and self.weights_provider is not None:
+                        ref = self.weights_provider()
+                    if ref is None:
+                        return
+                    await asyncio.wait_for(self.handles[index].update_weights.remote(ref, self.version),
                                            self.sync_timeout_s)
                     self.resyncs += 1
                     return

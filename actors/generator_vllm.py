@@ -10,10 +10,11 @@ Weights reach vLLM two ways:
 * `update_weights(state_dict, version)`: a full CPU state dict (what the learner publishes through
   the Ray object store), loaded bucket by bucket through the worker's `model.load_weights`, so no
   second full copy of the model is ever held on the GPU.
-* `init_weight_sync(...)` + `receive_broadcast(metas, version)`: the GPU path. The learner's rank 0
-  joins a NCCL group with the vLLM workers and broadcasts parameters in size-capped buckets (each
-  ZeRO-3 layer gathered only for its turn, on the learner side); every receive runs under a
-  timeout, so a dead or missing peer becomes an error that names it instead of a silent hang.
+* `join_weight_sync(...)` + `receive_weights(version)`: the GPU path. The learner's rank 0 and the
+  vLLM workers form a `learner.weight_sync.WeightSyncGroup` (NCCL) and the learner broadcasts
+  parameters in size-capped buckets (each ZeRO-3 module gathered only for its turn, on the learner
+  side); every blocking point has a timeout, so a dead or missing peer becomes an error that names
+  it instead of a silent hang.
 
 Log-probs: vLLM's default returns raw-model log-probs; we ask for `logprobs_mode=
 "processed_logprobs"`, the log-probs of the distribution after temperature / top-k / top-p, i.e.
@@ -22,7 +23,6 @@ the one the token was actually sampled from (the contract of `actors.generator`)
 
 from __future__ import annotations
 
-import concurrent.futures
 import time
 from typing import Any
 
@@ -41,9 +41,8 @@ class VLLMOptions(BaseModel):
     max_model_len: int = Field(default=8192 + 12288, ge=16)
     enable_prefix_caching: bool = True
     enforce_eager: bool = False
-    # Bucket cap for state-dict and broadcast weight updates.
+    # Bucket cap for object-store (state dict) weight updates; the broadcast path uses weight_sync.bucket_mb.
     bucket_mb: int = Field(default=512, ge=1)
-    sync_timeout_s: float = Field(default=300.0, gt=0)
 
 
 class WeightSyncExtension:
@@ -59,45 +58,30 @@ class WeightSyncExtension:
         loaded = model.load_weights(weights=[(name, tensor.to(self.device)) for name, tensor in named_tensors])
         return len(loaded) if loaded is not None else len(named_tensors)
 
-    def hcgym_init_weight_sync(self, master_address: str, master_port: int, rank_offset: int,
-                               world_size: int, timeout_s: float) -> None:
-        """Join the learner's broadcast group (learner rank 0 is the source)."""
-        from vllm.distributed.device_communicators.pynccl import PyNcclCommunicator
-        from vllm.distributed.utils import StatelessProcessGroup
+    def hcgym_join_weight_sync(self, config: dict, rank_offset: int, world_size: int, peer_names: list[str]) -> None:
+        """Join the learner's weight-sync group (`learner.weight_sync.WeightSyncGroup`, NCCL) as
+        receiver `rank_offset + tensor-parallel rank`."""
+        from vllm.distributed.parallel_state import get_tensor_model_parallel_rank
 
-        from vllm.distributed.parallel_state import get_world_group
+        from learner.config_models import WeightSyncConfig
+        from learner.weight_sync import WeightSyncGroup
 
-        rank = get_world_group().rank + rank_offset
-        group = StatelessProcessGroup.create(host=master_address, port=master_port, rank=rank,
-                                             world_size=world_size, store_timeout=int(timeout_s))
-        self._hcgym_comm = PyNcclCommunicator(group, device=self.device)
-        self._hcgym_peer = f"learner rank 0 at {master_address}:{master_port}"
-        self._hcgym_timeout = timeout_s
+        rank = rank_offset + get_tensor_model_parallel_rank()
+        self._hcgym_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,
+                                            device=str(self.device))
 
-    def hcgym_receive_bucket(self, metas: list[tuple[str, str, list[int]]]) -> int:
-        """Receive one broadcast bucket (names, dtypes, shapes in the learner's send order) and load it."""
-        import torch
-
-        if not hasattr(self, "_hcgym_comm"):
-            raise RuntimeError("hcgym_receive_bucket before hcgym_init_weight_sync")
-        tensors = [torch.empty(shape, dtype=getattr(torch, dtype), device=self.device) for _, dtype, shape in metas]
-
-        def receive() -> None:
-            for tensor in tensors:
-                self._hcgym_comm.broadcast(tensor, src=0, stream=torch.cuda.current_stream())
-            torch.cuda.current_stream().synchronize()
-
-        # NCCL has no per-call timeout; waiting on a helper thread turns a hang into an error.
-        with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
-            future = pool.submit(receive)
-            try:
-                future.result(timeout=self._hcgym_timeout)
-            except concurrent.futures.TimeoutError:
-                raise TimeoutError(
-                    f"weight broadcast from {self._hcgym_peer} did not complete within {self._hcgym_timeout:.0f}s "
-                    f"(bucket of {len(metas)} tensors starting at {metas[0][0] if metas else '?'})"
-                ) from None
-        return self.hcgym_load_weights([(name, t) for (name, _, _), t in zip(metas, tensors)])
+    def hcgym_receive(self, version: int) -> int:
+        """Receive broadcast `version` bucket by bucket and load each tensor as it arrives (the group's
+        own timeouts name a stalled peer)."""
+        if not hasattr(self, "_hcgym_group"):
+            raise RuntimeError("hcgym_receive before hcgym_join_weight_sync")
+        model = self.model_runner.model
+        loaded = 0
+        for name, tensor in self._hcgym_group.receive(version):
+            # load_weights copies (and shards for tensor parallelism) before the next bucket arrives.
+            model.load_weights(weights=[(name, tensor)])
+            loaded += 1
+        return loaded
 
 
 class VLLMGenerator(Generator):
@@ -194,14 +178,11 @@ class VLLMGenerator(Generator):
         self.version = int(version)
 
     # -- GPU broadcast path ----------------------------------------------------------------------
-    def init_weight_sync(self, master_address: str, master_port: int, rank_offset: int, world_size: int) -> None:
-        self.llm.collective_rpc("hcgym_init_weight_sync",
-                                args=(master_address, master_port, rank_offset, world_size,
-                                      self.options.sync_timeout_s))
+    def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
+        # With tensor parallelism every TP worker is a receiver: ranks rank .. rank + tp - 1.
+        self.llm.collective_rpc("hcgym_join_weight_sync", args=(config, rank, world_size, peer_names))
 
-    def receive_broadcast(self, buckets: list[list[tuple[str, str, list[int]]]], version: int) -> None:
-        """Receive the learner's broadcast, bucket by bucket, in the learner's send order."""
-        for metas in buckets:
-            self.llm.collective_rpc("hcgym_receive_bucket", args=(metas,))
-        self.llm.reset_prefix_cache()
+    def receive_weights(self, version: int) -> None:
+        self.llm.collective_rpc("hcgym_receive", args=(version,))
+        self.llm.reset_prefix_cache()  # cached prefixes were computed with the old weights
         self.version = int(version)

@@ -502,33 +502,57 @@ class Trainer:
         for group in list(self.teacher_outstanding.values()):
             self._submit_teacher(group)
 
-    async def _teacher_outputs(self, groups: list[Group]) -> dict[str, TeacherOutput]:
-        """Fetch the batch's teacher log-probs (waiting only for what is not computed yet)."""
+    async def _train_with_teacher(self, groups: list[Group], samples: list[RolloutSample]):
+        """One learner step whose teacher log-probs are fetched while the learner already runs.
+
+        The fetch's ref goes to the learner inside a list (T1's overlap): the learner does its
+        reference and pi_old forwards first and blocks on the teacher only for what is not scored
+        yet. A teacher that died (fetch fails, or the step's samples are unknown to it) is recovered
+        and the step retried; nothing was updated, the learner resolves the teacher before its backward.
+
+        Returns:
+            (learner metrics, {sample id: TeacherOutput}).
+        """
         from ray.exceptions import RayActorError
 
         for group in groups:
             if not group.teacher_submitted:
                 self._submit_teacher(group)  # a fill group (filtered when it finished)
         ids = [s.sample_id for g in groups for s in g.samples]
+        floors = {s.sample_id: g.teacher_floor for g in groups for s in g.samples}
         timeout = self.cfg.trainer.teacher_timeout_s
         for _ in range(5):
             try:
                 # Threaded actor: a fetch may overtake a submit sent just before it; wait for those.
                 await asyncio.gather(*[g.teacher_submit_ref for g in groups])
-                fetched = await asyncio.wait_for(self.teacher.fetch.remote(ids, timeout), timeout + 30)
-            except (RayActorError, KeyError) as exc:
-                # Died mid-fetch, or restarted and never heard of these samples.
-                await self._recover_teacher(f"{type(exc).__name__} during fetch")
+                # A teacher restarted since its last update scores with its initial weights: restore first.
+                if await self.teacher.teacher_version.remote() != self.teacher_confirmed:
+                    await self._recover_teacher("teacher version behind the driver's")
+                    continue
+            except RayActorError as exc:
+                await self._recover_teacher(f"{type(exc).__name__} before fetch")
                 continue
-            floors = {s.sample_id: g.teacher_floor for g in groups for s in g.samples}
+            fetch_ref = self.teacher.fetch.remote(ids, timeout)
+            try:
+                metrics = await self.learner.train_step.remote(samples, [fetch_ref], self.step + 1)
+            except Exception as exc:
+                try:
+                    await fetch_ref
+                except (RayActorError, KeyError) as teacher_exc:
+                    await self._recover_teacher(f"{type(teacher_exc).__name__} during fetch")
+                    continue
+                raise exc
+            fetched = await fetch_ref
             old = [o for o in fetched.outputs if o.teacher_version < floors[o.sample_id]]
-            if old:  # scored by a restarted teacher before its state came back
-                await self._recover_teacher(f"sample scored by teacher version {old[0].teacher_version} "
-                                            f"< {floors[old[0].sample_id]}")
-                continue
+            if old:
+                # Scored by a restarted teacher in the instant before the version check: counted and
+                # logged, the step has used them.
+                self.counters["teacher_stale_outputs"] = self.counters.get("teacher_stale_outputs", 0) + len(old)
+                self.log(f"[teacher] {len(old)} outputs of step {self.step + 1} came from teacher version "
+                         f"{old[0].teacher_version} < {floors[old[0].sample_id]}")
             for group in groups:
                 self.teacher_outstanding.pop(group.seq, None)
-            return {o.sample_id: o for o in fetched.outputs}
+            return metrics, {o.sample_id: o for o in fetched.outputs}
         raise RuntimeError(f"teacher failed to serve step {self.step + 1} five times")
 
     async def _update_teacher(self, weights_ref) -> str:
@@ -539,6 +563,8 @@ class Trainer:
         action = teacher_update_action(self.step, self.cfg.teacher)
         if action == "none":
             return action
+        if weights_ref is None:  # collective transport: the teacher still takes a full CPU state dict
+            weights_ref = self.learner.get_weights.remote()
         self._confirm_teacher_snapshot()
         for attempt in range(3):
             try:
@@ -557,6 +583,40 @@ class Trainer:
         self.teacher_version = self.teacher_confirmed
         self.teacher_snapshot_pending = self.teacher.get_state.remote()
         return action
+
+    # -- collective weight sync (GPU path; gloo on CPU) -------------------------------------------
+    async def _form_weight_sync_group(self) -> None:
+        """The learner's rank 0 and every generator join one private process group."""
+        from learner.learner_actor import free_port
+
+        config = self.cfg.weight_sync.model_dump()
+        # Every (re-)formation needs a fresh rendezvous: the old store may still hold the port.
+        config["master_port"] = free_port() if self._sync_formations or not config["master_port"] else config["master_port"]
+        self._sync_formations += 1
+        world = 1 + len(self.generators)
+        names = ["learner-rank0"] + [f"generator-{i}" for i in range(len(self.generators))]
+        await asyncio.wait_for(asyncio.gather(
+            self.learner.join_weight_sync.remote(config, world, names),
+            *[g.join_weight_sync.remote(config, i + 1, world, names) for i, g in enumerate(self.generators)],
+        ), self.cfg.weight_sync.timeout_s + 30)
+
+    async def _broadcast_to_generators(self) -> None:
+        """One collective sync of the new weights; a broken group (a generator restarted) is re-formed
+        once and the sync retried, and a generator that still fails catches up via the object store."""
+        timeout = self.cfg.weight_sync.timeout_s + 30
+        for attempt in range(2):
+            try:
+                await asyncio.wait_for(asyncio.gather(
+                    self.learner.broadcast_weights.remote(),
+                    *[g.receive_weights.remote(self.step) for g in self.generators],
+                ), timeout)
+                break
+            except Exception as exc:
+                if attempt == 1:
+                    raise RuntimeError(f"collective weight sync of version {self.step} failed twice: {exc}") from exc
+                self.log(f"[weight sync] {type(exc).__name__}: {exc}; re-forming the group")
+                await self._form_weight_sync_group()
+        self.gen_client.publish(None, self.step)
 
     # -- the learner's side ----------------------------------------------------------------------
     async def _collect_batch(self) -> tuple[list[Group], dict[str, float]]:
@@ -618,19 +678,22 @@ class Trainer:
         if not samples:
             raise RuntimeError(f"step {self.step + 1}: no trainable groups (all rollouts failed); see the log")
         teacher_out: dict[str, TeacherOutput] | None = None
-        wait_s = 0.0
-        if self.teacher is not None:
-            teacher_out = await self._teacher_outputs(groups)
-            wait_s = time.perf_counter() - t_batch
         t_learn = time.perf_counter()
-        learner_metrics = await self.learner.train_step.remote(
-            samples, list(teacher_out.values()) if teacher_out else None, self.step + 1)
+        if self.teacher is not None:
+            learner_metrics, teacher_out = await self._train_with_teacher(groups, samples)
+        else:
+            learner_metrics = await self.learner.train_step.remote(samples, None, self.step + 1)
         learner_s = time.perf_counter() - t_learn
+        wait_s = float(learner_metrics.get("teacher_wait_s", 0.0))
         self.step += 1
 
         t_sync = time.perf_counter()
-        weights_ref = self.learner.get_weights.remote()
-        await self.gen_client.sync_all(weights_ref, self.step)
+        if self.collective:
+            await self._broadcast_to_generators()
+            weights_ref = None
+        else:
+            weights_ref = self.learner.get_weights.remote()
+            await self.gen_client.sync_all(weights_ref, self.step)
         teacher_action = await self._update_teacher(weights_ref) if self.teacher is not None else "none"
         sync_s = time.perf_counter() - t_sync
         if cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0:
@@ -662,7 +725,8 @@ class Trainer:
         record.update(batch_info)
         record.update({
             "policy_lag_max": float(max(lags) if lags else 0), "policy_lag_mean": float(np.mean(lags) if lags else 0),
-            "teacher_wait_s": wait_s, "teacher_wait_frac": wait_s / max(wait_s + learner_s, 1e-9),
+            # The share of the learner step spent blocked on the teacher (T1's overlap hides the rest).
+            "teacher_wait_s": wait_s, "teacher_wait_frac": wait_s / max(learner_s, 1e-9),
             "time_step_s": step_s, "time_batch_wait_s": t_batch - t_start, "time_learner_s": learner_s,
             "time_weight_sync_s": sync_s,
             "time_generation_s": float(sum(s.metadata.get("generate_s", 0.0) for s in samples)),
@@ -734,8 +798,13 @@ class Trainer:
         self._group_tasks: dict[int, TaskRef] = {}
         self.pool = EnvPool(**self.pool_args)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
-                                          cfg.trainer.weight_sync_timeout_s)
+                                          cfg.trainer.weight_sync_timeout_s,
+                                          weights_provider=lambda: self.learner.get_weights.remote())
+        self.collective = cfg.weight_sync.transport == "collective"
+        self._sync_formations = 0
         await self.pool.ready()
+        if self.collective:
+            await self._form_weight_sync_group()
         resumed = await self._restore() if self.resume else False
         self.sink = MetricsSink(self.run_dir, tensorboard=cfg.metrics.tensorboard, ray_metrics=cfg.metrics.ray_metrics,
                                 run_name=cfg.name, resume=resumed)

@@ -62,6 +62,8 @@ def test_grpo_runs_streams_on_policy_and_resumes_exactly(ray_cluster, ward_polic
         assert all(math.isfinite(r[k]) for k in REQUIRED_KEYS)
         assert r["policy_lag_max"] == 0  # staleness 0: strictly on-policy
         assert r["grad_norm"] > 0 and r["trajectories_per_s"] > 0
+        # The generators sampled with exactly the learner's weights of the previous step.
+        assert r["logprob_abs_diff"] < 1e-3, r["logprob_abs_diff"]
     assert sum(1 for line in logs if line.startswith("step ")) == 4  # one progress line per step
     val = [json.loads(line) for line in (tmp_path / "straight" / "validation.jsonl").read_text().splitlines()]
     assert [v["step"] for v in val] == [0, 2, 4] and all("val_accuracy" in v for v in val)
@@ -129,3 +131,19 @@ def test_ttopd_streams_with_staleness_and_updates_the_teacher(ray_cluster, ward_
     status = summary["group_status"]
     assert status.get("cancelled", 0) == 0 and status.get("in_flight", 0) == 0
     assert summary["ledger"]["in_flight"] == 0
+
+
+def test_collective_weight_sync_over_gloo(ray_cluster, ward_policy_dir, tmp_path):
+    """The GPU transport's code path on CPU: learner rank 0 broadcasts to the generators in buckets."""
+    from learner.train import train
+
+    cfg = tiny_config(tmp_path / "collective", ward_policy_dir,
+                      generator={"num_generators": 2},
+                      trainer={"max_steps": 3, "checkpoint_interval": 0},
+                      weight_sync={"transport": "collective", "backend": "gloo", "bucket_mb": 0.05, "timeout_s": 60})
+    train(cfg, log=lambda line: None)
+    records = read_metrics(cfg.output_dir)
+    assert [r["step"] for r in records] == [1, 2, 3]
+    for r in records:
+        assert r["logprob_abs_diff"] < 1e-3, r  # generators hold the learner's weights of step - 1
+        assert r["policy_lag_max"] == 0
