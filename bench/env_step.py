@@ -35,13 +35,38 @@ def _median_us(samples: list[float]) -> float:
 
 
 def pick_read_action(domain: str):
-    env = registry.get_environment(domain)
+    """The first READ expected action of any task (tools are looked up after reset, since some
+    domains, e.g. cross-domain pathways, build their toolkit per task)."""
+    env = HealthcareGymEnv(domain=domain, max_turns=10**9)
     for task in registry.get_tasks(domain):
-        for action in task.evaluation_criteria.actions:
-            definition = env.toolkit.definitions.get(action.name)
+        env.reset(seed=0, options={"task_id": task.id})
+        for action in task.evaluation_criteria.actions[:1]:
+            definition = env.domain_env.toolkit.definitions.get(action.name)
             if definition and definition.tool_type is ToolType.READ and action.name not in KNOWLEDGE_TOOLS:
                 return task, action
     raise SystemExit(f"{domain}: no task with a READ expected action to benchmark")
+
+
+def slowest_tool(domain: str, max_tasks: int = 150) -> tuple[str, float]:
+    """Median of three warm calls of every gold action of up to `max_tasks` tasks."""
+    slowest = ("-", 0.0)
+    env = HealthcareGymEnv(domain=domain, max_turns=10**9)
+    for task in registry.get_tasks(domain)[:max_tasks]:
+        env.reset(seed=0, options={"task_id": task.id})
+        toolkit = env.domain_env.toolkit
+        for action in task.evaluation_criteria.actions:
+            if action.name in KNOWLEDGE_TOOLS or action.name not in toolkit.definitions:
+                continue
+            toolkit.call(action.name, action.arguments)  # warm: one-off index loads are not per-call cost
+            runs = []
+            for _ in range(3):
+                start = time.perf_counter()
+                toolkit.call(action.name, action.arguments)
+                runs.append(time.perf_counter() - start)
+            elapsed = statistics.median(runs)
+            if elapsed > slowest[1]:
+                slowest = (action.name, elapsed)
+    return slowest
 
 
 def bench_domain(domain: str, steps: int) -> dict:
@@ -68,21 +93,7 @@ def bench_domain(domain: str, steps: int) -> dict:
         stepped.append(time.perf_counter() - start)
         if len(env._record.turns) > 200:  # keep the transcript from growing without bound
             env.reset(seed=0)
-    slowest = ("-", 0.0)
-    tool_env = registry.get_environment(domain)
-    for t in registry.get_tasks(domain)[:300]:
-        for a in t.evaluation_criteria.actions:
-            if a.name in KNOWLEDGE_TOOLS or a.name not in tool_env.toolkit.definitions:
-                continue
-            tool_env.toolkit.call(a.name, a.arguments)  # warm: one-off index loads are not per-call cost
-            runs = []
-            for _ in range(3):
-                start = time.perf_counter()
-                tool_env.toolkit.call(a.name, a.arguments)
-                runs.append(time.perf_counter() - start)
-            elapsed = statistics.median(runs)
-            if elapsed > slowest[1]:
-                slowest = (a.name, elapsed)
+    slowest = slowest_tool(domain)
     step_us, direct_us = _median_us(stepped), _median_us(direct)
     return {
         "domain": domain, "tool": action.name, "reset_ms_p50": _median_us(resets) / 1000,

@@ -73,6 +73,7 @@ def action_matches(expected: ExpectedAction, name: str, arguments: dict[str, Any
 @dataclass
 class PhaseLog:
     calls: list[tuple[str, dict[str, Any], bool]] = field(default_factory=list)
+    matched: set[int] = field(default_factory=set)  # indices of required actions already performed
     completed: bool = False
     over_budget: bool = False
 
@@ -153,6 +154,10 @@ class PathwayEngine(Toolkit):
         outcome = self.domain_envs[self.phase.domain].toolkit.call(name, arguments)
         log = self.logs[phase_index]
         log.calls.append((name, outcome.arguments, outcome.ok))
+        if outcome.ok:  # match only the new call: the log itself can grow long
+            for index, required in enumerate(self.phase.required_actions):
+                if index not in log.matched and action_matches(required, name, outcome.arguments):
+                    log.matched.add(index)
         if self.phase.max_calls and len(log.calls) > self.phase.max_calls:
             log.over_budget = True
         if outcome.ok and self.phase.transition == "required_actions" and not self.missing_actions():
@@ -164,8 +169,7 @@ class PathwayEngine(Toolkit):
     def missing_actions(self, index: int | None = None) -> list[ExpectedAction]:
         index = self.phase_index if index is None else index
         phase, log = self.pathway.phases[index], self.logs[index]
-        return [a for a in phase.required_actions
-                if not any(ok and action_matches(a, n, args) for n, args, ok in log.calls)]
+        return [a for i, a in enumerate(phase.required_actions) if i not in log.matched]
 
     def advance(self, declared: bool) -> dict:
         if self.finished:

@@ -63,17 +63,24 @@ def search_classes(db: DrugInteractionDB, query: str) -> list[DrugClass]:
     return sorted(hits, key=lambda c: (len(c.name), c.id))
 
 
+def _non_drug_party(db: DrugInteractionDB, key: str) -> DrugClass | None:
+    for cls in db.classes.values():
+        if cls.kind != "class" and (key in (fold(cls.name), fold(cls.name_fr), cls.id)
+                                    or key == fold(cls.name).split(" (")[0]):
+            return cls
+    return None
+
+
 def resolve_party(db: DrugInteractionDB, name: str) -> tuple[str, Drug | DrugClass]:
     """A drug, or failing that a non-drug ANSM party such as grapefruit or alcohol."""
-    try:
-        return "drug", resolve_drug(db, name)
-    except LookupFailure as drug_error:
-        key = fold(name or "")
-        for cls in db.classes.values():
-            if cls.kind != "class" and (key in (fold(cls.name), fold(cls.name_fr), cls.id)
-                                        or key == fold(cls.name).split(" (")[0]):
-                return "party", cls
-        raise drug_error
+    key = fold(name or "")
+    if key not in db.name_index and not (key.endswith("s") and key[:-1] in db.name_index):
+        # Check the few non-drug parties before resolve_drug's fuzzy suggestions, which scan every
+        # drug name (tens of milliseconds) only to build an error message.
+        party = _non_drug_party(db, key)
+        if party is not None:
+            return "party", party
+    return "drug", resolve_drug(db, name)
 
 
 def get_patient(db: DrugInteractionDB, patient_id: str) -> Patient:
