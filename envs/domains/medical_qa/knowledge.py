@@ -174,6 +174,13 @@ class MedicalKnowledge:
             return code[:3] + "." + code[3:]
         return None
 
+    def _posting_set(self, word: str) -> frozenset[str]:
+        cache = self.__dict__.setdefault("_posting_sets", {})
+        found = cache.get(word)
+        if found is None:
+            found = cache[word] = frozenset(self.icd_words[word])
+        return found
+
     def search_icd(self, query: str, limit: int, billable_only: bool) -> list[tuple[str, float]]:
         q = list(dict.fromkeys(words(query)))
         if not q:
@@ -192,8 +199,9 @@ class MedicalKnowledge:
         for weight, w in weighted:
             posting = self.icd_words[w]
             if len(posting) > len(candidates):
+                posting_set = self._posting_set(w)  # O(1) membership instead of re-splitting descriptions
                 for code in candidates:
-                    if w in self.icd_norm[code].split():
+                    if code in posting_set:
                         scores[code] += weight
             else:
                 for code in posting:
