@@ -5,9 +5,9 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Self
+from typing import Any, ClassVar, Self
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError
 
 
 class DataFileError(ValueError):
@@ -61,3 +61,66 @@ class DB(BaseModel):
         """SHA-256 of the canonical JSON: equal states hash equal, whatever the insertion order."""
         canonical = json.dumps(self.model_dump(mode="json"), sort_keys=True, ensure_ascii=False, separators=(",", ":"))
         return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _canonical(payload: Any) -> str:
+    return json.dumps(payload, sort_keys=True, ensure_ascii=False, separators=(",", ":"))
+
+
+class ForkableDB(DB):
+    """A database split into read-only reference tables and per-episode state.
+
+    Episodes `fork()` the parsed template: the reference tables (patients, studies, formularies)
+    are shared, the state fields (orders, notes, reports) are copied, so reset, the WRITE snapshot
+    and hashing cost only the state. Subclasses name the two groups:
+
+        REFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ("patients", "formulary")
+        STATE_FIELDS: ClassVar[tuple[str, ...]] = ("orders", "notes")
+
+    Tools must not mutate reference tables (they are shared between episodes).
+    """
+
+    REFERENCE_FIELDS: ClassVar[tuple[str, ...]] = ()
+    STATE_FIELDS: ClassVar[tuple[str, ...]] = ()
+    _reference_hash: str | None = PrivateAttr(default=None)
+
+    def reference_hash(self) -> str:
+        if self._reference_hash is None:
+            payload = _canonical({f: _plain(getattr(self, f)) for f in self.REFERENCE_FIELDS})
+            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
+        return self._reference_hash
+
+    def fork(self) -> Self:
+        """A copy sharing the reference tables, with its own deep copy of the state fields."""
+        state = {f: _copy_state(getattr(self, f)) for f in self.STATE_FIELDS}
+        clone = type(self).model_construct(**{f: getattr(self, f) for f in self.REFERENCE_FIELDS}, **state)
+        clone._reference_hash = self.reference_hash()
+        return clone
+
+    def __deepcopy__(self, memo: dict | None = None) -> Self:
+        return self.fork()
+
+    def content_hash(self) -> str:
+        """SHA-256 over the reference hash and the canonical JSON of the state."""
+        state = _canonical({f: _plain(getattr(self, f)) for f in self.STATE_FIELDS})
+        return hashlib.sha256((self.reference_hash() + state).encode("utf-8")).hexdigest()
+
+
+def _copy_state(value: Any) -> Any:
+    if isinstance(value, BaseModel):
+        return value.model_copy(deep=True)
+    if isinstance(value, dict):
+        return {k: _copy_state(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_state(v) for v in value]
+    return value

@@ -129,3 +129,59 @@ def read_policy(package_dir: Path) -> str:
 def write_split(path: Path, splits: dict[str, list[str]]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(splits, indent=1) + "\n", encoding="utf-8")
+
+
+class BuiltDomain:
+    """Entry-point plumbing for a domain whose database `hcgym data build` writes to
+    `domain_build_dir(name)/db.json`: the file is parsed once per process (again if it changes),
+    the policy read once, and the task store shared. Episodes fork the parsed template.
+
+    Example (a domain's environment.py):
+        DOMAIN = BuiltDomain("psychiatry", Path(__file__).parent, PsychiatryDB)
+        get_tasks, get_splits = DOMAIN.get_tasks, DOMAIN.get_splits
+    """
+
+    def __init__(self, name: str, package_dir: Path, db_class: type[DB]) -> None:
+        import threading
+
+        from envs.core.paths import domain_build_dir
+
+        self.name = name
+        self.package_dir = package_dir
+        self.db_class = db_class
+        self._build_dir = domain_build_dir
+        self._lock = threading.Lock()
+        self._template: tuple[Path, float, DB] | None = None
+        self._stores: dict[Path, DomainTaskStore] = {}
+        self._policy: str | None = None
+
+    def template(self) -> DB:
+        path = self._build_dir(self.name) / "db.json"
+        if not path.exists():
+            raise DataFileError(f"{path}: {self.name} database not built (run `hcgym data build --only {self.name}`)")
+        stamp = path.stat().st_mtime
+        with self._lock:
+            if self._template is None or self._template[:2] != (path, stamp):
+                db = self.db_class.load(path)
+                if hasattr(db, "reference_hash"):
+                    db.reference_hash()  # computed once, shared by every fork
+                self._template = (path, stamp, db)
+            return self._template[2]
+
+    def policy(self) -> str:
+        if self._policy is None:
+            self._policy = read_policy(self.package_dir)
+        return self._policy
+
+    def store(self) -> DomainTaskStore:
+        build = self._build_dir(self.name)
+        with self._lock:
+            if build not in self._stores:
+                self._stores[build] = DomainTaskStore(self.name, self.package_dir, build)
+            return self._stores[build]
+
+    def get_tasks(self, split: str | None = None) -> list[Task]:
+        return self.store().tasks(split)
+
+    def get_splits(self) -> dict[str, list[str]]:
+        return self.store().splits()

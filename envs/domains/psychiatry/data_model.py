@@ -8,13 +8,11 @@ lab orders, follow-ups).
 
 from __future__ import annotations
 
-import hashlib
-import json
-from typing import Literal
+from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, ConfigDict, Field
 
-from envs.core.db import DB
+from envs.core.db import ForkableDB
 
 
 class _Record(BaseModel):
@@ -215,10 +213,12 @@ REFERENCE_FIELDS = ("patients", "formulary", "interaction_rules", "icd10_mental"
 STATE_FIELDS = ("mse_records", "safety_plans", "escalations", "diagnoses", "lab_orders", "follow_ups")
 
 
-class PsychiatryDB(DB):
+class PsychiatryDB(ForkableDB):
     """Patients and reference tables are read-only (no tool changes them); the record lists are the
     episode state. Forks share the read-only part, so a reset, a WRITE snapshot and the content
     hash cost microseconds instead of re-serialising every patient."""
+    REFERENCE_FIELDS: ClassVar[tuple[str, ...]] = REFERENCE_FIELDS
+    STATE_FIELDS: ClassVar[tuple[str, ...]] = STATE_FIELDS
 
     patients: dict[str, Patient]
     formulary: dict[str, FormularyDrug]
@@ -230,39 +230,3 @@ class PsychiatryDB(DB):
     diagnoses: list[DiagnosisRecord] = Field(default_factory=list)
     lab_orders: list[LabOrder] = Field(default_factory=list)
     follow_ups: list[FollowUp] = Field(default_factory=list)
-
-    _reference_hash: str | None = PrivateAttr(default=None)
-
-    def reference_hash(self) -> str:
-        if self._reference_hash is None:
-            payload = json.dumps({f: _dump(getattr(self, f)) for f in REFERENCE_FIELDS}, sort_keys=True,
-                                 ensure_ascii=False, separators=(",", ":"))
-            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
-        return self._reference_hash
-
-    def fork(self) -> "PsychiatryDB":
-        """A copy sharing the read-only tables, with its own copy of the records."""
-        clone = type(self).model_construct(
-            **{f: getattr(self, f) for f in REFERENCE_FIELDS},
-            **{f: [r.model_copy(deep=True) for r in getattr(self, f)] for f in STATE_FIELDS})
-        clone._reference_hash = self.reference_hash()
-        return clone
-
-    def __deepcopy__(self, memo: dict | None = None) -> "PsychiatryDB":
-        return self.fork()
-
-    def content_hash(self) -> str:
-        """SHA-256 over the reference hash and the canonical JSON of the records."""
-        state = json.dumps({f: _dump(getattr(self, f)) for f in STATE_FIELDS}, sort_keys=True, ensure_ascii=False,
-                           separators=(",", ":"))
-        return hashlib.sha256((self.reference_hash() + state).encode("utf-8")).hexdigest()
-
-
-def _dump(value):
-    if isinstance(value, BaseModel):
-        return value.model_dump(mode="json")
-    if isinstance(value, dict):
-        return {k: _dump(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_dump(v) for v in value]
-    return value

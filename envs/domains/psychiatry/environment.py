@@ -1,20 +1,15 @@
 """Psychiatry domain entry point: `get_environment()`, `get_tasks(split)`, `get_splits()`.
 
 The built database is parsed once per process; every episode gets a fork that shares the
-read-only patients and reference tables and has its own (empty) clinical records.
+read-only reference tables and has its own copy of the episode state.
 """
 
 from __future__ import annotations
 
-import threading
-from functools import lru_cache
 from pathlib import Path
 
-from envs.core.db import DataFileError
-from envs.core.domain import DomainEnvironment, DomainTaskStore, read_policy
-from envs.core.paths import domain_build_dir
+from envs.core.domain import BuiltDomain, DomainEnvironment
 from envs.core.shared import shared_toolkits
-from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import PsychiatryDB
@@ -22,49 +17,13 @@ from .safety import PsychiatrySafetyContext
 from .tools import PsychiatryTools
 
 NAME = "psychiatry"
-HERE = Path(__file__).parent
-_lock = threading.Lock()
-_templates: dict[Path, tuple[float, PsychiatryDB]] = {}
-_stores: dict[Path, DomainTaskStore] = {}
-
-
-def _template() -> PsychiatryDB:
-    path = domain_build_dir(NAME) / "db.json"
-    if not path.exists():
-        raise DataFileError(f"{path}: psychiatry database not built (run `hcgym data build {NAME}`)")
-    stamp = path.stat().st_mtime
-    with _lock:
-        cached = _templates.get(path)
-        if cached is None or cached[0] != stamp:
-            db = PsychiatryDB.load(path)
-            db.reference_hash()
-            _templates[path] = (stamp, db)
-        return _templates[path][1]
-
-
-@lru_cache(maxsize=1)
-def _policy() -> str:
-    return read_policy(HERE)
+DOMAIN = BuiltDomain(NAME, Path(__file__).parent, PsychiatryDB)
+get_tasks = DOMAIN.get_tasks
+get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    tools = PsychiatryTools(_template().fork())
+    tools = PsychiatryTools(DOMAIN.template().fork())
     toolkit = CompositeToolkit(tools, *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit,
+    return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit,
                              safety_context=PsychiatrySafetyContext(lambda: tools.db))
-
-
-def _store() -> DomainTaskStore:
-    build = domain_build_dir(NAME)
-    with _lock:
-        if build not in _stores:
-            _stores[build] = DomainTaskStore(NAME, HERE, build)
-        return _stores[build]
-
-
-def get_tasks(split: str | None = None) -> list[Task]:
-    return _store().tasks(split)
-
-
-def get_splits() -> dict[str, list[str]]:
-    return _store().splits()

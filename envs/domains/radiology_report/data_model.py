@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal
+from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, ConfigDict, Field
 
-from envs.core.db import DB
+from envs.core.db import ForkableDB
 
 
 class _Record(BaseModel):
@@ -117,31 +117,14 @@ REFERENCE_FIELDS = ("studies", "templates")
 STATE_FIELDS = ("reports", "communications")
 
 
-class RadiologyDB(DB):
+class RadiologyDB(ForkableDB):
+    REFERENCE_FIELDS: ClassVar[tuple[str, ...]] = REFERENCE_FIELDS
+    STATE_FIELDS: ClassVar[tuple[str, ...]] = STATE_FIELDS
     studies: dict[str, Study]
     templates: dict[str, ReportTemplate]
     reports: dict[str, Report] = Field(default_factory=dict)
     communications: list[CriticalCommunication] = Field(default_factory=list)
 
-    _reference_hash: str | None = PrivateAttr(default=None)
-
-    def reference_hash(self) -> str:
-        if self._reference_hash is None:
-            payload = json.dumps({f: _dump(getattr(self, f)) for f in REFERENCE_FIELDS}, sort_keys=True,
-                                 ensure_ascii=False, separators=(",", ":"))
-            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
-        return self._reference_hash
-
-    def fork(self) -> "RadiologyDB":
-        clone = type(self).model_construct(
-            studies=self.studies, templates=self.templates,
-            reports={k: r.model_copy(deep=True) for k, r in self.reports.items()},
-            communications=[c.model_copy(deep=True) for c in self.communications])
-        clone._reference_hash = self.reference_hash()
-        return clone
-
-    def __deepcopy__(self, memo: dict | None = None) -> "RadiologyDB":
-        return self.fork()
 
     def decision_state(self) -> dict:
         """The graded state: per report its status and category; per communication the study and method."""
@@ -153,13 +136,3 @@ class RadiologyDB(DB):
         every episode, so tasks can carry an expected hash that survives rebuilds of the study set."""
         state = json.dumps(self.decision_state(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(state.encode("utf-8")).hexdigest()
-
-
-def _dump(value):
-    if isinstance(value, BaseModel):
-        return value.model_dump(mode="json")
-    if isinstance(value, dict):
-        return {k: _dump(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_dump(v) for v in value]
-    return value

@@ -7,13 +7,11 @@ metadata); it lives in the generated task's metadata for grading.
 
 from __future__ import annotations
 
-import hashlib
-import json
-from typing import Literal
+from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, ConfigDict, Field
 
-from envs.core.db import DB
+from envs.core.db import ForkableDB
 
 
 class _Record(BaseModel):
@@ -89,43 +87,11 @@ REFERENCE_FIELDS = ("studies", "archive", "signs")
 STATE_FIELDS = ("recorded_findings", "escalations")
 
 
-class VisualDB(DB):
+class VisualDB(ForkableDB):
+    REFERENCE_FIELDS: ClassVar[tuple[str, ...]] = REFERENCE_FIELDS
+    STATE_FIELDS: ClassVar[tuple[str, ...]] = STATE_FIELDS
     studies: dict[str, Study]
     archive: dict[str, ArchivedCase]
     signs: dict[str, ImagingSign]
     recorded_findings: list[RecordedFinding] = Field(default_factory=list)
     escalations: list[CriticalEscalation] = Field(default_factory=list)
-
-    _reference_hash: str | None = PrivateAttr(default=None)
-
-    def reference_hash(self) -> str:
-        if self._reference_hash is None:
-            payload = json.dumps({f: _dump(getattr(self, f)) for f in REFERENCE_FIELDS}, sort_keys=True,
-                                 ensure_ascii=False, separators=(",", ":"))
-            self._reference_hash = hashlib.sha256(payload.encode("utf-8")).hexdigest()
-        return self._reference_hash
-
-    def fork(self) -> "VisualDB":
-        clone = type(self).model_construct(
-            **{f: getattr(self, f) for f in REFERENCE_FIELDS},
-            **{f: [r.model_copy(deep=True) for r in getattr(self, f)] for f in STATE_FIELDS})
-        clone._reference_hash = self.reference_hash()
-        return clone
-
-    def __deepcopy__(self, memo: dict | None = None) -> "VisualDB":
-        return self.fork()
-
-    def content_hash(self) -> str:
-        state = json.dumps({f: _dump(getattr(self, f)) for f in STATE_FIELDS}, sort_keys=True, ensure_ascii=False,
-                           separators=(",", ":"))
-        return hashlib.sha256((self.reference_hash() + state).encode("utf-8")).hexdigest()
-
-
-def _dump(value):
-    if isinstance(value, BaseModel):
-        return value.model_dump(mode="json")
-    if isinstance(value, dict):
-        return {k: _dump(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_dump(v) for v in value]
-    return value
