@@ -79,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=96)
     parser.add_argument("--max-turns", type=int, default=5)
     parser.add_argument("--slots", type=int, default=16)
+    parser.add_argument("--prompt", choices=["env", "compact"], default="env",
+                        help="system prompt style of the agent loop (the tiny configs use compact)")
     parser.add_argument("--json", default=None, help="also write the figures here")
     args = parser.parse_args(argv)
     os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
@@ -95,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     limits = RolloutLimits(max_turns=args.max_turns)
     tasks = {t.id: t for t in registry.get_tasks(args.domain, "train")}
     policy = GoldReplayPolicy(tokenizer, {r.task_id: gold_turn_actions(tasks[r.task_id], args.max_turns) for r in refs})
-    loop = AgentLoop(tokenizer, limits)
+    loop = AgentLoop(tokenizer, limits, args.prompt)
     episode_specs = specs(refs, args.episodes)
 
     asyncio.run(plain_loop(loop, policy, episode_specs[:4], args.max_turns))  # warm-up (imports, first env)
@@ -103,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     plain = asyncio.run(plain_loop(loop, policy, episode_specs, args.max_turns))
     plain_s = time.perf_counter() - started
     results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
+               "prompt": args.prompt,
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
                "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
                "plain": {"wall_s": plain_s, "episodes_per_s": args.episodes / plain_s}}
@@ -119,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
             }
     finally:
         ray.shutdown()
-    print(f"rollout benchmark: {args.episodes} gold-replay episodes of {args.domain} ({pattern}), "
+    print(f"rollout benchmark: {args.episodes} gold-replay episodes of {args.domain} ({pattern}, {args.prompt} prompt), "
           f"{results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs")
     print(f"  plain loop         {plain_s:7.2f} s  {results['plain']['episodes_per_s']:7.2f} episodes/s")
     for actors in (1, 2):

@@ -148,8 +148,12 @@ class RewardConfig(_Strict):
     # Which limits count as "truncated" (R_penalty) in Eq. 4: the response-token limit L_max, and
     # optionally running out of assistant turns without submitting.
     penalize: list[Literal["response_tokens", "max_turns"]] = Field(default_factory=lambda: ["response_tokens"])
-    correct_if: Literal["is_correct", "reward_positive", "accuracy_at_least"] = "is_correct"
+    # is_correct: the env's grader; reward_positive: the reference's rule (5D total > 0);
+    # accuracy_at_least: the accuracy component >= accuracy_threshold; total_at_least: the 5D total
+    # >= total_threshold (a completed, well-formed episode; for policies too small to be accurate).
+    correct_if: Literal["is_correct", "reward_positive", "accuracy_at_least", "total_at_least"] = "is_correct"
     accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
+    total_threshold: float = 0.5
 
 
 class DynamicSamplingConfig(_Strict):

@@ -159,6 +159,8 @@ def is_correct(sample: RolloutSample, cfg: RunConfig) -> bool:
         return bool(sample.metadata.get("is_correct", sample.correct))
     if rule == "reward_positive":  # the reference implementation's rule
         return float(sample.metadata.get("env_reward", sample.reward)) > 0
+    if rule == "total_at_least":
+        return float(sample.metadata.get("env_reward", sample.reward)) >= cfg.reward.total_threshold
     accuracy = sample.reward_components.get("accuracy")
     return accuracy is not None and float(accuracy) >= cfg.reward.accuracy_threshold
 

@@ -117,6 +117,8 @@ def test_rewards_and_correctness_rules():
     assert is_correct(wrong, positive) and not is_correct(zero, positive)
     acc = validate_config({"reward": {"correct_if": "accuracy_at_least", "accuracy_threshold": 0.5}})
     assert is_correct(right, acc) and not is_correct(wrong, acc)
+    total = validate_config({"reward": {"correct_if": "total_at_least", "total_threshold": 0.4}})
+    assert is_correct(wrong, total) and not is_correct(zero, total)  # the 5D total, not the accuracy
 
     by_reward = validate_config({"trainer": {"dynamic_sampling": {"criterion": "reward"}}})
     same = [sample(0, i, correct=False, reward=0.3) for i in range(3)]
