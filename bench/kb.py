@@ -422,32 +422,43 @@ def build_engine(engine: str, corpus: Path, index: Path) -> dict:
     return res
 
 
-def _query_worker(engine: str, index: str, queries: list[str], barrier, results) -> None:
-    eng = ENGINES[engine](Path(index))
-    for q in queries[:20]:  # warm-up: numba compilation, page cache, SQLite caches
-        eng.search(q)
-    barrier.wait()
-    lat, tops = [], []
-    t0 = time.perf_counter()
-    for q in queries:
-        t = time.perf_counter()
-        tops.append(eng.search(q))
-        lat.append(time.perf_counter() - t)
-    results.put({"elapsed": time.perf_counter() - t0, "lat": lat, "tops": tops})
+def _query_worker(specs: list[tuple[str, str]], queries: list[str], subsets: dict[str, list[int]], block: int,
+                  barrier, results) -> None:
+    """Run every engine over the queries in interleaved blocks, so that background load on a
+    shared machine falls on all engines alike; with 2 processes both run the same engine block
+    at the same time (a barrier before each block)."""
+    engines = {name: ENGINES[name](Path(index)) for name, index in specs}
+    for name, eng in engines.items():  # warm-up: numba compilation, page cache, SQLite caches
+        for i in subsets[name][:20]:
+            eng.search(queries[i])
+    out = {name: {"lat": [], "tops": [], "blocks": []} for name in engines}
+    for b0 in range(0, len(queries), block):
+        for name, eng in engines.items():
+            ids = [i for i in subsets[name] if b0 <= i < b0 + block]
+            barrier.wait()
+            t0 = time.perf_counter()
+            for i in ids:
+                t = time.perf_counter()
+                out[name]["tops"].append(eng.search(queries[i]))
+                out[name]["lat"].append(time.perf_counter() - t)
+            out[name]["blocks"].append(time.perf_counter() - t0)
+    results.put(out)
 
 
-def run_queries(engine: str, index: Path, queries: list[str], procs: int) -> list[dict]:
+def run_queries(specs: list[tuple[str, Path]], queries: list[str], subsets: dict[str, list[int]], procs: int,
+                block: int = 50) -> list[dict]:
     ctx = mp.get_context("spawn")
     barrier = ctx.Barrier(procs)
     results = ctx.Queue()
-    ps = [ctx.Process(target=_query_worker, args=(engine, str(index), queries, barrier, results)) for _ in range(procs)]
+    args = ([(n, str(p)) for n, p in specs], queries, subsets, block, barrier, results)
+    ps = [ctx.Process(target=_query_worker, args=args) for _ in range(procs)]
     for p in ps:
         p.start()
     out = [results.get() for _ in ps]
     for p in ps:
         p.join()
         if p.exitcode != 0:
-            raise RuntimeError(f"{engine} query worker failed (exit {p.exitcode})")
+            raise RuntimeError(f"query worker failed (exit {p.exitcode})")
     return out
 
 
@@ -515,34 +526,42 @@ def main(argv: list[str] | None = None) -> int:
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     rng = np.random.default_rng(args.seed + 2)
     results: dict[str, dict] = {}
+    specs: list[tuple[str, Path]] = []
     for name in engines:
-        if name == "ours-rank" and "ours" in results:  # same index as ours: measure the ranking alone
+        if name == "ours-rank" and "ours" in results:  # same index as ours: the ranking alone
             index = work / f"index-ours-{args.n_passages}"
             res = {k: results["ours"][k] for k in ("build_s", "peak_rss_gb", "disk_gb")}
         else:
             index = work / f"index-{name}-{args.n_passages}"
             print(f"[bench] {name}: building ...", flush=True)
             res = build_engine(name, corpus, index)
-        qs = queries
-        if name == "fts5" and args.n_passages > 100_000 and args.fts5_sample < len(queries):
-            pick = np.sort(rng.choice(len(queries), args.fts5_sample, replace=False))
-            qs = [queries[i] for i in pick]
-            res["query_sample"] = pick.tolist()
-        print(f"[bench] {name}: built in {res['build_s']:.0f}s, {res['disk_gb']:.2f} GB, peak RSS "
-              f"{res['peak_rss_gb']:.2f} GB; querying ({len(qs)} queries) ...", flush=True)
-        one = run_queries(name, index, qs, 1)[0]
-        two = run_queries(name, index, qs, 2)
-        lat = np.array(one["lat"]) * 1000
-        res.update(n_queries=len(qs), p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)),
-                   qps_1=len(qs) / one["elapsed"], qps_2=2 * len(qs) / max(r["elapsed"] for r in two),
-                   tops=one["tops"], queries=qs)
-        res["scaling_2"] = res["qps_2"] / res["qps_1"]
-        print(f"[bench] {name}: p50 {res['p50_ms']:.2f} ms, p99 {res['p99_ms']:.2f} ms, {res['qps_1']:.1f} q/s (1 proc), "
-              f"{res['qps_2']:.1f} q/s (2 procs)", flush=True)
+            print(f"[bench] {name}: built in {res['build_s']:.0f}s, {res['disk_gb']:.2f} GB, peak RSS "
+                  f"{res['peak_rss_gb']:.2f} GB (load average {os.getloadavg()[0]:.1f})", flush=True)
         results[name] = res
-        if not args.keep and not (name == "ours" and "ours-rank" in engines):
-            shutil.rmtree(index, ignore_errors=True)
-        if name == "ours-rank" and not args.keep:
+        specs.append((name, index))
+
+    all_ids = list(range(len(queries)))
+    subsets = {name: all_ids for name in engines}
+    if "fts5" in engines and args.n_passages > 100_000 and args.fts5_sample < len(queries):
+        subsets["fts5"] = np.sort(rng.choice(len(queries), args.fts5_sample, replace=False)).tolist()
+        results["fts5"]["query_sample"] = subsets["fts5"]
+    print(f"[bench] querying, engines interleaved in blocks of 50 queries: 1 process ...", flush=True)
+    one = run_queries(specs, queries, subsets, 1)[0]
+    print(f"[bench] 2 processes ... (load average {os.getloadavg()[0]:.1f})", flush=True)
+    two = run_queries(specs, queries, subsets, 2)
+    for name in engines:
+        res = results[name]
+        qs = [queries[i] for i in subsets[name]]
+        lat = np.array(one[name]["lat"]) * 1000
+        block_max = np.max([r[name]["blocks"] for r in two], axis=0)
+        res.update(n_queries=len(qs), p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)),
+                   mean_ms=float(lat.mean()), qps_1=len(qs) / sum(one[name]["blocks"]),
+                   qps_2=2 * len(qs) / float(block_max.sum()), tops=one[name]["tops"], queries=qs)
+        res["scaling_2"] = res["qps_2"] / res["qps_1"]
+        print(f"[bench] {name}: p50 {res['p50_ms']:.2f} ms, p99 {res['p99_ms']:.2f} ms, {res['qps_1']:.1f} q/s "
+              f"(1 proc), {res['qps_2']:.1f} q/s (2 procs)", flush=True)
+    if not args.keep:
+        for _name, index in specs:
             shutil.rmtree(index, ignore_errors=True)
 
     if "bm25s" in results:
