@@ -78,6 +78,10 @@ class SFTConfig(_Strict):
     weight_decay: float = Field(default=0.0, ge=0)
     warmup_frac: float = Field(default=0.05, ge=0, le=1)
     max_grad_norm: float = Field(default=1.0, gt=0)
+    # Share of the gold replays shown with a TT-OPD hint turn inserted (reinforcing or corrective at
+    # random, same gold response), so the teacher's hinted context is not out of distribution for a
+    # policy that would otherwise never have seen one. Used only when teacher hints are on.
+    hint_fraction: float = Field(default=0.0, ge=0, le=1)
 
 
 class DataConfig(_Strict):

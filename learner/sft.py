@@ -20,6 +20,7 @@ import json
 import math
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -88,7 +89,38 @@ def gold_replay_samples(tokenizer, refs: list[tuple[str, str, str | None]], limi
     return good
 
 
-def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[RolloutSample], *, epochs: float,
+@dataclass
+class SFTExample:
+    """Token ids and the mask of the positions trained on (the assistant tokens)."""
+
+    input_ids: list[int]
+    loss_mask: list[int]
+
+
+def hinted_example(sample: RolloutSample, tokenizer, hints, kind: str) -> SFTExample:
+    """The sample with a privileged hint inserted where the TT-OPD teacher inserts it.
+
+    Mirrors `actors.teacher.Teacher.build_context`: the hint turn (`hints.template` around the
+    reinforcing or corrective text) goes before the prompt's trailing generation header
+    `<|im_start|>assistant\n` when `before_generation_prompt` is set and the prompt ends with it,
+    else at `prompt_length`. The hint tokens are not trained on.
+
+    Why: a policy warm-started without ever seeing such a turn treats the teacher's hinted context
+    as out of distribution; on the tiny model that alone put KL(student || teacher) at 0.35-0.55
+    nats/token at step 1 and the distillation term pulled the student toward broken outputs.
+    """
+    from learner.model import IM_START
+
+    text = hints.template.format(hint=hints.reinforcing if kind == "reinforcing" else hints.corrective)
+    hint = list(tokenizer.encode(text, add_special_tokens=False))
+    header = list(tokenizer.encode(f"{IM_START}assistant\n", add_special_tokens=False))
+    ids, mask, at = list(sample.input_ids), list(sample.loss_mask), sample.prompt_length
+    if hints.before_generation_prompt and at >= len(header) and ids[at - len(header):at] == header:
+        at -= len(header)
+    return SFTExample(ids[:at] + hint + ids[at:], mask[:at] + [0] * len(hint) + mask[at:])
+
+
+def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[RolloutSample | SFTExample], *, epochs: float,
             lr: float, batch_size: int, seed: int, weight_decay: float = 0.0, warmup_frac: float = 0.05,
             max_grad_norm: float = 1.0, log: Callable[[str], None] = print) -> dict[str, Any]:
     """Next-token cross-entropy on the assistant tokens (loss mask 1) of `samples`.
@@ -200,7 +232,17 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
         samples = gold_replay_samples(tokenizer, refs, limits, prompt_style=cfg.rollout.system_prompt, log=log)
         log(f"[sft] {len(samples)} gold-replay trajectories in {time.perf_counter() - t0:.1f}s")
         s = cfg.sft
-        info["sft"] = run_sft(base, root / "sft", samples, epochs=s.epochs, lr=s.lr, batch_size=s.batch_size,
+        examples: list = list(samples)
+        if s.hint_fraction > 0 and cfg.teacher.enabled and cfg.teacher.hints.enabled:
+            import random
+
+            rng = random.Random(cfg.seed)
+            chosen = [i for i in range(len(samples)) if rng.random() < s.hint_fraction]
+            for i in chosen:  # replaced, not added: the same number of SFT steps
+                examples[i] = hinted_example(samples[i], tokenizer, cfg.teacher.hints,
+                                             rng.choice(["reinforcing", "corrective"]))
+            log(f"[sft] {len(chosen)} of {len(samples)} examples carry a teacher hint turn")
+        info["sft"] = run_sft(base, root / "sft", examples, epochs=s.epochs, lr=s.lr, batch_size=s.batch_size,
                               seed=cfg.seed, weight_decay=s.weight_decay, warmup_frac=s.warmup_frac,
                               max_grad_norm=s.max_grad_norm, log=log)
         policy = root / "sft"
