@@ -87,7 +87,7 @@ def batch(bools: tuple[str, ...] = (), **fields: Domain):
     return st.lists(st.integers(0, total - 1).map(decode), min_size=BATCH, max_size=BATCH)
 
 
-def agree(ours, kw: dict, *peer_fns, tol: float = 0.0):
+def assert_agree(ours, kw: dict, *peer_fns, tol: float = 0.0):
     mine = ours(**kw).score
     for peer in peer_fns:
         theirs = peer(**kw)

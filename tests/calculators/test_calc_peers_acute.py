@@ -16,7 +16,7 @@ from envs import calculators as C
 
 from . import peers as P
 from . import peers_clincalc as Q
-from .peer_strategies import PEER, agree, b, batch, choice, hundredths, ints, opt, tenths
+from .peer_strategies import PEER, assert_agree, b, batch, choice, hundredths, ints, opt, tenths
 
 
 # ----------------------------------------------------------------------------- critical care
@@ -26,14 +26,14 @@ from .peer_strategies import PEER, agree, b, batch, choice, hundredths, ints, op
 @given(batch(eye=ints(1, 4), verbal=ints(1, 5), motor=ints(1, 6)))
 def test_gcs_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_gcs, kw, P.gcs_medcalc, P.gcs_open_medicine, Q.gcs_clincalc)
+        assert_agree(C.calculate_gcs, kw, P.gcs_medcalc, P.gcs_open_medicine, Q.gcs_clincalc)
 
 
 @PEER
 @given(batch(bools=("altered_mentation",), respiratory_rate=ints(0, 60), systolic_bp=ints(40, 250)))
 def test_qsofa_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_qsofa, kw, P.qsofa_open_medicine, Q.qsofa_clincalc)
+        assert_agree(C.calculate_qsofa, kw, P.qsofa_open_medicine, Q.qsofa_clincalc)
 
 
 @PEER
@@ -50,7 +50,7 @@ def test_sirs_vs_medcalc(cases):
     # Heart rate is drawn > 90 only: medcalc-bench 1.7.0 also adds the heart-rate point in its
     # "<= 90" branch (sirs_criteria.py), contradicting Bone 1992 (HR > 90); we follow Bone 1992.
     for kw in cases:
-        agree(C.calculate_sirs, kw, P.sirs_medcalc)
+        assert_agree(C.calculate_sirs, kw, P.sirs_medcalc)
 
 
 @PEER
@@ -68,7 +68,7 @@ def test_sirs_vs_medcalc(cases):
 )
 def test_news2_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_news2, kw, P.news2_open_medicine, Q.news2_clincalc)
+        assert_agree(C.calculate_news2, kw, P.news2_open_medicine, Q.news2_clincalc)
 
 
 @PEER
@@ -89,14 +89,14 @@ def test_news2_vs_peers(cases):
 )
 def test_sofa_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_sofa, kw, Q.sofa_clincalc)
+        assert_agree(C.calculate_sofa, kw, Q.sofa_clincalc)
         # open-medicine has no ventilation input (it scores the respiratory rows 3-4 from the ratio
         # alone, while Vincent 1996 requires respiratory support) and no dobutamine input (any
         # dobutamine scores 2): compare only where neither can matter.
         if (kw["on_mechanical_ventilation"] or kw["pao2_fio2_ratio"] >= 200) and kw[
             "dobutamine_mcg_kg_min"
         ] == 0:
-            agree(C.calculate_sofa, kw, P.sofa_open_medicine)
+            assert_agree(C.calculate_sofa, kw, P.sofa_open_medicine)
 
 
 @PEER
@@ -130,7 +130,7 @@ def test_apache2_vs_peers(cases):
         if kw["fio2"] >= 0.5 and (aa < 0 or min(abs(aa - e) for e in (200, 350, 500)) < 1e-6):
             continue  # impossible gas (negative gradient) or a float tie at a band edge
         # open-medicine computes the A-a gradient from PaCO2 as we do; clincalc takes the gradient.
-        mine = agree(C.calculate_apache2, kw, P.apache2_open_medicine)
+        mine = assert_agree(C.calculate_apache2, kw, P.apache2_open_medicine)
         assert Q.apache2_clincalc(**dict(kw, aa_gradient_mmhg=aa)) == mine, kw
 
 
@@ -145,7 +145,7 @@ def test_apache2_vs_peers(cases):
 )
 def test_aa_gradient_vs_open_medicine(cases):
     for kw in cases:  # open-medicine rounds to one decimal
-        agree(C.calculate_aa_gradient, kw, P.aa_gradient_open_medicine, tol=0.051)
+        assert_agree(C.calculate_aa_gradient, kw, P.aa_gradient_open_medicine, tol=0.051)
 
 
 # ----------------------------------------------------------------------------- pulmonary
@@ -164,14 +164,14 @@ def test_aa_gradient_vs_open_medicine(cases):
 )
 def test_curb65_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_curb65, kw, P.curb65_medcalc)
+        assert_agree(C.calculate_curb65, kw, P.curb65_medcalc)
         # open-medicine scores BUN > 20 mg/dL (curb65.py), not > 19: BUN in (19, 20] differs.
         if not 19 < kw["bun_mg_dl"] <= 20:
-            agree(C.calculate_curb65, kw, P.curb65_open_medicine)
+            assert_agree(C.calculate_curb65, kw, P.curb65_open_medicine)
         # clincalc scores the paper's urea > 7 mmol/L, i.e. BUN > 19.6 mg/dL; the requirement (and
         # the usual US statement) is BUN > 19 mg/dL, so BUN in (19, 19.6] is scored differently.
         if not 19 < kw["bun_mg_dl"] <= 19.6:
-            agree(C.calculate_curb65, kw, Q.curb65_clincalc)
+            assert_agree(C.calculate_curb65, kw, Q.curb65_clincalc)
 
 
 @PEER
@@ -186,7 +186,7 @@ def test_curb65_vs_peers(cases):
 )
 def test_crb65_vs_open_medicine(cases):
     for kw in cases:
-        agree(C.calculate_crb65, kw, P.crb65_open_medicine)
+        assert_agree(C.calculate_crb65, kw, P.crb65_open_medicine)
 
 
 @PEER
@@ -205,7 +205,7 @@ def test_crb65_vs_open_medicine(cases):
 )
 def test_wells_pe_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_wells_pe, kw, P.wells_pe_medcalc, P.wells_pe_open_medicine, Q.wells_pe_clincalc)
+        assert_agree(C.calculate_wells_pe, kw, P.wells_pe_medcalc, P.wells_pe_open_medicine, Q.wells_pe_clincalc)
 
 
 @PEER
@@ -225,7 +225,7 @@ def test_wells_pe_vs_peers(cases):
 )
 def test_perc_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_perc, kw, P.perc_medcalc, P.perc_open_medicine, Q.perc_clincalc)
+        assert_agree(C.calculate_perc, kw, P.perc_medcalc, P.perc_open_medicine, Q.perc_clincalc)
 
 
 # ----------------------------------------------------------------------------- cardiology
@@ -244,12 +244,12 @@ def test_perc_vs_peers(cases):
 )
 def test_heart_score_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_heart_score, kw, P.heart_open_medicine, Q.heart_clincalc)
+        assert_agree(C.calculate_heart_score, kw, P.heart_open_medicine, Q.heart_clincalc)
         # medcalc-bench scores known atherosclerotic disease as 2 only together with >= 3 risk factors
         # (it gives 1 for atherosclerosis alone); Six 2008 gives 2 for ">= 3 risk factors or history of
         # atherosclerotic disease", which we follow.
         if not (kw["atherosclerotic_disease"] and kw["risk_factor_count"] < 3):
-            agree(C.calculate_heart_score, kw, P.heart_medcalc)
+            assert_agree(C.calculate_heart_score, kw, P.heart_medcalc)
 
 
 @PEER
@@ -268,7 +268,7 @@ def test_heart_score_vs_peers(cases):
 )
 def test_timi_ua_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_timi_ua, kw, P.timi_open_medicine, Q.timi_clincalc)
+        assert_agree(C.calculate_timi_ua, kw, P.timi_open_medicine, Q.timi_clincalc)
 
 
 @PEER
@@ -287,7 +287,7 @@ def test_timi_ua_vs_peers(cases):
 )
 def test_cha2ds2_vasc_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_cha2ds2_vasc, kw, P.chads_medcalc, P.chads_open_medicine, Q.chads_clincalc)
+        assert_agree(C.calculate_cha2ds2_vasc, kw, P.chads_medcalc, P.chads_open_medicine, Q.chads_clincalc)
 
 
 @PEER
@@ -308,14 +308,14 @@ def test_cha2ds2_vasc_vs_peers(cases):
 )
 def test_has_bled_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_has_bled, kw, P.hasbled_medcalc, P.hasbled_open_medicine, Q.hasbled_clincalc)
+        assert_agree(C.calculate_has_bled, kw, P.hasbled_medcalc, P.hasbled_open_medicine, Q.hasbled_clincalc)
 
 
 @PEER
 @given(batch(bools=P._DVT_KEYS))
 def test_wells_dvt_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_wells_dvt, kw, P.wells_dvt_medcalc, P.wells_dvt_open_medicine, Q.wells_dvt_clincalc)
+        assert_agree(C.calculate_wells_dvt, kw, P.wells_dvt_medcalc, P.wells_dvt_open_medicine, Q.wells_dvt_clincalc)
 
 
 @PEER
@@ -329,16 +329,16 @@ def test_wells_dvt_vs_peers(cases):
 def test_qtc_vs_peers(cases):
     for kw in cases:
         # medcalc-bench rounds the RR interval to 3 decimals (seconds) before correcting: <= 1 ms apart.
-        agree(C.calculate_qtc, kw, P.qtc_medcalc, tol=1.0)
+        assert_agree(C.calculate_qtc, kw, P.qtc_medcalc, tol=1.0)
         if kw["formula"] in ("bazett", "fridericia"):  # open-medicine has these two only, rounded to 1 ms
-            agree(C.calculate_qtc, kw, P.qtc_open_medicine, tol=0.51)
+            assert_agree(C.calculate_qtc, kw, P.qtc_open_medicine, tol=0.51)
 
 
 @PEER
 @given(batch(systolic_bp=ints(70, 250), diastolic_bp=ints(30, 69)))
 def test_map_vs_medcalc(cases):
     for kw in cases:
-        agree(C.calculate_map, kw, P.map_medcalc, tol=0.0051)
+        assert_agree(C.calculate_map, kw, P.map_medcalc, tol=0.0051)
 
 
 # ----------------------------------------------------------------------------- hepatology / GI
@@ -381,12 +381,12 @@ def test_meld_na_vs_peers(cases):
 )
 def test_child_pugh_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_child_pugh, kw, P.child_pugh_open_medicine, Q.child_pugh_clincalc)
+        assert_agree(C.calculate_child_pugh, kw, P.child_pugh_open_medicine, Q.child_pugh_clincalc)
         # medcalc-bench mis-scores the exact band edges: albumin 2.8 g/dL as 3 points ("<= 2.8"),
         # bilirubin 2.0 mg/dL as 0 and 3.0 as 3. Pugh 1973: bilirubin < 2 / 2-3 / > 3 and albumin
         # > 3.5 / 2.8-3.5 / < 2.8, so 2.0 and 3.0 score 2 and 2.8 scores 2 (as the other peers do).
         if kw["albumin_g_dl"] != 2.8 and kw["bilirubin_mg_dl"] not in (2.0, 3.0):
-            agree(C.calculate_child_pugh, kw, P.child_pugh_medcalc)
+            assert_agree(C.calculate_child_pugh, kw, P.child_pugh_medcalc)
 
 
 @PEER
@@ -407,13 +407,13 @@ def test_child_pugh_vs_peers(cases):
 )
 def test_glasgow_blatchford_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_glasgow_blatchford, kw, Q.gbs_clincalc)
+        assert_agree(C.calculate_glasgow_blatchford, kw, Q.gbs_clincalc)
         # medcalc-bench mis-scores exact band edges: haemoglobin 12.0 and 13.0 g/dL (men), 10.0 and
         # 12.0 (women), and BUN 70.0 mg/dL (0 instead of 6). Blatchford 2000 bands start at their
         # printed lower value (men 12.0-12.9 = 1; urea >= 25 mmol/L = 6), as clincalc agrees.
         if kw["hemoglobin_g_dl"] not in (10.0, 12.0, 13.0) and kw["bun_mg_dl"] != 70.0:
-            agree(C.calculate_glasgow_blatchford, kw, P.gbs_medcalc)
+            assert_agree(C.calculate_glasgow_blatchford, kw, P.gbs_medcalc)
         # open-medicine scores syncope, hepatic disease and cardiac failure 1 point each; Blatchford
         # 2000 gives 2 each (as the other peers do). Compare where none is present.
         if not (kw["syncope"] or kw["hepatic_disease"] or kw["cardiac_failure"]):
-            agree(C.calculate_glasgow_blatchford, kw, P.gbs_open_medicine)
+            assert_agree(C.calculate_glasgow_blatchford, kw, P.gbs_open_medicine)

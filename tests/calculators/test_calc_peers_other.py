@@ -18,7 +18,7 @@ from envs import calculators as C
 
 from . import peers as P
 from . import peers_clincalc as Q
-from .peer_strategies import PEER, agree, batch, choice, hundredths, ints, items, sexes, tenths
+from .peer_strategies import PEER, assert_agree, batch, choice, hundredths, ints, items, sexes, tenths
 
 
 # ----------------------------------------------------------------------------- renal
@@ -28,8 +28,8 @@ from .peer_strategies import PEER, agree, batch, choice, hundredths, ints, items
 @given(batch(age=ints(18, 100), weight_kg=tenths(35, 200), creatinine_mg_dl=tenths(0.3, 8), sex=sexes))
 def test_creatinine_clearance_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_creatinine_clearance, kw, P.cg_open_medicine, tol=0.051)  # rounds to 1 decimal
-        agree(C.calculate_creatinine_clearance, kw, Q.cg_clincalc, tol=0.051)
+        assert_agree(C.calculate_creatinine_clearance, kw, P.cg_open_medicine, tol=0.051)  # rounds to 1 decimal
+        assert_agree(C.calculate_creatinine_clearance, kw, Q.cg_clincalc, tol=0.051)
 
 
 @PEER
@@ -51,9 +51,9 @@ def test_ckd_epi_2021_vs_peers(cases):
         # medcalc-bench uses kappa 0.7 instead of 0.9 for men with creatinine <= 0.9 mg/dL
         # (ckd_epi_2021_creatinine.py); Inker 2021: kappa 0.9 for men. Compare elsewhere.
         if not (kw["sex"] == "male" and kw["creatinine_mg_dl"] <= 0.9):
-            agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_medcalc, tol=0.0051)  # 3 decimals
-        agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_open_medicine, tol=0.051)  # 1 decimal
-        agree(C.calculate_ckd_epi_2021, kw, Q.ckd_epi_clincalc, tol=0.5)  # whole number
+            assert_agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_medcalc, tol=0.0051)  # 3 decimals
+        assert_agree(C.calculate_ckd_epi_2021, kw, P.ckd_epi_open_medicine, tol=0.051)  # 1 decimal
+        assert_agree(C.calculate_ckd_epi_2021, kw, Q.ckd_epi_clincalc, tol=0.5)  # whole number
 
 
 @PEER
@@ -67,7 +67,7 @@ def test_ckd_epi_2021_vs_peers(cases):
 )
 def test_fena_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_fena, kw, P.fena_medcalc, Q.fena_clincalc, tol=0.0051)  # both round to 2 decimals
+        assert_agree(C.calculate_fena, kw, P.fena_medcalc, Q.fena_clincalc, tol=0.0051)  # both round to 2 decimals
 
 
 @PEER
@@ -88,15 +88,15 @@ def test_free_water_deficit_vs_peers(cases):
 @given(batch(weight_kg=tenths(20, 250), height_cm=tenths(100, 220)))
 def test_bmi_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_bmi, kw, P.bmi_medcalc, tol=0.0051)
-        agree(C.calculate_bmi, kw, P.bmi_open_medicine, Q.bmi_clincalc, tol=0.051)
+        assert_agree(C.calculate_bmi, kw, P.bmi_medcalc, tol=0.0051)
+        assert_agree(C.calculate_bmi, kw, P.bmi_open_medicine, Q.bmi_clincalc, tol=0.051)
 
 
 @PEER
 @given(batch(sodium=ints(110, 170), chloride=ints(70, 130), bicarbonate=ints(3, 45)))
 def test_anion_gap_vs_peers(cases):
     for kw in cases:
-        agree(
+        assert_agree(
             C.calculate_anion_gap,
             kw,
             P.anion_gap_medcalc,
@@ -123,8 +123,8 @@ def test_albumin_corrected_anion_gap_vs_open_medicine(cases):
 @given(batch(calcium_mg_dl=tenths(4, 15), albumin_g_dl=tenths(1, 6)))
 def test_corrected_calcium_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_corrected_calcium, kw, P.calcium_medcalc, tol=0.0051)
-        agree(C.calculate_corrected_calcium, kw, P.calcium_open_medicine, Q.calcium_clincalc, tol=0.051)
+        assert_agree(C.calculate_corrected_calcium, kw, P.calcium_medcalc, tol=0.0051)
+        assert_agree(C.calculate_corrected_calcium, kw, P.calcium_open_medicine, Q.calcium_clincalc, tol=0.051)
 
 
 @PEER
@@ -132,18 +132,18 @@ def test_corrected_calcium_vs_peers(cases):
 def test_corrected_sodium_vs_peers(cases):
     for kw in cases:
         # medcalc-bench implements Hillier (0.024 per mg/dL); open-medicine reports Katz.
-        agree(C.calculate_corrected_sodium, dict(kw, formula="hillier"), P.sodium_medcalc, tol=0.0051)
-        agree(C.calculate_corrected_sodium, dict(kw, formula="katz"), P.sodium_open_medicine, tol=0.051)
+        assert_agree(C.calculate_corrected_sodium, dict(kw, formula="hillier"), P.sodium_medcalc, tol=0.0051)
+        assert_agree(C.calculate_corrected_sodium, dict(kw, formula="katz"), P.sodium_open_medicine, tol=0.051)
         for formula in ("katz", "hillier"):
-            agree(C.calculate_corrected_sodium, dict(kw, formula=formula), Q.sodium_clincalc, tol=0.051)
+            assert_agree(C.calculate_corrected_sodium, dict(kw, formula=formula), Q.sodium_clincalc, tol=0.051)
 
 
 @PEER
 @given(batch(sodium_mmol_l=ints(110, 170), glucose_mg_dl=ints(20, 1500), bun_mg_dl=ints(2, 150)))
 def test_serum_osmolality_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_serum_osmolality, kw, P.osm_medcalc, tol=0.0051)
-        agree(C.calculate_serum_osmolality, kw, P.osm_open_medicine, tol=0.051)
+        assert_agree(C.calculate_serum_osmolality, kw, P.osm_medcalc, tol=0.0051)
+        assert_agree(C.calculate_serum_osmolality, kw, P.osm_open_medicine, tol=0.051)
 
 
 # ----------------------------------------------------------------------------- obstetrics
@@ -163,7 +163,7 @@ def test_bishop_vs_open_medicine(cases):
     # open-medicine takes whole centimetres 0-6 and stations -3..+2 (Bishop 1964's range); we
     # accept any real dilation and stations -5..+5 and place values between bands in the lower one.
     for kw in cases:
-        agree(C.calculate_bishop_score, kw, P.bishop_open_medicine)
+        assert_agree(C.calculate_bishop_score, kw, P.bishop_open_medicine)
 
 
 @PEER
@@ -178,7 +178,7 @@ def test_bishop_vs_open_medicine(cases):
 )
 def test_apgar_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_apgar, kw, P.apgar_open_medicine, Q.apgar_clincalc)
+        assert_agree(C.calculate_apgar, kw, P.apgar_open_medicine, Q.apgar_clincalc)
 
 
 # ----------------------------------------------------------------------------- psychiatry
@@ -188,28 +188,28 @@ def test_apgar_vs_peers(cases):
 @given(batch(responses=items(9, 0, 3)))
 def test_phq9_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_phq9, kw, P.phq9_open_medicine, Q.phq9_clincalc)
+        assert_agree(C.administer_phq9, kw, P.phq9_open_medicine, Q.phq9_clincalc)
 
 
 @PEER
 @given(batch(responses=items(7, 0, 3)))
 def test_gad7_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_gad7, kw, P.gad7_open_medicine, Q.gad7_clincalc)
+        assert_agree(C.administer_gad7, kw, P.gad7_open_medicine, Q.gad7_clincalc)
 
 
 @PEER
 @given(batch(responses=items(10, 0, 3)))
 def test_epds_vs_peers(cases):
     for kw in cases:
-        agree(C.administer_epds, kw, P.epds_open_medicine, Q.epds_clincalc)
+        assert_agree(C.administer_epds, kw, P.epds_open_medicine, Q.epds_clincalc)
 
 
 @PEER
 @given(batch(responses=items(3, 0, 4), sex=sexes))
 def test_audit_c_vs_peers(cases):
     for kw in cases:
-        result = agree(C.administer_audit_c, kw, P.audit_c_open_medicine, Q.audit_c_clincalc)
+        result = assert_agree(C.administer_audit_c, kw, P.audit_c_open_medicine, Q.audit_c_clincalc)
         positive = clincalc_positive = Q.clincalc.calculate("auditc", kw)["working"]["screen_positive"]
         assert (C.administer_audit_c(**kw).category == "positive") == positive, (
             kw,
@@ -222,7 +222,7 @@ def test_audit_c_vs_peers(cases):
 @given(batch(bools=("cut_down", "annoyed", "guilty", "eye_opener")))
 def test_cage_vs_open_medicine(cases):
     for kw in cases:
-        agree(C.administer_cage, kw, P.cage_open_medicine)
+        assert_agree(C.administer_cage, kw, P.cage_open_medicine)
 
 
 ciwa_items = dict(
@@ -243,7 +243,7 @@ ciwa_items = dict(
 @given(batch(**ciwa_items))
 def test_ciwa_ar_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_ciwa_ar, kw, P.ciwa_open_medicine, Q.ciwa_clincalc)
+        assert_agree(C.calculate_ciwa_ar, kw, P.ciwa_open_medicine, Q.ciwa_clincalc)
 
 
 # ----------------------------------------------------------------------------- emergency / neurology
@@ -263,21 +263,21 @@ def test_ciwa_ar_vs_peers(cases):
 )
 def test_centor_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_centor, kw, P.centor_medcalc, P.centor_open_medicine, Q.centor_clincalc)
+        assert_agree(C.calculate_centor, kw, P.centor_medcalc, P.centor_open_medicine, Q.centor_clincalc)
 
 
 @PEER
 @given(batch(gcs=ints(3, 15), systolic_bp=ints(0, 220), respiratory_rate=ints(0, 60)))
 def test_revised_trauma_score_vs_open_medicine(cases):
     for kw in cases:
-        agree(C.calculate_revised_trauma_score, kw, P.rts_open_medicine, tol=0.00051)  # 4 decimals
+        assert_agree(C.calculate_revised_trauma_score, kw, P.rts_open_medicine, tol=0.00051)  # 4 decimals
 
 
 @PEER
 @given(batch(weight_kg=tenths(3, 200), tbsa_percent=ints(1, 100)))
 def test_parkland_vs_open_medicine(cases):
     for kw in cases:
-        agree(C.calculate_parkland, kw, P.parkland_open_medicine, tol=0.51)  # whole mL
+        assert_agree(C.calculate_parkland, kw, P.parkland_open_medicine, tol=0.51)  # whole mL
 
 
 @PEER
@@ -297,7 +297,7 @@ def test_parkland_vs_open_medicine(cases):
 )
 def test_alvarado_vs_clincalc(cases):
     for kw in cases:
-        agree(C.calculate_alvarado, kw, Q.alvarado_clincalc)
+        assert_agree(C.calculate_alvarado, kw, Q.alvarado_clincalc)
 
 
 @PEER
@@ -351,12 +351,12 @@ def test_nihss_vs_peers(cases):
             # NIHSS instructions for a coma patient (1a = 3), enforced by us and by clincalc: 1b, 1c and 8
             # score 2, 9 scores 3.
             kw.update(loc_questions=2, loc_commands=2, sensory=2, best_language=3)
-        agree(C.calculate_nihss, kw, P.nihss_open_medicine)
+        assert_agree(C.calculate_nihss, kw, P.nihss_open_medicine)
         # clincalc adds consistency rules we do not impose: in coma, dysarthria 2 and motor >= 3; ataxia
         # only in limbs that can move (motor < 4). Compare where neither applies.
         limbs = ("motor_arm_left", "motor_arm_right", "motor_leg_left", "motor_leg_right")
         if kw["loc"] < 3 and all(kw[limb] < 4 for limb in limbs):
-            agree(C.calculate_nihss, kw, Q.nihss_clincalc)
+            assert_agree(C.calculate_nihss, kw, Q.nihss_clincalc)
 
 
 @PEER
@@ -372,4 +372,4 @@ def test_nihss_vs_peers(cases):
 )
 def test_abcd2_vs_peers(cases):
     for kw in cases:
-        agree(C.calculate_abcd2, kw, P.abcd2_open_medicine, Q.abcd2_clincalc)
+        assert_agree(C.calculate_abcd2, kw, P.abcd2_open_medicine, Q.abcd2_clincalc)
