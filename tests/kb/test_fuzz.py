@@ -32,7 +32,7 @@ queries = st.one_of(
 )
 
 
-def _check(results, k):
+def assert_valid_results(results, k):
     assert isinstance(results, list) and len(results) <= k
     assert all(isinstance(r, Passage) and r.doc_id and r.score > 0 for r in results)
     scores = [r.score for r in results]
@@ -44,7 +44,7 @@ def _check(results, k):
 @given(q=queries, k=st.integers(min_value=-5, max_value=30), filt=st.sampled_from([None, "wiki", ["drugs", "wiki"]]))
 def test_any_query_is_valid(kb, q, k, filt):
     results = kb.search(q, k=k, source=filt)
-    _check(results, max(k, 0))
+    assert_valid_results(results, max(k, 0))
 
 
 NASTY = [
@@ -59,14 +59,14 @@ NASTY = [
 
 def test_nasty_queries(kb):
     for q in NASTY:
-        _check(kb.search(q, k=10), 10)
+        assert_valid_results(kb.search(q, k=10), 10)
     assert kb.search("(" * 5_000 + "asthma" + ")" * 5_000, k=3)  # absurd nesting still finds asthma
     assert kb.search("x" * 100_000) == []
 
 
 def test_non_string_inputs(kb):
     for q in (None, 42, 3.5, b"bytes", ["heart"], {"q": 1}):
-        _check(kb.search(q, k=5), 5)  # type: ignore[arg-type]
+        assert_valid_results(kb.search(q, k=5), 5)  # type: ignore[arg-type]
 
 
 @settings(max_examples=300, deadline=None, derandomize=True)
