@@ -124,6 +124,18 @@ def summarize_final_info(info: dict[str, Any], reward: float) -> dict[str, Any]:
             "is_correct": bool(info.get("is_correct", False))}
 
 
+def make_env(domain: str, split: str | None, max_turns: int, env_kwargs: dict[str, Any] | None = None):
+    """A `HealthcareGymEnv` (the class registered as HealthcareGym-v0), built directly.
+
+    Direct construction rather than `gymnasium.make`: it does not depend on `envs/__init__.py`
+    having run its registration in this process (a stale editable install can import `envs` as a
+    namespace package, which skips it).
+    """
+    from envs.core.env import HealthcareGymEnv
+
+    return HealthcareGymEnv(domain=domain, split=split, max_turns=max_turns, **(env_kwargs or {}))
+
+
 class LocalEnv:
     """An in-process `EnvHandle` around a `HealthcareGymEnv` (one episode at a time)."""
 
@@ -134,14 +146,9 @@ class LocalEnv:
         self.env = None
 
     async def reset(self, spec: EpisodeSpec) -> tuple[str, dict[str, Any]]:
-        import gymnasium
-
-        import envs  # noqa: F401  (registers HealthcareGym-v0)
-
         key = (spec.domain, spec.split)
         if key not in self._envs:
-            self._envs[key] = gymnasium.make("HealthcareGym-v0", domain=spec.domain, split=spec.split,
-                                             max_turns=self.max_turns, **self.env_kwargs)
+            self._envs[key] = make_env(spec.domain, spec.split, self.max_turns, self.env_kwargs)
         self.env = self._envs[key]
         obs, info = self.env.reset(seed=spec.seed, options={"task_id": spec.task_id})
         return obs, info

@@ -22,7 +22,7 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finished_info, summarize_final_info
+from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finished_info, make_env, summarize_final_info
 from actors.types import RolloutSample
 
 
@@ -56,8 +56,6 @@ class EnvActor:
 
     def __init__(self, actor_index: int, max_turns: int, slots: int = 4,
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None) -> None:
-        import envs  # noqa: F401  (registers HealthcareGym-v0)
-
         register_domains(domain_modules)
 
         self.actor_index = actor_index
@@ -74,13 +72,10 @@ class EnvActor:
                 "active": len(self._active), "episodes_started": self.episodes_started}
 
     def _env_for(self, domain: str, split: str | None):
-        import gymnasium
-
         idle = self._idle.setdefault((domain, split), [])
         if idle:
             return idle.pop()
-        return gymnasium.make("HealthcareGym-v0", domain=domain, split=split, max_turns=self.max_turns,
-                              **self.env_kwargs)
+        return make_env(domain, split, self.max_turns, self.env_kwargs)
 
     def reset(self, key: str, spec: dict[str, Any]) -> tuple[str, dict[str, Any]]:
         spec = EpisodeSpec.model_validate(spec)

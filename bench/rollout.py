@@ -2,6 +2,7 @@
 env-actor pool with 1 and 2 actors, on the same episodes.
 
 The policy is `GoldReplayPolicy` (no model), so the figures measure the rollout machinery itself:
+(each mode runs `--repeats` times, the median is reported; actor start-up is excluded)
 environment steps, tool execution, grading, TITO tokenization and, for Ray, the actor round trips.
 The overhead figure is the Ray pipeline's wall time per episode minus the plain loop's.
 
@@ -81,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slots", type=int, default=16)
     parser.add_argument("--prompt", choices=["env", "compact"], default="env",
                         help="system prompt style of the agent loop (the tiny configs use compact)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed passes per mode; the median is reported")
     parser.add_argument("--json", default=None, help="also write the figures here")
     args = parser.parse_args(argv)
     os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
@@ -101,9 +103,12 @@ def main(argv: list[str] | None = None) -> int:
     episode_specs = specs(refs, args.episodes)
 
     asyncio.run(plain_loop(loop, policy, episode_specs[:4], args.max_turns))  # warm-up (imports, first env)
-    started = time.perf_counter()
-    plain = asyncio.run(plain_loop(loop, policy, episode_specs, args.max_turns))
-    plain_s = time.perf_counter() - started
+    times = []
+    for _ in range(args.repeats):
+        started = time.perf_counter()
+        plain = asyncio.run(plain_loop(loop, policy, episode_specs, args.max_turns))
+        times.append(time.perf_counter() - started)
+    plain_s = statistics.median(times)
     results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
                "prompt": args.prompt,
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
@@ -112,8 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         for actors in (1, 2):
-            samples, elapsed, balance = asyncio.run(
-                ray_pool(loop, policy, episode_specs, args.max_turns, actors, args.slots, {"HCGYM_EMBEDDINGS": "0"}))
+            runs = [asyncio.run(ray_pool(loop, policy, episode_specs, args.max_turns, actors, args.slots,
+                                         {"HCGYM_EMBEDDINGS": "0"})) for _ in range(args.repeats)]
+            samples, _, balance = runs[0]
+            elapsed = statistics.median(r[1] for r in runs)
             same = all(a.input_ids == b.input_ids and a.reward == b.reward for a, b in zip(samples, plain))
             results[f"ray_{actors}_actors"] = {
                 "wall_s": elapsed, "episodes_per_s": args.episodes / elapsed,

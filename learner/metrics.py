@@ -95,6 +95,7 @@ class MetricsSink:
         self.path = self.run_dir / "metrics.jsonl"
         if not resume and self.path.exists():
             self.path.unlink()
+        self.path.touch()  # a run directory always has one, even before its first step
         self.run_name = run_name
         self._tb = None
         if tensorboard:

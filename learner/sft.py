@@ -185,6 +185,18 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
             "seconds": time.perf_counter() - started, "samples": len(samples)}
 
 
+def policy_fingerprint(cfg) -> str:
+    """Hash of everything that determines the initial policy (model, SFT, data, prompt, seed)."""
+    import hashlib
+
+    parts = {"model": cfg.model.model_dump(mode="json"), "sft": cfg.sft.model_dump(mode="json"),
+             "data": cfg.data.model_dump(mode="json"), "seed": cfg.seed,
+             "rollout": {k: getattr(cfg.rollout, k) for k in ("max_turns", "max_observation_chars", "system_prompt",
+                                                               "max_new_tokens_per_turn", "max_response_tokens")},
+             "hints": cfg.teacher.hints.model_dump(mode="json") if cfg.teacher.enabled else None}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:16]
+
+
 def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = print) -> Path:
     """The initial policy directory of a run (built once; a resumed run finds the record).
 
@@ -199,11 +211,14 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
     register_domains(cfg.data.domain_modules)
     root = Path(run_dir) / "model"
     record = root / POLICY_RECORD
+    fingerprint = policy_fingerprint(cfg)
     if record.exists():
-        path = Path(json.loads(record.read_text())["policy_dir"])
-        if (path / "config.json").exists():
+        recorded = json.loads(record.read_text())
+        path = Path(recorded["policy_dir"])
+        if recorded.get("fingerprint") == fingerprint and (path / "config.json").exists():
             log(f"[model] reusing {path}")
             return path
+        log(f"[model] {record} was built from another config: rebuilding")
     root.mkdir(parents=True, exist_ok=True)
     info: dict[str, Any] = {}
     if cfg.model.kind == "pretrained":
@@ -246,5 +261,5 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
                               seed=cfg.seed, weight_decay=s.weight_decay, warmup_frac=s.warmup_frac,
                               max_grad_norm=s.max_grad_norm, log=log)
         policy = root / "sft"
-    record.write_text(json.dumps({"policy_dir": str(policy.resolve()), **info}, indent=1))
+    record.write_text(json.dumps({"policy_dir": str(policy.resolve()), "fingerprint": fingerprint, **info}, indent=1))
     return policy.resolve()
