@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -125,26 +126,72 @@ class BM25Builder:
         return {"num_docs": scores["num_docs"], "vocab": len(self.vocab), "postings": int(len(scores["data"]))}
 
 
-_F32, _I32 = np.dtype("float32"), np.dtype("int32")
 _KERNEL: list = []
 
 
-def _cached_kernel():
-    """bm25s's own single-query numba kernel, compiled with numba's on-disk cache.
+def _topk_kernel():
+    """The query-time kernel over bm25s's matrix, compiled once with numba's on-disk cache.
 
-    bm25s compiles its kernel without ``cache=True``, which costs ~6 s in every new process (every
-    Ray replica, every `hcgym kb search`). The same function compiled with ``cache=True`` loads
-    in ~0.5 s after the first time. Calling the kernel directly also skips `retrieve`'s per-call
-    input checks. Falls back to `BM25.retrieve` if bm25s's internals move.
+    bm25s's own kernel (`bm25s.numba.retrieve_utils`) allocates a zeroed score array of every
+    document per query (3.3 MB at 828K passages, page faults included) and runs its top-k heap over
+    all of them, although a query touches a fraction of the documents (median 15% on the benchmark
+    corpus). This kernel sums the same precomputed BM25 weights (``data[j]`` of bm25s's CSC matrix,
+    so scores are identical) into a score buffer that is kept between queries, records which
+    documents it touches, selects the top k among those alone and resets only them: the scan is
+    proportional to the query's postings, not to the corpus. Measured in docs/benchmarks.md.
+
+    Compiled with ``cache=True`` (bm25s compiles without it, ~6 s in every new process; the cache
+    loads in ~0.5 s). ``nogil``: concurrent threads each use their own buffers.
     """
     if not _KERNEL:
-        try:
-            from bm25s.numba import retrieve_utils
-            from numba import njit
+        from numba import njit
 
-            _KERNEL.append(njit(nogil=True, cache=True)(retrieve_utils._retrieve_internal_jitted))
-        except Exception:  # pragma: no cover - depends on the installed bm25s
-            _KERNEL.append(None)
+        @njit(nogil=True, cache=True)
+        def topk(ids, data, indptr, indices, k, scores, touched, mask, use_mask):  # pragma: no cover - numba
+            n_touched = 0
+            for t in ids:
+                for j in range(indptr[t], indptr[t + 1]):
+                    d = indices[j]
+                    # Branch-free "append d if untouched" (a mispredicted branch here cost more
+                    # than the rest of the loop): BM25 weights are > 0 (Lucene idf), so 0 means
+                    # untouched; the slot is overwritten when d was already there.
+                    touched[n_touched] = d
+                    n_touched += scores[d] == 0.0
+                    scores[d] += data[j]
+            best_s = np.full(k, -1.0, dtype=np.float32)
+            best_d = np.full(k, -1, dtype=np.int64)
+            floor, floor_at, filled = np.float32(-1.0), 0, 0
+            for i in range(n_touched):
+                d = touched[i]
+                s = scores[d]
+                scores[d] = 0.0  # leave the buffer zeroed for the next query
+                if use_mask:
+                    s = s * mask[d]
+                    if s <= 0.0:
+                        continue
+                # Ties go to the lower document number, whatever order documents were touched in.
+                if filled < k:
+                    best_s[filled] = s
+                    best_d[filled] = d
+                    filled += 1
+                    if filled < k:
+                        continue
+                elif s < floor or (s == floor and d > best_d[floor_at]):
+                    continue
+                else:
+                    best_s[floor_at] = s
+                    best_d[floor_at] = d
+                floor_at = 0  # find the new weakest of the k
+                for m in range(1, k):
+                    if best_s[m] < best_s[floor_at] or (best_s[m] == best_s[floor_at] and best_d[m] > best_d[floor_at]):
+                        floor_at = m
+                floor = best_s[floor_at]
+            # Sort the kept ones: score descending, then document number ascending.
+            order = np.argsort(best_d[:filled], kind="mergesort")
+            order = order[np.argsort(-best_s[:filled][order], kind="mergesort")]
+            return best_d[:filled][order], best_s[:filled][order]
+
+        _KERNEL.append(topk)
     return _KERNEL[0]
 
 
@@ -156,18 +203,18 @@ class BM25Searcher:
 
         self.path = Path(path)
         self.retriever = bm25s.BM25.load(str(self.path), mmap=True, load_corpus=False, show_progress=False)
-        if self.retriever.backend != "numba":
-            self.retriever.backend = "numba"
-            self.retriever.compile(activate_numba=True, warmup=False)
         self.vocab: dict[str, int] = self.retriever.vocab_dict
-        self.indptr = self.retriever.scores["indptr"]
-        self.num_docs = int(self.retriever.scores["num_docs"])
+        s = self.retriever.scores
+        # Plain ndarray views of the memory maps: numba types an np.memmap argument more slowly.
+        self.data, self.indptr, self.indices = (np.asarray(s[key]).view(np.ndarray) for key in ("data", "indptr", "indices"))
+        self.num_docs = int(s["num_docs"])
         self.scale = float(self.retriever.k1) + 1.0
+        self._buffers = threading.local()  # per-thread score/touched buffers for the kernel
+        self._no_mask = np.zeros(1, dtype=np.float32)
 
     def validate(self) -> None:
-        scores = self.retriever.scores
         n_post = int(self.indptr[-1])
-        if len(self.indptr) != len(self.vocab) + 1 or n_post != len(scores["data"]) or n_post != len(scores["indices"]):
+        if len(self.indptr) != len(self.vocab) + 1 or n_post != len(self.data) or n_post != len(self.indices):
             raise ValueError("bm25s arrays are inconsistent (truncated or mismatched files)")
 
     def term_ids(self, terms: list[str], max_terms: int) -> list[int]:
@@ -178,28 +225,28 @@ class BM25Searcher:
             ids = [ids[j] for j in sorted(keep)]
         return ids
 
+    def _thread_buffers(self) -> tuple[np.ndarray, np.ndarray]:
+        buf = getattr(self._buffers, "pair", None)
+        if buf is None:
+            buf = self._buffers.pair = (np.zeros(self.num_docs, dtype=np.float32),
+                                        np.zeros(self.num_docs, dtype=np.int64))
+        return buf
+
     def search(self, ids: list[int], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Top-k (doc indices, scores) with score > 0, best first."""
+        """Top-k (doc indices, scores) with score > 0, best first (ties: lower document first)."""
         if not ids or k <= 0:
             return np.zeros(0, np.int64), np.zeros(0, np.float32)
         k = min(k, self.num_docs)
-        kernel = _cached_kernel()
-        if kernel is not None:
-            s = self.retriever.scores
-            scores, docs = kernel(np.asarray(ids, dtype=np.int32), np.array([0, len(ids)], dtype=np.int32), k, True,
-                                  _F32, _I32, s["data"], s["indptr"], s["indices"], self.num_docs, None, weight_mask)
-        else:  # bm25s changed its internals: use the public API
-            docs, scores = self.retriever.retrieve(
-                [ids], k=k, show_progress=False, n_threads=1, weight_mask=weight_mask, return_as="tuple"
-            )
-        docs, scores = np.asarray(docs[0]), np.asarray(scores[0])
-        keep = scores > 0
+        scores, touched = self._thread_buffers()
+        mask = self._no_mask if weight_mask is None else weight_mask
+        docs, top = _topk_kernel()(np.asarray(ids, dtype=np.int64), self.data, self.indptr, self.indices, k,
+                                   scores, touched, mask, weight_mask is not None)
         # bm25s's Lucene variant leaves out BM25's constant (k1 + 1) numerator; tantivy keeps it.
         # Multiply it back so both engines report scores on one scale (ranking is unchanged).
-        return docs[keep], scores[keep] * self.scale
+        return docs, top * self.scale
 
     def warmup(self) -> None:
-        """Compile the numba kernel now (first call otherwise pays ~1-2 s)."""
+        """Load (or compile) the numba kernel now (the first call otherwise pays for it)."""
         if self.vocab:
             self.search([next(iter(self.vocab.values()))], 1)
 

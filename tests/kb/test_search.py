@@ -154,3 +154,47 @@ def test_fast_snippet_matching_equals_word_by_word_analysis(corpus):
         assert h.matches(text, terms) == h.matches_slow(text, terms)
 
     check()
+
+
+def test_topk_kernel_equals_bm25s_retrieve(kb):
+    """Our top-k kernel over bm25s's matrix returns bm25s's own top k (same documents, same scores,
+    ties to the lower document), with and without a filter mask, and leaves its buffers clean."""
+    import random
+
+    searcher = kb.bm25
+    retriever = searcher.retriever
+    vocab_ids = sorted(searcher.vocab.values())
+    rng = random.Random(7)
+    mask = (np.arange(searcher.num_docs) % 3 != 0).astype(np.float32)
+    for trial in range(300):
+        ids = sorted(set(rng.sample(vocab_ids, rng.randint(1, 6))))
+        k = rng.choice([1, 3, 10, 50, searcher.num_docs])
+        weight = mask if trial % 2 else None
+        docs, scores = searcher.search(ids, k, weight)
+        ref_docs, ref_scores = retriever.retrieve([ids], k=k, show_progress=False, n_threads=1,
+                                                  weight_mask=weight, return_as="tuple")
+        ref_docs, ref_scores = np.asarray(ref_docs[0]), np.asarray(ref_scores[0]) * searcher.scale
+        keep = ref_scores > 0
+        ref = sorted(zip((-ref_scores[keep]).tolist(), ref_docs[keep].tolist()))
+        np.testing.assert_allclose(scores, [-s for s, _ in ref], rtol=1e-6)
+        assert list(np.diff(scores) <= 0) == [True] * (len(scores) - 1)
+        # Equal scores may be cut at different members by the two kernels; every other document agrees.
+        cut = ref[-1][0] if ref else None
+        assert {d for s, d in ref if s != cut} <= set(docs.tolist())
+        assert len(docs) == len(ref)
+        if weight is not None:
+            assert all(mask[d] > 0 for d in docs)
+        for a, b in zip(zip(scores, docs), zip(scores[1:], docs[1:])):  # ties: lower document first
+            assert a[0] > b[0] or a[1] < b[1]
+    scores_buf, _touched = searcher._thread_buffers()
+    assert not scores_buf.any()  # every touched score was reset
+
+
+def test_topk_kernel_threads_use_their_own_buffers(kb):
+    from concurrent.futures import ThreadPoolExecutor
+
+    queries = ["warfarin headache", "asthma corticosteroid", "heart failure", "patient fever", "cough whoop"]
+    expected = {q: ids(kb.search(q, k=10)) for q in queries}
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(lambda q: (q, ids(kb.search(q, k=10))), queries * 40))
+    assert all(r == expected[q] for q, r in got)
