@@ -25,6 +25,12 @@ class GRPOConfig(_Strict):
     clip_eps_high: float = Field(default=0.2, ge=0, description="upper clip range: ratio <= 1 + eps")
     kl_beta: float = Field(default=0.01, ge=0, description="weight of KL(pi_theta || pi_ref); 0 = no reference model")
     kl_estimator: KLEstimator = "k3"
+    # Bound on each token's KL estimate in the loss (verl's low_var_kl uses 10). k3 = r - 1 - log r
+    # with r = pi_ref / pi_theta grows like r on a sampled token the policy finds unlikely and the
+    # reference likes (the tiny model's KL_ref means of 4-6 nats/token come from a few such tokens).
+    # With kl_grad.mode "pathwise" that token's gradient is 1 - r (~1e4): bound it there. The default
+    # "unbiased" gradient is -log r, already bounded. None = unbounded.
+    kl_clamp: float | None = Field(default=None, gt=0)
     scale_advantages: bool = Field(default=True, description="divide by the group's std (False = Dr.GRPO)")
     advantage_eps: float = Field(default=1e-6, gt=0)
     loss_aggregation: Literal["token_mean", "sequence_mean"] = "token_mean"

@@ -98,7 +98,8 @@ def kl_estimate(logp: torch.Tensor, logq: torch.Tensor, estimator: str) -> torch
 
 
 def kl_surrogate(
-    logp: torch.Tensor, old_logp: torch.Tensor, logq: torch.Tensor, estimator: str, mode: str
+    logp: torch.Tensor, old_logp: torch.Tensor, logq: torch.Tensor, estimator: str, mode: str,
+    clamp: float | None = None,
 ) -> torch.Tensor:
     """A differentiable per-token term whose gradient estimates grad KL(pi_theta || q).
 
@@ -115,8 +116,12 @@ def kl_surrogate(
         logq: The other model's log-probs (detached).
         estimator: "k1" or "k3".
         mode: "unbiased" or "pathwise".
+        clamp: Bound each token's estimate to [-clamp, clamp] (beyond it the token adds a constant,
+            no gradient through the estimate), or None.
     """
     est = kl_estimate(logp, logq.detach(), estimator)
+    if clamp is not None:
+        est = est.clamp(-clamp, clamp)
     if mode == "pathwise":
         return est
     if mode == "unbiased":
@@ -293,7 +298,7 @@ def compute_loss(inputs: LossInputs, config: LossConfig, norms: BatchNorms) -> L
     if g.kl_beta > 0:
         if inputs.ref_logprobs is None:
             raise ValueError("loss.grpo.kl_beta > 0 but no reference log-probs were computed")
-        kl_ref_tok = kl_surrogate(logp, old, inputs.ref_logprobs, g.kl_estimator, config.kl_grad.mode)
+        kl_ref_tok = kl_surrogate(logp, old, inputs.ref_logprobs, g.kl_estimator, config.kl_grad.mode, g.kl_clamp)
         kl_ref_loss = g.kl_beta * aggregate(kl_ref_tok)
         kl_ref_value = _masked_sum(kl_estimate(logp.detach(), inputs.ref_logprobs, g.kl_estimator), mask)
 

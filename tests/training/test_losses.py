@@ -145,6 +145,24 @@ def test_unbiased_surrogate_gradient_equals_reverse_kl_gradient(estimator):
     assert torch.allclose(theta.grad, expected_theta.grad, atol=1e-6)
 
 
+def test_kl_clamp_bounds_an_outlier_tokens_gradient():
+    # A sampled token the policy finds unlikely (p = 1e-5) but the reference likes (q = 0.9): k3 ~ 9e4.
+    logp = torch.tensor([math.log(1e-5), math.log(0.5)])
+    logq = torch.tensor([math.log(0.9), math.log(0.5)])
+
+    def grad(mode, clamp):
+        lp = logp.clone().requires_grad_(True)
+        kl_surrogate(lp, lp.detach(), logq, "k3", mode, clamp).sum().backward()
+        return lp.grad[0].item()
+
+    log_r = math.log(0.9 / 1e-5)
+    assert grad("unbiased", None) == pytest.approx(-log_r, rel=1e-3)  # bounded by |log r| already
+    assert grad("pathwise", None) == pytest.approx(1 - 0.9 / 1e-5, rel=1e-3)  # 1 - r: the outlier rules
+    assert grad("pathwise", 10.0) == 0.0 and abs(grad("unbiased", 10.0)) <= 10.0
+    ordinary = kl_surrogate(logp, logp, logq, "k3", "unbiased", 10.0)[1]
+    assert float(ordinary) == pytest.approx(0.0, abs=1e-6)  # within the bound nothing changes
+
+
 def test_pathwise_k3_gradient_is_the_forward_kl_gradient():
     # Documented difference: differentiating k3's value gives grad KL(q || p_theta), not the reverse KL.
     theta = torch.tensor([0.3, -0.2, 1.0, 0.1], requires_grad=True)
