@@ -34,6 +34,12 @@ class GRPOConfig(_Strict):
     scale_advantages: bool = Field(default=True, description="divide by the group's std (False = Dr.GRPO)")
     advantage_eps: float = Field(default=1e-6, gt=0)
     loss_aggregation: Literal["token_mean", "sequence_mean"] = "token_mean"
+    # Weight of negative advantages (1.0 = Eq. 1). A sequence-level advantage blames every token of a
+    # failed episode, including the ones it shares with successful episodes (the tool-call syntax,
+    # `submit_answer`): on the tiny model, failed episodes' pushes erased `submit_answer` within five
+    # steps at lr 3e-4 although submitting episodes had the higher rewards (docs/training.md). Values
+    # below 1 trust failures less than successes, as asymmetric REINFORCE does.
+    negative_advantage_weight: float = Field(default=1.0, ge=0, le=1)
     # Rollout-vs-train mismatch correction (truncated importance sampling): weight each token by
     # min(pi_old / pi_rollout, cap). None = off. Useful when the generator's numerics differ (vLLM).
     tis_cap: float | None = Field(default=None, gt=0)

@@ -131,6 +131,8 @@ class RankWorker:
         cfg = self.config.loss
         adv = group_advantages([s.reward for s in samples], [s.group_id for s in samples],
                                scale=cfg.grpo.scale_advantages, eps=cfg.grpo.advantage_eps)
+        if cfg.grpo.negative_advantage_weight != 1.0:
+            adv = torch.where(adv < 0, adv * cfg.grpo.negative_advantage_weight, adv)
         weights = None
         kept = dropped = 0
         if cfg.distill.enabled:

@@ -172,3 +172,23 @@ def test_entropy_bonus_raises_entropy(model_dir, batch):
     w0 = idle.get_state_dict()
     assert idle.train_step(flat)["grad_norm"] == 0.0
     assert all(torch.equal(w0[k], v) for k, v in idle.get_state_dict().items())
+
+
+@pytest.mark.parametrize("weight", [0.0, 0.25])
+def test_negative_advantage_weight_scales_only_failures(model_dir, batch, weight):
+    from learner.losses import group_advantages
+
+    adv = group_advantages([s.reward for s in batch], [s.group_id for s in batch])
+    assert bool((adv < 0).any()) and bool((adv > 0).any())
+    expected = float(torch.where(adv < 0, adv * weight, adv).abs().mean())
+    learner = Learner(LearnerConfig(optim={"lr": 2e-3}, loss={"grpo": {"negative_advantage_weight": weight}}),
+                      model_dir)
+    before = learner.get_state_dict()
+    m = learner.train_step(batch, step=1)
+    assert m["advantage_abs_mean"] == pytest.approx(expected, rel=1e-5)
+    if weight == 0.0:  # only successes are reinforced: each of them becomes more likely
+        lp0, lp1 = _logprobs(before, model_dir, batch), _logprobs(learner.get_state_dict(), model_dir, batch)
+        for i, s in enumerate(batch):
+            if adv[i] > 0:
+                mask = torch.tensor(s.loss_mask, dtype=torch.bool)
+                assert float((lp1[i, : len(s.input_ids)] - lp0[i, : len(s.input_ids)])[mask].mean()) > 0
