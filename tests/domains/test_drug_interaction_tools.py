@@ -194,6 +194,15 @@ def test_allergy_by_class(env):
     assert proposal["allergy_conflicts_of_proposed_drug"][0]["allergen"] == "penicillins"
 
 
+def test_allergy_to_a_class_covers_a_fixed_combination_through_its_component(env):
+    # "piperacillin and tazobactam" carries no ANSM class of its own; piperacillin is a penicillin.
+    for name in ("piperacillin and tazobactam", "piperacillin tazobactam"):
+        out = call(env, "check_allergy", patient_id="P013", drug=name)
+        assert out["conflict"], name
+        assert out["matches"][0]["allergen"] == "penicillins" and "component" in out["matches"][0]["match"]
+    assert not call(env, "check_allergy", patient_id="P013", drug="tazobactam")["conflict"]
+
+
 def test_patient_details_and_medications_match_the_authored_file(env):
     authored = json.loads((di_build.HERE / "patients.json").read_text())["patients"]
     p = next(x for x in authored if x["patient_id"] == "P006")

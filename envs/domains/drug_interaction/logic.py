@@ -8,6 +8,8 @@ pregnancy category meanings, renal-function formulas).
 
 from __future__ import annotations
 
+import re
+
 import difflib
 import math
 from dataclasses import dataclass
@@ -251,17 +253,34 @@ def medication_list_findings(db: DrugInteractionDB, patient: Patient, proposed: 
 
 
 # -- allergies -----------------------------------------------------------------------------------
+def combination_components(db: DrugInteractionDB, drug: Drug) -> list[Drug]:
+    """The single agents of a fixed combination ("piperacillin and tazobactam"), when the vocabulary
+    has each of them; [] for a single agent. A combination carries no ANSM class of its own, so an
+    allergy to a component's class must be checked on the components."""
+    parts = [p.strip() for p in re.split(r"\s+and\s+|\s*/\s*|\s*\+\s*", drug.id) if p.strip()]
+    if len(parts) < 2:
+        return []
+    found = [db.drugs[p] for p in parts if p in db.drugs and p != drug.id]
+    return found if len(found) == len(parts) else []
+
+
 def allergy_conflicts(db: DrugInteractionDB, patient: Patient, drug: Drug) -> list[dict]:
-    """Direct (same drug), class (drug in an allergen ANSM class) and listed cross-reaction conflicts."""
+    """Direct (same drug), class (drug in an allergen ANSM class) and listed cross-reaction conflicts;
+    a fixed combination conflicts through any of its components."""
     out = []
     profile = db.dose_profiles.get(drug.id)
     cross = {fold(x) for x in (profile.allergy_cross_reactions if profile else [])}
+    agents = [drug] + combination_components(db, drug)
     for allergy in patient.allergies:
-        if allergy.drug_id == drug.id:
-            out.append({"allergen": allergy.allergen, "match": "direct", "reaction": allergy.reaction,
+        direct = next((a for a in agents if allergy.drug_id == a.id), None)
+        member = next((a for a in agents if allergy.class_id and allergy.class_id in a.class_ids), None)
+        if direct is not None:
+            how = "direct" if direct is drug else f"direct: {direct.name} is a component of {drug.name}"
+            out.append({"allergen": allergy.allergen, "match": how, "reaction": allergy.reaction,
                         "severity": allergy.severity})
-        elif allergy.class_id and allergy.class_id in drug.class_ids:
-            out.append({"allergen": allergy.allergen, "match": f"class: {drug.name} is a member of "
+        elif member is not None:
+            via = "" if member is drug else f" (component of {drug.name})"
+            out.append({"allergen": allergy.allergen, "match": f"class: {member.name}{via} is a member of "
                         f"'{db.classes[allergy.class_id].name}'", "reaction": allergy.reaction, "severity": allergy.severity})
         elif allergy.drug_id and fold(allergy.drug_id) in cross:
             out.append({"allergen": allergy.allergen, "match": "cross-reaction listed by drugdose",
