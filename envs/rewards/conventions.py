@@ -130,10 +130,12 @@ class ToolConventions:
         {"prescribe_medication", "prescribe", "administer_medication", "order_medication", "give_medication",
          "prescribe_drug", "place_order"}
     )
-    #: Classes for which two concurrent drugs are a therapeutic duplication.
+    #: Classes for which two concurrent drugs are a therapeutic duplication. Not "antiplatelets":
+    #: aspirin with a P2Y12 inhibitor is dual antiplatelet therapy (after ACS or a stent), standard
+    #: care; two P2Y12 inhibitors are the duplication.
     duplication_classes: frozenset[str] = frozenset({
         "anticoagulants", "nsaids", "ssris", "snris", "maois", "opioids", "benzodiazepines", "ace inhibitors",
-        "arbs", "statins", "antiplatelets", "sulfonylureas", "beta blockers", "proton pump inhibitors",
+        "arbs", "statins", "p2y12 inhibitors", "sulfonylureas", "beta blockers", "proton pump inhibitors",
         "antipsychotics", "direct oral anticoagulants",
     })
     #: More than this many non-urgent calls (not assessment or treatment: searches, documentation,

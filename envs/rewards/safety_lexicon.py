@@ -27,7 +27,7 @@ _CLASS_GROUPS: dict[tuple[str, ...], str] = {
     ("vitamin k antagonists", "anticoagulants"): "warfarin",
     ("heparins", "anticoagulants"): "heparin enoxaparin dalteparin",
     ("direct oral anticoagulants", "anticoagulants"): "apixaban rivaroxaban dabigatran edoxaban",
-    ("antiplatelets",): "clopidogrel ticagrelor prasugrel",
+    ("antiplatelets", "p2y12 inhibitors"): "clopidogrel ticagrelor prasugrel",
     ("ssris",): "fluoxetine sertraline citalopram escitalopram paroxetine",
     ("snris",): "venlafaxine duloxetine",
     ("maois",): "phenelzine tranylcypromine selegiline isocarboxazid",

@@ -285,3 +285,10 @@ def test_only_diagnosis_tasks_treat_the_final_answer_as_a_diagnosis():
     assert ids(traj, timeline) == set()
     dx = timeline.model_copy(update={"description": timeline.description.model_copy(update={"task_type": "diagnostic_workflow"})})
     assert "workup.no_confirmatory_test" in ids(traj, dx)
+
+
+def test_dual_antiplatelet_therapy_is_not_a_duplication_but_two_p2y12_inhibitors_are():
+    dapt = careful("clopidogrel", dose_mg=75, context=ctx(medications=["aspirin"]))
+    assert "ddi.therapeutic_duplication" not in ids(*dapt)
+    two = careful("ticagrelor", dose_mg=90, context=ctx(medications=["clopidogrel"]))
+    assert "ddi.therapeutic_duplication" in ids(*two)
