@@ -170,7 +170,8 @@ class HealthcareGymEnv(gym.Env[str, str]):
                 text = text[:MAX_TOOL_RESULT_CHARS] + f"\n[truncated: result longer than {MAX_TOOL_RESULT_CHARS} characters]"
             records.append(ToolCallRecord(
                 name=outcome.name, arguments=outcome.arguments, result=text if outcome.ok else None,
-                error=outcome.error, tool_type=str(outcome.tool_type) if outcome.tool_type else None,
+                error=outcome.error, error_kind=outcome.error_kind,
+                tool_type=str(outcome.tool_type) if outcome.tool_type else None,
                 format=call.format, submit=outcome.submit, duration_s=time.perf_counter() - call_start,
             ))
             parts.append(text if len(parsed.calls) == 1 else f"[{outcome.name}] {text}")

@@ -29,7 +29,7 @@ import re
 import typing
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError, create_model
 
@@ -247,6 +247,14 @@ class UnknownToolError(LookupError):
     """The agent named a tool that does not exist."""
 
 
+#: How a tool call failed, for rewards and analysis without parsing messages:
+#: "unknown_tool" (no such tool, or not in this phase), "invalid_arguments" (the arguments do not fit
+#: the signature: missing, unknown, wrong type), "tool_error" (the tool refused: a `ToolError`, e.g.
+#: an unknown patient), "input_error" (a value the tool cannot compute with, e.g. a calculator
+#: argument out of range), "internal_error" (an unexpected exception in the tool's code).
+ErrorKind = Literal["unknown_tool", "invalid_arguments", "tool_error", "input_error", "internal_error"]
+
+
 @dataclass
 class ToolOutcome:
     """The result of one tool call as the environment records it."""
@@ -257,6 +265,8 @@ class ToolOutcome:
     error: str | None = None
     tool_type: ToolType | None = None
     submit: bool = False
+    #: What kind of failure `error` is (None when the call succeeded); see `ErrorKind`.
+    error_kind: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -377,25 +387,25 @@ class Toolkit:
         """Call a tool for the agent: never raises; errors become the outcome's `error`."""
         if not isinstance(name, str) or not self.has_tool(name):
             return ToolOutcome(name=str(name), arguments=arguments if isinstance(arguments, dict) else {},
-                               error=self.unknown_tool_message(name))
+                               error=self.unknown_tool_message(name), error_kind="unknown_tool")
         definition, method = self.bound(name)
         outcome = ToolOutcome(name=name, arguments=arguments if isinstance(arguments, dict) else {},
                               tool_type=definition.tool_type, submit=definition.submit)
         try:
             kwargs = definition.validate(arguments)
         except ToolArgumentError as exc:
-            outcome.error = str(exc)
+            outcome.error, outcome.error_kind = str(exc), "invalid_arguments"
             return outcome
         snapshot = self._snapshot() if definition.tool_type is ToolType.WRITE else None
         try:
             outcome.result = method(**kwargs)
         except ToolError as exc:
-            outcome.error = f"{name}: {exc}"
+            outcome.error, outcome.error_kind = f"{name}: {exc}", "tool_error"
         except (ValueError, TypeError, KeyError, LookupError, ArithmeticError) as exc:
             # A validation error from a clinical calculator names the argument and its range.
-            outcome.error = f"{name}: {type(exc).__name__}: {exc}"
+            outcome.error, outcome.error_kind = f"{name}: {type(exc).__name__}: {exc}", "input_error"
         except Exception as exc:  # a tool bug must not crash the episode or lose state
-            outcome.error = f"{name}: internal error {type(exc).__name__}: {exc}"
+            outcome.error, outcome.error_kind = f"{name}: internal error {type(exc).__name__}: {exc}", "internal_error"
         if outcome.error is not None and snapshot is not None:
             self._restore(snapshot)
         return outcome

@@ -25,6 +25,9 @@ class ToolCallRecord(BaseModel):
     arguments: dict[str, Any] = Field(default_factory=dict)
     result: str | None = None          # the observation text returned to the agent
     error: str | None = None           # why the call failed (unknown tool, bad argument, tool error)
+    # The failure's kind (envs.core.tools.ErrorKind): unknown_tool, invalid_arguments, tool_error,
+    # input_error, internal_error; None when the call succeeded.
+    error_kind: str | None = None
     tool_type: str | None = None       # read / write / think / generic
     format: ActionFormat = "json"      # how the agent wrote the call
     submit: bool = False

@@ -191,3 +191,11 @@ def test_image_tasks_give_an_image_content_part():
     assert record.image_path == "/data/cxr_001.png"
     assert record.messages[1]["content"][0] == {"type": "image", "image": "/data/cxr_001.png"}
     assert "[image: /data/cxr_001.png]" in env.transcript()
+
+
+def test_env_records_the_error_kind_of_each_call():
+    env = HealthcareGymEnv(domain="ward")
+    env.reset(seed=0)
+    env.step(call("get_patient", patient_id="nobody") + call("no_such_tool") + call("count_patients"))
+    calls = env.trajectory().turns[-1].tool_calls
+    assert [c.error_kind for c in calls] == ["tool_error", "unknown_tool", None]

@@ -120,3 +120,39 @@ def test_tool_needs_description_and_annotations():
 def test_ward_tools_are_collected():
     assert {"get_patient", "dose_for_weight", "add_allergy", "think", "submit_answer"} <= set(WardTools._definitions)
     assert "count_patients" in SharedNotes._definitions
+
+
+class Failing(Toolkit):
+    @is_tool(ToolType.READ)
+    def score(self, points: int) -> int:
+        """Score points.
+
+        Args:
+            points: 0 to 10.
+        """
+        if points > 10:
+            raise ValueError("points must be in 0..10")
+        if points == 7:
+            raise RuntimeError("a bug in the tool")
+        return points
+
+    @is_tool(ToolType.READ)
+    def refuse(self) -> str:
+        """Always refuses."""
+        from envs.core.tools import ToolError
+
+        raise ToolError("not allowed here")
+
+
+@pytest.mark.parametrize(("name", "args", "kind"), [
+    ("score", {"points": 3}, None),
+    ("scor", {"points": 3}, "unknown_tool"),
+    ("score", {"points": "many"}, "invalid_arguments"),
+    ("score", {}, "invalid_arguments"),
+    ("refuse", {}, "tool_error"),
+    ("score", {"points": 11}, "input_error"),
+    ("score", {"points": 7}, "internal_error"),
+])
+def test_failed_calls_carry_a_structured_error_kind(name, args, kind):
+    outcome = Failing().call(name, args)
+    assert outcome.error_kind == kind and (outcome.error is None) == (kind is None)

@@ -149,7 +149,7 @@ class PathwayEngine(Toolkit):
         if name not in self.definitions:
             return ToolOutcome(name=str(name), arguments=arguments if isinstance(arguments, dict) else {},
                                error=self.unknown_tool_message(name) + f" (phase {self.phase.name!r} uses the "
-                               f"{self.phase.domain} tools)")
+                               f"{self.phase.domain} tools)", error_kind="unknown_tool")
         phase_index = self.phase_index
         outcome = self.domain_envs[self.phase.domain].toolkit.call(name, arguments)
         log = self.logs[phase_index]
