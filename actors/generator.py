@@ -103,14 +103,14 @@ class Generator(ABC):
     def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
         """Load a full state dict (parameter name -> tensor) and record its policy version."""
 
-    # -- collective weight sync (optional; `weight_sync.transport: collective`) ---------------------
+    # -- collective weight sync (`weight_sync.transport: collective`; every backend has it) ---------
+    @abstractmethod
     def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
         """Join the learner's weight-sync group as receiver `rank` (blocks until every member joined)."""
-        raise NotImplementedError(f"the {self.name} generator backend has no collective weight sync")
 
+    @abstractmethod
     def receive_weights(self, version: int) -> None:
         """Receive the learner's broadcast of `version` (the learner sends at the same time)."""
-        raise NotImplementedError(f"the {self.name} generator backend has no collective weight sync")
 
     def check_version(self, requests: list[GenerationRequest]) -> None:
         need = max(r.min_version for r in requests)

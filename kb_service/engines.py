@@ -21,6 +21,7 @@ reads back. A test checks the result is identical to ``bm25s.BM25.index`` on a c
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import threading
@@ -128,9 +129,7 @@ class BM25Builder:
         return {"num_docs": scores["num_docs"], "vocab": len(self.vocab), "postings": int(len(scores["data"]))}
 
 
-_KERNEL: list = []
-
-
+@functools.cache
 def _topk_kernel():
     """The query-time kernel over bm25s's matrix, compiled once with numba's on-disk cache.
 
@@ -145,56 +144,54 @@ def _topk_kernel():
     Compiled with ``cache=True`` (bm25s compiles without it, ~6 s in every new process; the cache
     loads in ~0.5 s). ``nogil``: concurrent threads each use their own buffers.
     """
-    if not _KERNEL:
-        from numba import njit
+    from numba import njit
 
-        @njit(nogil=True, cache=True)
-        def topk(ids, data, indptr, indices, k, scores, touched, mask, use_mask):  # pragma: no cover - numba
-            n_touched = 0
-            for t in ids:
-                for j in range(indptr[t], indptr[t + 1]):
-                    d = indices[j]
-                    # Branch-free "append d if untouched" (a mispredicted branch here cost more
-                    # than the rest of the loop): BM25 weights are > 0 (Lucene idf), so 0 means
-                    # untouched; the slot is overwritten when d was already there.
-                    touched[n_touched] = d
-                    n_touched += scores[d] == 0.0
-                    scores[d] += data[j]
-            best_s = np.full(k, -1.0, dtype=np.float32)
-            best_d = np.full(k, -1, dtype=np.int64)
-            floor, floor_at, filled = np.float32(-1.0), 0, 0
-            for i in range(n_touched):
-                d = touched[i]
-                s = scores[d]
-                scores[d] = 0.0  # leave the buffer zeroed for the next query
-                if use_mask:
-                    s = s * mask[d]
-                    if s <= 0.0:
-                        continue
-                # Ties go to the lower document number, whatever order documents were touched in.
-                if filled < k:
-                    best_s[filled] = s
-                    best_d[filled] = d
-                    filled += 1
-                    if filled < k:
-                        continue
-                elif s < floor or (s == floor and d > best_d[floor_at]):
+    @njit(nogil=True, cache=True)
+    def topk(ids, data, indptr, indices, k, scores, touched, mask, use_mask):  # pragma: no cover - numba
+        n_touched = 0
+        for t in ids:
+            for j in range(indptr[t], indptr[t + 1]):
+                d = indices[j]
+                # Branch-free "append d if untouched" (a mispredicted branch here cost more
+                # than the rest of the loop): BM25 weights are > 0 (Lucene idf), so 0 means
+                # untouched; the slot is overwritten when d was already there.
+                touched[n_touched] = d
+                n_touched += scores[d] == 0.0
+                scores[d] += data[j]
+        best_s = np.full(k, -1.0, dtype=np.float32)
+        best_d = np.full(k, -1, dtype=np.int64)
+        floor, floor_at, filled = np.float32(-1.0), 0, 0
+        for i in range(n_touched):
+            d = touched[i]
+            s = scores[d]
+            scores[d] = 0.0  # leave the buffer zeroed for the next query
+            if use_mask:
+                s = s * mask[d]
+                if s <= 0.0:
                     continue
-                else:
-                    best_s[floor_at] = s
-                    best_d[floor_at] = d
-                floor_at = 0  # find the new weakest of the k
-                for m in range(1, k):
-                    if best_s[m] < best_s[floor_at] or (best_s[m] == best_s[floor_at] and best_d[m] > best_d[floor_at]):
-                        floor_at = m
-                floor = best_s[floor_at]
-            # Sort the kept ones: score descending, then document number ascending.
-            order = np.argsort(best_d[:filled], kind="mergesort")
-            order = order[np.argsort(-best_s[:filled][order], kind="mergesort")]
-            return best_d[:filled][order], best_s[:filled][order]
+            # Ties go to the lower document number, whatever order documents were touched in.
+            if filled < k:
+                best_s[filled] = s
+                best_d[filled] = d
+                filled += 1
+                if filled < k:
+                    continue
+            elif s < floor or (s == floor and d > best_d[floor_at]):
+                continue
+            else:
+                best_s[floor_at] = s
+                best_d[floor_at] = d
+            floor_at = 0  # find the new weakest of the k
+            for m in range(1, k):
+                if best_s[m] < best_s[floor_at] or (best_s[m] == best_s[floor_at] and best_d[m] > best_d[floor_at]):
+                    floor_at = m
+            floor = best_s[floor_at]
+        # Sort the kept ones: score descending, then document number ascending.
+        order = np.argsort(best_d[:filled], kind="mergesort")
+        order = order[np.argsort(-best_s[:filled][order], kind="mergesort")]
+        return best_d[:filled][order], best_s[:filled][order]
 
-        _KERNEL.append(topk)
-    return _KERNEL[0]
+    return topk
 
 
 class BM25Searcher:
@@ -207,8 +204,7 @@ class BM25Searcher:
         self.retriever = bm25s.BM25.load(str(self.path), mmap=True, load_corpus=False, show_progress=False)
         self.vocab: dict[str, int] = self.retriever.vocab_dict
         s = self.retriever.scores
-        # Plain ndarray views of the memory maps: numba types an np.memmap argument more slowly.
-        self.data, self.indptr, self.indices = (np.asarray(s[key]).view(np.ndarray) for key in ("data", "indptr", "indices"))
+        self.data, self.indptr, self.indices = s["data"], s["indptr"], s["indices"]
         self.num_docs = int(s["num_docs"])
         self.scale = float(self.retriever.k1) + 1.0
         self._buffers = threading.local()  # per-thread score/touched buffers for the kernel

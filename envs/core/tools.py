@@ -29,9 +29,11 @@ import re
 import typing
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Callable, ClassVar, Literal
+from typing import Any, Callable, ClassVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError, create_model
+
+from envs.core.trajectory import ErrorKind
 
 
 class ToolType(StrEnum):
@@ -247,14 +249,6 @@ class UnknownToolError(LookupError):
     """The agent named a tool that does not exist."""
 
 
-#: How a tool call failed, for rewards and analysis without parsing messages:
-#: "unknown_tool" (no such tool, or not in this phase), "invalid_arguments" (the arguments do not fit
-#: the signature: missing, unknown, wrong type), "tool_error" (the tool refused: a `ToolError`, e.g.
-#: an unknown patient), "input_error" (a value the tool cannot compute with, e.g. a calculator
-#: argument out of range), "internal_error" (an unexpected exception in the tool's code).
-ErrorKind = Literal["unknown_tool", "invalid_arguments", "tool_error", "input_error", "internal_error"]
-
-
 @dataclass
 class ToolOutcome:
     """The result of one tool call as the environment records it."""
@@ -265,8 +259,7 @@ class ToolOutcome:
     error: str | None = None
     tool_type: ToolType | None = None
     submit: bool = False
-    #: What kind of failure `error` is (None when the call succeeded); see `ErrorKind`.
-    error_kind: str | None = None
+    error_kind: ErrorKind | None = None  # what kind of failure `error` is (see envs.core.trajectory)
 
     @property
     def ok(self) -> bool:

@@ -15,6 +15,12 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 ActionFormat = Literal["json", "openai", "hermes", "fenced", "function", "text", "empty"]
+#: How a tool call failed, for rewards and analysis without parsing messages:
+#: "unknown_tool" (no such tool, or not in this phase), "invalid_arguments" (the arguments do not fit
+#: the signature: missing, unknown, wrong type), "tool_error" (the tool refused: a `ToolError`, e.g.
+#: an unknown patient), "input_error" (a value the tool cannot compute with, e.g. a calculator
+#: argument out of range), "internal_error" (an unexpected exception in the tool's code).
+ErrorKind = Literal["unknown_tool", "invalid_arguments", "tool_error", "input_error", "internal_error"]
 
 
 class ToolCallRecord(BaseModel):
@@ -25,9 +31,7 @@ class ToolCallRecord(BaseModel):
     arguments: dict[str, Any] = Field(default_factory=dict)
     result: str | None = None          # the observation text returned to the agent
     error: str | None = None           # why the call failed (unknown tool, bad argument, tool error)
-    # The failure's kind (envs.core.tools.ErrorKind): unknown_tool, invalid_arguments, tool_error,
-    # input_error, internal_error; None when the call succeeded.
-    error_kind: str | None = None
+    error_kind: ErrorKind | None = None  # what kind of failure `error` is; None when the call succeeded
     tool_type: str | None = None       # read / write / think / generic
     format: ActionFormat = "json"      # how the agent wrote the call
     submit: bool = False

@@ -8,10 +8,9 @@ pregnancy category meanings, renal-function formulas).
 
 from __future__ import annotations
 
-import re
-
 import difflib
 import math
+import re
 from dataclasses import dataclass
 
 from .data_model import (
@@ -260,7 +259,7 @@ def combination_components(db: DrugInteractionDB, drug: Drug) -> list[Drug]:
     parts = [p.strip() for p in re.split(r"\s+and\s+|\s*/\s*|\s*\+\s*", drug.id) if p.strip()]
     if len(parts) < 2:
         return []
-    found = [db.drugs[p] for p in parts if p in db.drugs and p != drug.id]
+    found = [db.drugs[p] for p in parts if p in db.drugs]
     return found if len(found) == len(parts) else []
 
 
