@@ -197,6 +197,18 @@ class RayConfig(_Strict):
     teacher_num_cpus: float = Field(default=0.0, ge=0)
     teacher_num_gpus: float = Field(default=0.0, ge=0)
     teacher_max_restarts: int = Field(default=-1, ge=-1)
+    # Placement (learner/placement.py). Custom resources are per actor, e.g. generator_resources:
+    # {"rollout_node": 1} with nodes started as `ray start --resources='{"rollout_node": 4}'`.
+    learner_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per learner rank (the learner actor at world size 1)")
+    generator_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per generator")
+    teacher_resources: dict[str, float] = Field(default_factory=dict, description="custom resources of the teacher")
+    learner_placement_strategy: Literal["PACK", "SPREAD", "STRICT_PACK", "STRICT_SPREAD"] = Field(
+        default="PACK", description="placement group of the DeepSpeed ranks (one bundle per rank)")
+    placement_timeout_s: float = Field(default=60.0, gt=0, description="wait for the ranks' placement group")
+    startup_timeout_s: float = Field(default=900.0, gt=0,
+                                     description="actors' construction (model loading), counted before any rendezvous")
+    # False on autoscaling clusters: nodes start on demand, so current resources understate capacity.
+    check_resources: bool = Field(default=True, description="fail at start when the cluster lacks resources")
 
 
 class KBConfig(_Strict):
