@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
-from learner.config_models import LearnerConfig, TeacherConfig, WeightSyncConfig
+from learner.config_models import OFFPOLICY_TIS_CAP, LearnerConfig, TeacherConfig, WeightSyncConfig
 
 
 class ConfigError(ValueError):
@@ -261,6 +261,14 @@ class RunConfig(_Strict):
                              f"generator.sampling.temperature ({self.generator.sampling.temperature})")
         if self.generator.backend == "vllm" and self.generator.num_gpus <= 0:
             raise ValueError("generator.backend 'vllm' needs generator.num_gpus > 0")
+        grpo = self.learner.loss.grpo
+        if self.trainer.max_staleness > 0 and "tis_cap" not in grpo.model_fields_set:
+            # Tokens may come from an older policy: correct them by default (losses.py Eq. 1b).
+            # An explicit `tis_cap: null` keeps it off. Copies, not in-place edits: a LearnerConfig
+            # passed in by the caller stays as it was; model_copy marks the field as set, so the
+            # dumped config reloads to the same value.
+            loss = self.learner.loss.model_copy(update={"grpo": grpo.model_copy(update={"tis_cap": OFFPOLICY_TIS_CAP})})
+            self.learner = self.learner.model_copy(update={"loss": loss})
         return self
 
     @property

@@ -13,6 +13,11 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 KLEstimator = Literal["k1", "k3"]
 
+# The truncation C of the behaviour weight min(pi_old / mu, C) that runs with max_staleness > 0 get
+# by default: 2 as in TIS (Yao et al. 2025) and verl's rollout-correction default; no token of a
+# stale batch weighs more than twice what it would on-policy.
+OFFPOLICY_TIS_CAP = 2.0
+
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -40,8 +45,12 @@ class GRPOConfig(_Strict):
     # steps at lr 3e-4 although submitting episodes had the higher rewards (docs/training.md). Values
     # below 1 trust failures less than successes, as asymmetric REINFORCE does.
     negative_advantage_weight: float = Field(default=1.0, ge=0, le=1)
-    # Rollout-vs-train mismatch correction (truncated importance sampling): weight each token by
-    # min(pi_old / pi_rollout, cap). None = off. Useful when the generator's numerics differ (vLLM).
+    # Off-policy correction, losses.py Eq. 1b-1d: every sampled-token term of the loss (policy
+    # gradient, KL_ref, k1/k3 distillation) is weighted by w = min(pi_old / mu, tis_cap), mu = the
+    # generator's sampling log-probs. It corrects tokens sampled by an older policy version
+    # (trainer.max_staleness > 0) and the generator's numerics differing from the learner's (vLLM).
+    # None = off. Unless set explicitly, RunConfig sets it to OFFPOLICY_TIS_CAP whenever
+    # trainer.max_staleness > 0; write `tis_cap: null` to train a stale run uncorrected.
     tis_cap: float | None = Field(default=None, gt=0)
 
 

@@ -17,6 +17,56 @@ KL estimators with x ~ p (the sampled token), r = q(x) / p(x) (Schulman, "Approx
     k1 = log p(x) - log q(x)           unbiased, high variance, can be negative
     k2 = 0.5 * (log p(x) - log q(x))^2 biased, low variance (logged only)
     k3 = r - 1 - log r                 unbiased, >= 0, low variance
+
+Off-policy correction (Eq. 1b-1d). With `trainer.max_staleness` S > 0 a token trained at step s
+may have been sampled by the policy of version s-1-lag (lag <= S; `RolloutSample.policy_versions`),
+and always by the generator's own numerics. Three distributions meet in one token x_t:
+    mu(x_t)        the behaviour policy that sampled it (`RolloutSample.sampling_logprobs`)
+    pi_old(x_t)    the learner's policy at the start of this step (recomputed here, the "proximal" policy)
+    pi_theta(x_t)  the policy being optimised (pi_theta = pi_old in value on the step's first update)
+Eq. 1 and every sampled-token KL estimate are expectations over x ~ pi_old (resp. pi_theta); the
+batch holds x ~ mu. Without a correction (`tis_cap` None) a stale token is
+trained as if pi_old had sampled it: its ratio is 1 and its KL_ref term k3(pi_ref / pi_theta) is
+taken at a token the current policy may have moved far away from. On the demo (lr 3e-4, S = 1)
+that made KL_ref 70 nats/token and the grad norm 3.5 at step 2: a few lag-1 tokens with
+r = pi_ref / pi_theta ~ 1e5 (docs/training.md, "Off-policy correction").
+
+We use the decoupled PPO objective (Hilton et al. 2022, "Batch size-invariance for policy
+optimization"; AReaL, Fu et al. 2025) with a truncated behaviour weight (TIS, Yao et al. 2025):
+
+    w_t     = min(pi_old(x_t) / mu(x_t), C)          detached, C = `loss.grpo.tis_cap`     (Eq. 1b)
+    L_GRPO  = -E_{x~mu}[ w_t * min(rho_t * A, clip(rho_t, 1-eps_lo, 1+eps_hi) * A) ]
+              + beta * E_{x~mu}[ w_t * k(x_t) ],   rho_t = pi_theta / pi_old              (Eq. 1c)
+    L_distill: the same w_t multiplies each sampled-token (k1 / k3) distillation term     (Eq. 1d)
+
+Why this form and not the ratio taken directly against mu (rho' = pi_theta / mu, clipped):
+- The trust region belongs around the policy being updated. Clipping pi_theta / mu clips a stale
+  token from the start whenever pi_old / mu is already outside [1-eps, 1+eps] (it then gets no
+  gradient at all, or a one-sided one), and the clip region moves with the lag. Decoupled, the clip
+  stays centred on pi_old; staleness only changes the weight.
+- w_t corrects the sampling distribution: E_{x~mu}[(pi_old/mu) f(x)] = E_{x~pi_old}[f(x)]. The
+  truncation at C bounds its variance (no token weighs more than C) at the price of a downward bias
+  on tokens the policy now likes more than the sampler did. Tokens the policy has moved away from
+  (pi_old << mu), the ones that produced the spike, get weights near 0, which is exact IS.
+- The KL terms need the same weight: k(x) estimates KL(pi_theta || q) only when x ~ pi_theta. With
+  w_t the k3 term of a token that pi_theta has moved away from is w * k3 = (p/mu)(q/p - 1 - log q/p)
+  <= q/mu + (p/mu)|log q/p|; at lag 1 from the reference (mu = q) that is below 1 instead of
+  q/p ~ 1e5, so one token can no longer dominate the logged mean nor (through the unbiased
+  surrogate, whose per-token gradient is w * -log r) the gradient.
+- With `updates_per_batch` = 1 (our default) rho_t is 1 in value and the clip never binds: the
+  correction lives entirely in w_t. On-policy (S = 0) mu and pi_old are the same weights and w_t is
+  1 up to the generator's numerics; `tis_cap` is None there unless set, so nothing changes.
+The topk distillation estimator sums over the teacher's top-k tokens at each position (no sampled
+token to reweight), so it stays unweighted. Positions' prefixes were also sampled by mu; like every
+token-level method we do not correct them (the product of per-token ratios has unusable variance).
+
+Logged per step (token means over the loss mask unless noted): is_ratio_mean / is_ratio_max
+(pi_old / mu before truncation), is_weight_mean (the applied w, 1 when off), is_capped_frac (w hit C),
+is_stale_frac (tokens with lag > 0), is_lag_mean / is_lag_max (the learner's version minus the
+token's), is_log_ratio_abs_stale / is_log_ratio_abs_fresh (mean |log pi_old/mu| on lagged and on
+lag-0 tokens: lag-0 tokens differ only by the generator's numerics), kl_ref (Eq. 1's KL estimate,
+IS-weighted when the correction is on), kl_ref_unweighted (the plain token mean of k, for
+comparison), kl_ref_max (the largest single token's term in kl_ref).
 """
 
 from __future__ import annotations
@@ -245,6 +295,7 @@ class LossInputs:
     distill_weights: torch.Tensor | None = None    # [B, T] TurnWeights.weights
     student_topk_logprobs: torch.Tensor | None = None  # [B, T, K] student log-probs at teacher ids
     teacher_topk_logprobs: torch.Tensor | None = None  # [B, T, K]
+    policy_lag: torch.Tensor | None = None         # [B, T] learner version minus the sampling version
 
 
 @dataclass
@@ -255,6 +306,43 @@ class LossOutput:
 
 def _masked_sum(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return (x * mask).sum()
+
+
+def _masked_max(x: torch.Tensor, mask: torch.Tensor) -> float:
+    """Largest value on the mask (0.0 for an empty mask: every logged max here is of a value >= 0)."""
+    picked = x[mask > 0]
+    return float(picked.max()) if picked.numel() else 0.0
+
+
+@dataclass
+class BehaviourWeights:
+    """Eq. 1b for one micro-batch: the truncated importance weights and what led to them."""
+
+    ratio: torch.Tensor    # [B, T] pi_old / mu before truncation (detached)
+    weight: torch.Tensor   # [B, T] min(ratio, cap), or ones when the correction is off
+    capped: torch.Tensor   # [B, T] 1.0 where the cap bound
+
+
+def behaviour_weights(
+    old_logprobs: torch.Tensor, behaviour_logprobs: torch.Tensor, cap: float | None
+) -> BehaviourWeights:
+    """w_t = min(pi_old(x_t) / mu(x_t), cap) (Eq. 1b), detached; all ones when cap is None.
+
+    The ratio is formed in log space and clamped at +-20 before exp, so a token the generator
+    sampled at a log-prob far below the learner's cannot overflow (the cap truncates it anyway).
+
+    Args:
+        old_logprobs: log pi_old of the sampled tokens, as the learner recomputes them.
+        behaviour_logprobs: log mu of the same tokens, as the generator sampled them.
+        cap: C of Eq. 1b, or None for no correction (weights 1).
+    """
+    if cap is not None and cap <= 0:
+        raise ValueError(f"tis_cap must be > 0, got {cap}")
+    log_ratio = (old_logprobs.detach() - behaviour_logprobs.detach()).clamp(-20.0, 20.0)
+    ratio = torch.exp(log_ratio)
+    if cap is None:
+        return BehaviourWeights(ratio=ratio, weight=torch.ones_like(ratio), capped=torch.zeros_like(ratio))
+    return BehaviourWeights(ratio=ratio, weight=ratio.clamp(max=cap), capped=(ratio > cap).to(ratio.dtype))
 
 
 def compute_loss(inputs: LossInputs, config: LossConfig, norms: BatchNorms) -> LossOutput:
@@ -281,26 +369,35 @@ def compute_loss(inputs: LossInputs, config: LossConfig, norms: BatchNorms) -> L
         per_seq = (per_token * mask).sum(-1) / mask.sum(-1).clamp(min=1.0)
         return per_seq.sum() / norms.num_sequences
 
-    # --- Eq. 1: clipped surrogate with the importance ratio rho = pi_theta / pi_old -------------
+    # --- Eq. 1b: the behaviour weight w_t = min(pi_old / mu, C) (ones when tis_cap is None) --------
+    bw = behaviour_weights(old, inputs.rollout_logprobs, g.tis_cap)
+    is_on = g.tis_cap is not None
+
+    def reweighted(per_token: torch.Tensor) -> torch.Tensor:
+        # Only multiply when on: on-policy runs keep exactly the pre-correction arithmetic.
+        return per_token * bw.weight if is_on else per_token
+
+    # --- Eq. 1 / 1c: clipped surrogate with rho = pi_theta / pi_old, weighted by w_t ---------------
     ratio = torch.exp(logp - old)
     unclipped = -adv * ratio
     clipped = -adv * ratio.clamp(1.0 - g.clip_eps_low, 1.0 + g.clip_eps_high)
-    pg_per_token = torch.maximum(unclipped, clipped)
-    if g.tis_cap is not None:
-        # Truncated importance sampling: correct for the generator's numerics differing from ours.
-        tis = torch.exp(old - inputs.rollout_logprobs).clamp(max=g.tis_cap).detach()
-        pg_per_token = pg_per_token * tis
+    pg_per_token = reweighted(torch.maximum(unclipped, clipped))
     policy_loss = aggregate(pg_per_token)
 
-    # --- Eq. 1: beta * KL(pi_theta || pi_ref) ---------------------------------------------------
+    # --- Eq. 1 / 1c: beta * KL(pi_theta || pi_ref), each token's estimate weighted by w_t ----------
     kl_ref_loss = torch.zeros((), dtype=logp.dtype, device=logp.device)
     kl_ref_value = torch.zeros(())
+    kl_ref_unweighted = torch.zeros(())
+    kl_ref_max = 0.0
     if g.kl_beta > 0:
         if inputs.ref_logprobs is None:
             raise ValueError("loss.grpo.kl_beta > 0 but no reference log-probs were computed")
         kl_ref_tok = kl_surrogate(logp, old, inputs.ref_logprobs, g.kl_estimator, config.kl_grad.mode, g.kl_clamp)
-        kl_ref_loss = g.kl_beta * aggregate(kl_ref_tok)
-        kl_ref_value = _masked_sum(kl_estimate(logp.detach(), inputs.ref_logprobs, g.kl_estimator), mask)
+        kl_ref_loss = g.kl_beta * aggregate(reweighted(kl_ref_tok))
+        kl_ref_est = kl_estimate(logp.detach(), inputs.ref_logprobs, g.kl_estimator)
+        kl_ref_value = _masked_sum(reweighted(kl_ref_est), mask)
+        kl_ref_unweighted = _masked_sum(kl_ref_est, mask)
+        kl_ref_max = _masked_max(reweighted(kl_ref_est), mask)
 
     # --- Eq. 2: turn-level truncated distillation toward the teacher ---------------------------
     d = config.distill
@@ -320,8 +417,9 @@ def compute_loss(inputs: LossInputs, config: LossConfig, norms: BatchNorms) -> L
         else:
             if inputs.teacher_logprobs is None:
                 raise ValueError("loss.distill.enabled but teacher log-probs are missing")
-            kl_tok = kl_surrogate(logp, old, inputs.teacher_logprobs, d.estimator, config.kl_grad.mode)
-            kl_report = kl_estimate(logp.detach(), inputs.teacher_logprobs, d.estimator)
+            # Eq. 1d: a sampled-token estimate, so the sampled token's behaviour weight applies.
+            kl_tok = reweighted(kl_surrogate(logp, old, inputs.teacher_logprobs, d.estimator, config.kl_grad.mode))
+            kl_report = reweighted(kl_estimate(logp.detach(), inputs.teacher_logprobs, d.estimator))
         # sum_t 1/|a_t| sum_k KL_k per trajectory (the weights carry 1/|a_t| and the truncation),
         # then the mean over the batch's trajectories.
         per_traj = (kl_tok * w).sum(-1)
@@ -355,21 +453,48 @@ def compute_loss(inputs: LossInputs, config: LossConfig, norms: BatchNorms) -> L
             "sum/logprob_diff": float(_masked_sum(old - inputs.rollout_logprobs, mask)),
             "sum/logprob_abs_diff": float(_masked_sum((old - inputs.rollout_logprobs).abs(), mask)),
             "sum/tokens": float(mask.sum()),
+            "sum/kl_ref_unweighted": float(kl_ref_unweighted),
+            "max/kl_ref": kl_ref_max,
+            "sum/is_ratio": float(_masked_sum(bw.ratio, mask)),
+            "max/is_ratio": _masked_max(bw.ratio, mask),
+            "sum/is_weight": float(_masked_sum(bw.weight, mask)),
+            "sum/is_capped": float(_masked_sum(bw.capped, mask)),
         }
+        if inputs.policy_lag is not None:
+            lag = inputs.policy_lag.to(mask.dtype)
+            stale = mask * (lag > 0).to(mask.dtype)
+            abs_log_ratio = bw.ratio.log().abs()
+            metrics.update({
+                "sum/is_stale": float(stale.sum()),
+                "sum/is_lag": float(_masked_sum(lag, mask)),
+                "max/is_lag": _masked_max(lag, mask),
+                "sum/is_log_ratio_abs_stale": float(_masked_sum(abs_log_ratio, stale)),
+                "sum/is_log_ratio_abs_fresh": float(_masked_sum(abs_log_ratio, mask - stale)),
+            })
     return LossOutput(loss=loss, metrics=metrics)
 
 
-def finalize_metrics(parts: Sequence[dict[str, float]]) -> dict[str, float]:
-    """Combine the micro-batch metrics of one step: losses add up, `sum/*` become token means."""
-    if not parts:
-        return {}
+def combine_metric_parts(parts: Sequence[dict[str, float]]) -> dict[str, float]:
+    """Add up metric dicts of micro-batches (or ranks); `max/*` keys take the maximum instead."""
     total: dict[str, float] = {}
     for part in parts:
         for key, value in part.items():
-            total[key] = total.get(key, 0.0) + value
+            if key.startswith("max/"):
+                total[key] = max(total.get(key, value), value)
+            else:
+                total[key] = total.get(key, 0.0) + value
+    return total
+
+
+def finalize_metrics(parts: Sequence[dict[str, float]]) -> dict[str, float]:
+    """Combine the micro-batch metrics of one step: losses add up, `sum/*` become token means,
+    `max/*` the step's maximum."""
+    if not parts:
+        return {}
+    total = combine_metric_parts(parts)
     tokens = max(total.get("sum/tokens", 0.0), 1.0)
     distill_tokens = total.get("sum/distill_tokens", 0.0)
-    out = {k: v for k, v in total.items() if not k.startswith("sum/")}
+    out = {k: v for k, v in total.items() if not k.startswith(("sum/", "max/"))}
     out["kl_ref"] = total.get("sum/kl_ref", 0.0) / tokens
     out["kl_teacher"] = total.get("sum/kl_teacher", 0.0) / distill_tokens if distill_tokens else 0.0
     out["entropy"] = total.get("sum/entropy", 0.0) / tokens
@@ -378,4 +503,20 @@ def finalize_metrics(parts: Sequence[dict[str, float]]) -> dict[str, float]:
     out["logprob_abs_diff"] = total.get("sum/logprob_abs_diff", 0.0) / tokens
     out["train_tokens"] = total.get("sum/tokens", 0.0)
     out["distill_tokens"] = distill_tokens
+    # Off-policy correction (Eq. 1b): parts written before it existed simply lack these keys.
+    if "sum/is_ratio" in total:
+        out["kl_ref_unweighted"] = total.get("sum/kl_ref_unweighted", 0.0) / tokens
+        out["kl_ref_max"] = total.get("max/kl_ref", 0.0)
+        out["is_ratio_mean"] = total["sum/is_ratio"] / tokens
+        out["is_ratio_max"] = total.get("max/is_ratio", 0.0)
+        out["is_weight_mean"] = total.get("sum/is_weight", 0.0) / tokens
+        out["is_capped_frac"] = total.get("sum/is_capped", 0.0) / tokens
+    if "sum/is_stale" in total:
+        stale = total["sum/is_stale"]
+        fresh = total.get("sum/tokens", 0.0) - stale
+        out["is_stale_frac"] = stale / tokens
+        out["is_lag_mean"] = total.get("sum/is_lag", 0.0) / tokens
+        out["is_lag_max"] = total.get("max/is_lag", 0.0)
+        out["is_log_ratio_abs_stale"] = total.get("sum/is_log_ratio_abs_stale", 0.0) / stale if stale else 0.0
+        out["is_log_ratio_abs_fresh"] = total.get("sum/is_log_ratio_abs_fresh", 0.0) / fresh if fresh else 0.0
     return out

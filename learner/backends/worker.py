@@ -4,6 +4,10 @@ Every rank receives the whole batch, computes the whole-batch quantities (group 
 and sequence counts, turn weights) itself, and then trains on its round-robin shard. Because the
 losses are shares of the whole batch (losses.BatchNorms) and `grad_scale` undoes the cross-rank
 averaging, 1 rank and N ranks produce the same update for the same batch.
+
+Each rank counts its optimizer steps as the policy version it holds (restored from a checkpoint's
+`learner_state.json`), so it can tell how many versions behind the learner each sampled token is
+(`RolloutSample.policy_versions`): the lag that the off-policy metrics of losses.py report.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from learner.config_models import LearnerConfig
 from learner.losses import (
     BatchNorms,
     LossInputs,
+    combine_metric_parts,
     compute_loss,
     finalize_metrics,
     group_advantages,
@@ -115,6 +120,9 @@ class RankWorker:
 
         tokenizer = load_tokenizer(model_dir)
         self.pad_id = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
+        # The version of the weights this rank holds (batches trained so far): the same count as
+        # LearnerActor's policy_version, against which the tokens' sampling versions are lagged.
+        self.policy_version = 0
 
     def ready(self) -> int:
         return self.rank
@@ -189,6 +197,9 @@ class RankWorker:
             "loss_mask": _padded(T, [s.loss_mask for s in samples]),
             "rollout_logprobs": _padded(T, [s.sampling_logprobs for s in samples]),
             "advantages": prep.advantages[idx],
+            # Versions behind these weights each generated token was sampled (0 off the mask).
+            "policy_lag": _padded(T, [[float(self.policy_version - v) if m else 0.0
+                                       for v, m in zip(s.policy_versions, s.loss_mask)] for s in samples]),
         }
         if self.config.loss.distill.enabled:
             t["distill_weights"] = _padded(T, [prep.distill_weights[i] for i in idx])
@@ -291,6 +302,7 @@ class RankWorker:
                     entropy=stats.entropy if self.config.loss.entropy_coef > 0 else stats.entropy.detach(),
                     teacher_logprobs=t.get("teacher_logprobs"), distill_weights=t.get("distill_weights"),
                     student_topk_logprobs=stats.gathered, teacher_topk_logprobs=t.get("teacher_topk_logprobs"),
+                    policy_lag=t["policy_lag"],
                 )
                 out = compute_loss(inputs, self.config.loss, prep.norms)
                 if update:
@@ -299,10 +311,7 @@ class RankWorker:
             if update:
                 grad_norms.append(self.backend.step())
             # The metrics describe the last update of the batch (the only one when updates_per_batch=1).
-            sums = {}
-            for part in parts:
-                for key, value in part.items():
-                    sums[key] = sums.get(key, 0.0) + value
+            sums = combine_metric_parts(parts)
         extra = {
             "turns_truncated": float(prep.turns_truncated),
             "turns_kept": float(prep.turns_kept),
@@ -312,6 +321,7 @@ class RankWorker:
         }
         if update:
             extra["grad_norm"] = float(grad_norms[-1])
+            self.policy_version += 1
         return {"sums": sums, "extra": extra}
 
     def train_step(self, samples: list[RolloutSample], teacher=None) -> dict:
@@ -368,6 +378,10 @@ class RankWorker:
         directory = Path(directory)
         self.backend.load_state(directory)
         restore_rng_state(read_json(directory / f"rng_rank{self.rank}.json"))
+        # LearnerActor.save_checkpoint writes the version next to the rank states.
+        learner_state = directory / "learner_state.json"
+        if learner_state.exists():
+            self.policy_version = int(read_json(learner_state)["policy_version"])
 
     def shutdown(self) -> None:
         self.backend.shutdown()

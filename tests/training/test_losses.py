@@ -12,6 +12,7 @@ from learner.config_models import DistillConfig, LossConfig
 from learner.losses import (
     BatchNorms,
     LossInputs,
+    behaviour_weights,
     compute_loss,
     finalize_metrics,
     group_advantages,
@@ -95,6 +96,118 @@ def test_tis_weight_caps_rollout_mismatch():
     out = compute_loss(inputs, _grpo_only(tis_cap=2.0), BatchNorms(2.0, 1.0))
     assert out.loss.item() == pytest.approx(-(2.0 + 1.0) / 2.0)  # weight min(4, 2) = 2 on token 0
     assert out.metrics["sum/logprob_diff"] == pytest.approx(-math.log(0.25))
+
+
+# ----------------------------------------------------------------------------------------------
+# Off-policy correction (Eq. 1b-1d)
+# ----------------------------------------------------------------------------------------------
+
+
+def test_behaviour_weights_hand_computed():
+    # pi_old / mu = 4, 1, 0.5, e^25 (clamped in log space at e^20 before the cap)
+    old = torch.tensor([[math.log(0.4), math.log(0.3), math.log(0.1), 0.0]])
+    mu = torch.tensor([[math.log(0.1), math.log(0.3), math.log(0.2), -25.0]])
+    w = behaviour_weights(old, mu, 2.0)
+    assert w.ratio.tolist()[0][:3] == pytest.approx([4.0, 1.0, 0.5])
+    assert float(w.ratio[0, 3]) == pytest.approx(math.exp(20.0), rel=1e-5)
+    assert w.weight.tolist() == [pytest.approx([2.0, 1.0, 0.5, 2.0])]
+    assert w.capped.tolist() == [[1.0, 0.0, 0.0, 1.0]]
+    off = behaviour_weights(old, mu, None)  # no correction: weight 1, nothing capped, the ratio still known
+    assert off.weight.tolist() == [[1.0] * 4] and off.capped.sum() == 0 and float(off.ratio[0, 0]) == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="tis_cap"):
+        behaviour_weights(old, mu, 0.0)
+
+
+def _offpolicy_inputs():
+    """Two tokens of one sample (advantage +1) sampled by a stale mu: pi_old / mu = 4 and 1/2.
+
+    pi_theta = pi_old (first update); the reference likes token 0 much more than pi_theta does:
+    r = q / p = e^4 on token 0 (the k3 outlier), e^-0.5 on token 1.
+    """
+    old = torch.tensor([[math.log(0.4), math.log(0.2)]])
+    logp = old.clone().requires_grad_(True)
+    mu = torch.tensor([[math.log(0.1), math.log(0.4)]])
+    ref = old + torch.tensor([[4.0, -0.5]])
+    return LossInputs(logprobs=logp, old_logprobs=old, rollout_logprobs=mu, loss_mask=torch.ones(1, 2),
+                      advantages=torch.tensor([1.0]), ref_logprobs=ref, policy_lag=torch.tensor([[1.0, 0.0]]))
+
+
+def _k3(log_r):
+    return math.exp(log_r) - 1 - log_r
+
+
+def test_capped_offpolicy_loss_hand_computed():
+    inputs = _offpolicy_inputs()
+    cfg = LossConfig(grpo={"kl_beta": 0.1, "kl_estimator": "k3", "tis_cap": 2.0})
+    out = compute_loss(inputs, cfg, BatchNorms(2.0, 1.0))
+    w = [2.0, 0.5]  # min(4, 2), min(0.5, 2)
+    pg = (-w[0] * 1.0 - w[1] * 1.0) / 2.0  # rho = 1: -A * rho * w per token, token mean
+    kl_tok = [_k3(4.0), _k3(-0.5)]
+    kl = (w[0] * kl_tok[0] + w[1] * kl_tok[1]) / 2.0
+    assert out.metrics["policy_loss"] == pytest.approx(pg, rel=1e-6)
+    assert out.metrics["kl_ref_loss"] == pytest.approx(0.1 * kl, rel=1e-6)
+    assert out.loss.item() == pytest.approx(pg + 0.1 * kl, rel=1e-6)
+    # Gradient per token (unbiased KL surrogate): w * (-A * rho + beta * -log r) / 2
+    out.loss.backward()
+    expected = [w[0] * (-1.0 + 0.1 * -4.0) / 2.0, w[1] * (-1.0 + 0.1 * 0.5) / 2.0]
+    assert inputs.logprobs.grad.tolist()[0] == pytest.approx(expected, rel=1e-6)
+    m = finalize_metrics([out.metrics])
+    assert m["kl_ref"] == pytest.approx(kl, rel=1e-6)
+    assert m["kl_ref_unweighted"] == pytest.approx(sum(kl_tok) / 2.0, rel=1e-6)
+    assert m["kl_ref_max"] == pytest.approx(w[0] * kl_tok[0], rel=1e-6)
+    assert m["is_ratio_mean"] == pytest.approx((4.0 + 0.5) / 2.0) and m["is_ratio_max"] == pytest.approx(4.0)
+    assert m["is_weight_mean"] == pytest.approx(1.25) and m["is_capped_frac"] == pytest.approx(0.5)
+    assert m["is_stale_frac"] == pytest.approx(0.5) and m["is_lag_max"] == 1.0 and m["is_lag_mean"] == 0.5
+    assert m["is_log_ratio_abs_stale"] == pytest.approx(math.log(4.0))
+    assert m["is_log_ratio_abs_fresh"] == pytest.approx(math.log(2.0))
+
+
+def test_offpolicy_weight_off_keeps_the_uncorrected_loss():
+    inputs = _offpolicy_inputs()
+    out = compute_loss(inputs, LossConfig(grpo={"kl_beta": 0.1, "kl_estimator": "k3"}), BatchNorms(2.0, 1.0))
+    kl = (_k3(4.0) + _k3(-0.5)) / 2.0
+    assert out.loss.item() == pytest.approx(-1.0 + 0.1 * kl, rel=1e-6)
+    m = finalize_metrics([out.metrics])
+    assert m["kl_ref"] == pytest.approx(m["kl_ref_unweighted"]) and m["is_weight_mean"] == 1.0
+    assert m["is_capped_frac"] == 0.0 and m["is_ratio_max"] == pytest.approx(4.0)  # the mismatch is still logged
+
+
+def test_offpolicy_weight_applies_to_sampled_token_distillation():
+    # k1 distillation, teacher 1 nat below the student on both tokens: per token w * 1.
+    inputs = _offpolicy_inputs()
+    inputs.teacher_logprobs = inputs.old_logprobs - 1.0
+    inputs.distill_weights = torch.tensor([[0.5, 0.5]])  # one turn of two tokens
+    cfg = LossConfig(grpo={"kl_beta": 0.0, "tis_cap": 2.0}, distill={"enabled": True, "estimator": "k1",
+                                                                   "lambda_distill": 1.0})
+    out = compute_loss(inputs, cfg, BatchNorms(2.0, 1.0))
+    assert out.metrics["distill_loss"] == pytest.approx(0.5 * 2.0 + 0.5 * 0.5)
+    assert finalize_metrics([out.metrics])["kl_teacher"] == pytest.approx((2.0 + 0.5) / 2.0)
+
+
+def test_offpolicy_weight_removes_the_stale_token_kl_spike():
+    # The demo's step-2 situation: a lag-1 token sampled by mu = pi_ref that one update made 1e5 times
+    # less likely. Uncorrected its k3 term is ~1e5; weighted by pi/mu it is below 1 (losses.py Eq. 1c).
+    ref = torch.tensor([[math.log(0.5)] * 3])
+    mu = ref.clone()
+    old = torch.tensor([[math.log(0.5e-5), math.log(0.5), math.log(0.5)]])
+    base = dict(logprobs=old.clone().requires_grad_(True), old_logprobs=old, rollout_logprobs=mu,
+                loss_mask=torch.ones(1, 3), advantages=torch.tensor([0.0]), ref_logprobs=ref)
+    raw = finalize_metrics([compute_loss(LossInputs(**base), LossConfig(grpo={"kl_estimator": "k3"}),
+                                         BatchNorms(3.0, 1.0)).metrics])
+    fixed = compute_loss(LossInputs(**base), LossConfig(grpo={"kl_estimator": "k3", "tis_cap": 2.0}), BatchNorms(3.0, 1.0))
+    m = finalize_metrics([fixed.metrics])
+    assert raw["kl_ref"] == pytest.approx(_k3(math.log(1e5)) / 3.0, rel=1e-4) and raw["kl_ref"] > 3e4
+    assert m["kl_ref"] < 1.0 / 3.0 and m["kl_ref_max"] < 1.0
+    fixed.loss.backward()
+    assert abs(float(base["logprobs"].grad[0, 0])) < 1e-4  # the stale outlier no longer drives the gradient
+
+
+def test_max_metrics_combine_by_maximum():
+    parts = [{"sum/tokens": 2.0, "sum/is_ratio": 2.0, "max/is_ratio": 3.0, "loss": 1.0},
+             {"sum/tokens": 2.0, "sum/is_ratio": 4.0, "max/is_ratio": 1.5, "loss": 2.0}]
+    m = finalize_metrics(parts)
+    assert m["is_ratio_max"] == 3.0 and m["is_ratio_mean"] == 1.5 and m["loss"] == 3.0
+    assert not any(k.startswith(("sum/", "max/")) for k in m)
 
 
 # ----------------------------------------------------------------------------------------------
