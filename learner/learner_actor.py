@@ -26,15 +26,49 @@ from actors.types import RolloutSample, TeacherOutput
 from learner.backends.worker import RankWorker, combine_rank_metrics
 from learner.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
 from learner.config_models import LearnerConfig
+from learner.placement import (
+    ActorDemand,
+    NodeAddress,
+    RankPlacement,
+    bundle_scheduling,
+    bundle_nodes,
+    check_cluster_fits,
+    create_placement_group,
+    current_node_id,
+    node_address,
+    rank_bundle,
+    remove_placement_group_quietly,
+    wait_all_ready,
+)
 
 LEARNER_SUBDIR = "learner"
 
 
 def free_port() -> int:
-    """An unused TCP port on this host for a torch.distributed rendezvous."""
+    """An unused TCP port on this host (single-host rendezvous; across nodes see `Learner.rendezvous_address`)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
+
+
+class RankActor(RankWorker):
+    """A `RankWorker` started in two phases, so rank 0's address is known before any rank joins.
+
+    Ray places the actor (its constructor does nothing heavy), the learner asks every rank where it
+    runs (`address`: rank 0's node IP and a port free there), and only then `start` builds the
+    backend, which joins torch.distributed at rank 0's address. Inherits every RankWorker method.
+    """
+
+    def __init__(self, rank: int) -> None:
+        self.rank = rank
+
+    def address(self, port: int | None = None) -> dict:
+        """This rank's node id and IP, and `port` (or one free on this node)."""
+        return node_address(port).model_dump()
+
+    def start(self, config: LearnerConfig, model_dir: str, seed: int, world_size: int, master_port: int) -> int:
+        RankWorker.__init__(self, config, model_dir, seed, self.rank, world_size, master_port)
+        return self.rank
 
 
 class Learner:
@@ -45,12 +79,19 @@ class Learner:
         model_dir: The initial policy (also the frozen KL reference unless
             `config.reference_model_dir` names another).
         seed: Seed for every rank.
+        placement: Where the DeepSpeed rank actors go (placement group strategy, custom resources,
+            timeouts; `learner.placement.RankPlacement` or its dict form). Default: PACK, CPUs and
+            GPUs from `config.deepspeed`, resources checked against the cluster first.
     """
 
-    def __init__(self, config: LearnerConfig | dict, model_dir: str, seed: int = 0):
+    def __init__(self, config: LearnerConfig | dict, model_dir: str, seed: int = 0,
+                 placement: RankPlacement | dict | None = None):
         self.config = config if isinstance(config, LearnerConfig) else LearnerConfig.model_validate(config)
         self.model_dir = str(model_dir)
         self.seed = seed
+        self.placement = RankPlacement.model_validate(placement or {})
+        self._placement_group = None
+        self.rank_nodes: list[str] = []  # Ray node id of each rank
         self._version = 0
         self._step = 0
         ws = self.config.deepspeed.world_size if self.config.backend == "deepspeed" else 1
@@ -59,28 +100,69 @@ class Learner:
             self._local: RankWorker | None = RankWorker(self.config, self.model_dir, seed, 0, 1,
                                                         self.config.deepspeed.master_port or free_port())
             self._remote: list = []
+            self.rank_nodes = [current_node_id()]
         else:
             self._local = None
             self._remote = self._start_ranks(ws)
 
     def _start_ranks(self, ws: int) -> list:
-        port = self.config.deepspeed.master_port or free_port()
-        ds = self.config.deepspeed
-        cls = ray.remote(RankWorker).options(num_cpus=ds.num_cpus_per_rank, num_gpus=ds.num_gpus_per_rank,
-                                             max_restarts=0)
-        workers = [cls.remote(self.config, self.model_dir, self.seed, r, ws, port) for r in range(ws)]
-        # Wait for every rank: the process group forms only when all have joined. A rank that never
-        # comes up is named instead of hanging the run.
-        refs = [w.ready.remote() for w in workers]
-        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=ds.timeout_s)
-        missing = [r for r, ref in enumerate(refs) if ref not in ready]
-        if missing:
+        """Place the ranks (one placement-group bundle each), then start them at rank 0's address.
+
+        Fails at once, naming what is missing, when the cluster cannot hold the ranks; when a rank
+        raises while starting, fails with that rank's error as soon as it arrives (the other ranks,
+        blocked in the rendezvous, are killed rather than waited for).
+        """
+        ds, spec = self.config.deepspeed, self.placement
+        bundle = rank_bundle(self.config, spec.resources)
+        if spec.check_resources:
+            check_cluster_fits([ActorDemand(name="learner rank", count=ws, resources=bundle)],
+                               {"learner rank": spec.strategy})
+        self._placement_group = create_placement_group([bundle] * ws, spec.strategy, spec.placement_timeout_s,
+                                                       f"learner ranks (world size {ws})")
+        cls = ray.remote(RankActor)
+        workers = [
+            cls.options(num_cpus=ds.num_cpus_per_rank, num_gpus=ds.num_gpus_per_rank,
+                        resources=dict(spec.resources) or None, max_restarts=0,
+                        scheduling_strategy=bundle_scheduling(self._placement_group, r)).remote(r)
+            for r in range(ws)
+        ]
+        names = [f"DeepSpeed rank {r}" for r in range(ws)]
+        try:
+            placed = wait_all_ready({n: w.address.remote(ds.master_port) for n, w in zip(names, workers)},
+                                    spec.startup_timeout_s, "learner ranks (placing)")
+            rank0 = NodeAddress.model_validate(placed[names[0]])
+            self.rank_nodes = [placed[n]["node_id"] for n in names]
+            # torch.distributed's store is served by rank 0: every rank connects to rank 0's node.
+            config = self.config.model_copy(update={"deepspeed": ds.model_copy(
+                update={"master_addr": rank0.ip, "master_port": rank0.port})})
+            # The clock starts now that every rank process exists; it covers building the model.
+            wait_all_ready({n: w.start.remote(config, self.model_dir, self.seed, ws, rank0.port)
+                            for n, w in zip(names, workers)},
+                           spec.startup_timeout_s, f"learner ranks (rendezvous {rank0.ip}:{rank0.port})")
+        except BaseException:
             for w in workers:
                 ray.kill(w)
-            raise TimeoutError(f"DeepSpeed rank(s) {missing} of {ws} did not start within {ds.timeout_s:.0f}s "
-                               f"(rendezvous {ds.master_addr}:{port})")
-        ray.get(refs)  # re-raise a rank's start-up error, if any
+            remove_placement_group_quietly(self._placement_group)
+            self._placement_group = None
+            raise
+        self.config = config
         return workers
+
+    def rendezvous_address(self) -> dict:
+        """Where collective groups led by this learner meet: rank 0's node IP and a port free there.
+
+        The weight-sync group's store is served by learner rank 0, so generators and the teacher,
+        on whatever node, connect to this address (a `learner.placement.NodeAddress` as a dict).
+        """
+        if self._local is not None:
+            return node_address().model_dump()
+        return ray.get(self._remote[0].address.remote())
+
+    def placement_report(self) -> dict[str, list]:
+        """Where the ranks run: `rank_nodes` (Ray node id per rank, as each rank reported it) and
+        `bundle_nodes` (the node of each placement-group bundle; empty without a group)."""
+        bundles = bundle_nodes(self._placement_group) if self._placement_group is not None else []
+        return {"rank_nodes": list(self.rank_nodes), "bundle_nodes": bundles}
 
     def _all(self, method: str, *args) -> list[Any]:
         """Call `method` on every rank at once (collectives need all ranks), return their results."""
@@ -213,6 +295,9 @@ class Learner:
             for w in self._remote:
                 ray.kill(w)
             self._remote = []
+        if self._placement_group is not None:
+            remove_placement_group_quietly(self._placement_group)
+            self._placement_group = None
 
 
 # The Ray actor the driver creates; options (num_cpus, max_restarts) are the caller's choice.

@@ -186,7 +186,7 @@ def missing_resources(demands: Sequence[ActorDemand], totals: Mapping[str, float
         for key, amount in d.resources.items():
             if d.count and amount > 0:
                 need[key] = need.get(key, 0.0) + amount * d.count
-                who.setdefault(key, []).append(f"{d.count} {d.name} x {_fmt(amount)}")
+                who.setdefault(key, []).append(f"{d.count} x {d.name} at {_fmt(amount)} each")
     have = _user_resources(totals)
     for key in sorted(need):
         if need[key] > have.get(key, 0.0) + 1e-9:
@@ -309,13 +309,19 @@ def node_address(port: int | None = None) -> NodeAddress:
     import ray
 
     ip = ray.util.get_node_ip_address()
-    node_id = ray.get_runtime_context().get_node_id() if ray.is_initialized() else ""
     if port is None:
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
             # Bound on all interfaces, as the store will be: free for every peer's route to it.
             sock.bind(("", 0))
             port = sock.getsockname()[1]
-    return NodeAddress(node_id=node_id or "", ip=ip, port=int(port))
+    return NodeAddress(node_id=current_node_id(), ip=ip, port=int(port))
+
+
+def current_node_id() -> str:
+    """The Ray node id of this process ("" outside Ray)."""
+    import ray
+
+    return ray.get_runtime_context().get_node_id() if ray.is_initialized() else ""
 
 
 def wait_all_ready(members: Mapping[str, Any], timeout_s: float, what: str) -> dict[str, Any]:

@@ -17,6 +17,10 @@ import envs  # noqa: F401  (CPU runtime defaults before torch/ray load)
 NO_EMBEDDINGS = {"HCGYM_EMBEDDINGS": "0"}
 
 
+# The session cluster's arguments (test_placement.py restarts it after its own multi-node cluster).
+SESSION_RAY_INIT = {"num_cpus": 2, "include_dashboard": False, "namespace": "hcgym-tests", "log_to_driver": False}
+
+
 @pytest.fixture(scope="session")
 def ray_cluster():
     """`ray.init(num_cpus=2)` once per test session (about 5 s), shut down at the end."""
@@ -24,7 +28,7 @@ def ray_cluster():
 
     started = False
     if not ray.is_initialized():
-        ray.init(num_cpus=2, include_dashboard=False, namespace="hcgym-tests", log_to_driver=False)
+        ray.init(**SESSION_RAY_INIT)
         started = True
     yield ray
     if started:
