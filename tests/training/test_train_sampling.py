@@ -9,8 +9,8 @@ import pytest
 
 from actors.types import RolloutSample, TurnSpan
 from learner.config import validate_config
-from learner.train import (Group, TaskRef, TaskSampler, Trainer, episode_seed, is_correct, mixed_outcomes,
-                           shape_reward)
+from learner.batching import BatchScheduler
+from learner.train import Group, TaskRef, TaskSampler, episode_seed, is_correct, mixed_outcomes, shape_reward
 
 
 def sample(seq: int, i: int, *, correct: bool, reward: float = 0.5, truncation: str = "", length: int = 4):
@@ -32,18 +32,16 @@ def group(seq: int, *, outcomes=(True, False), admit_version: int = 0, failed: s
                  accepted=failed is None and len(set(outcomes)) > 1, failed=failed)
 
 
-def trainer(**trainer_cfg) -> Trainer:
+def trainer(**trainer_cfg) -> BatchScheduler:
     cfg = validate_config({"trainer": {"batch_size": 3, **trainer_cfg}, "data": {"domains": ["ward"]}})
-    t = Trainer(cfg, log=lambda line: None)
-    t.cond = asyncio.Condition()
-    return t
+    return BatchScheduler(cfg.trainer, log=lambda line: None)
 
 
-def collect(t: Trainer, groups: list[Group], late: list[Group] = ()):
+def collect(t: BatchScheduler, groups: list[Group], late: list[Group] = ()):
     async def go():
         for g in groups:
             t.completed[g.seq] = g
-        task = asyncio.ensure_future(t._collect_batch())
+        task = asyncio.ensure_future(t.collect_batch())
         for g in late:  # completes after the consumer started waiting
             await asyncio.sleep(0.01)
             assert not task.done(), "the consumer must wait for the FIFO head"

@@ -1,0 +1,114 @@
+"""Rolling out groups for training and passes for validation over the env pool and the generators.
+
+A training group is `rollout.group_size` episodes of one task with seeds fixed by its sequence
+number; each finished sample gets its correctness and RL reward (`batching.is_correct`,
+`batching.shape_reward`), and the group its dynamic-sampling verdict. Validation runs every
+validation task with the same seeds at every pass, so passes differ only by the policy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from pathlib import Path
+from typing import Callable
+
+from actors.agent_loop import AgentLoop, EpisodeSpec, PromptTooLongError
+from actors.env_actor import EnvActorLost, EnvPool, EpisodeLedger, run_episode
+from actors.generator import GeneratorClient
+from actors.types import RolloutSample
+from learner.batching import Group, is_correct, mixed_outcomes, shape_reward
+from learner.config import RunConfig
+from learner.metrics import rollout_metrics, write_samples
+from learner.tasks import TaskRef, episode_specs
+
+
+class Rollouts:
+    """Runs episodes for the driver and keeps their ledgers (every episode accounted for once).
+
+    Args:
+        cfg: The run config.
+        loop: The agent loop (tokenizer, limits, prompt rendering).
+        pool: The env actors.
+        gen_client: The generators.
+        run_dir: Where validation results go.
+        log: Where notices go.
+    """
+
+    def __init__(self, cfg: RunConfig, loop: AgentLoop, pool: EnvPool, gen_client: GeneratorClient, run_dir: Path,
+                 log: Callable[[str], None] = print) -> None:
+        self.cfg = cfg
+        self.loop = loop
+        self.pool = pool
+        self.gen_client = gen_client
+        self.run_dir = run_dir
+        self.log = log
+        self.ledger = EpisodeLedger()
+        self.val_ledger = EpisodeLedger()
+        self.last_val: dict[str, float] = {}
+
+    async def episodes(self, specs: list[EpisodeSpec], ledger: EpisodeLedger) -> list[RolloutSample]:
+        for spec in specs:
+            ledger.admit(spec.sample_id)
+        return list(await asyncio.gather(*[
+            run_episode(spec, self.loop, self.pool, self.gen_client, ledger, self.cfg.rollout.max_episode_attempts)
+            for spec in specs
+        ]))
+
+    async def group(self, seq: int, task: TaskRef, version: int,
+                    on_accepted: Callable[[Group], None] | None = None) -> Group:
+        """Roll out group `seq`, score it, and call `on_accepted` (teacher submission) if it is kept.
+
+        Never raises: a lost env actor or an over-long prompt marks the group failed; any other
+        error is kept in `group.error` and surfaced by the consumer with its group.
+        """
+        cfg = self.cfg
+        group = Group(seq=seq, task=task, admit_version=version)
+        try:
+            samples = await self.episodes(episode_specs(cfg.seed, seq, task, version, cfg.rollout.group_size),
+                                          self.ledger)
+            for s in samples:
+                s.correct = is_correct(s, cfg)
+                s.reward = shape_reward(s, cfg)
+                s.metadata["group_seq"] = seq
+                s.metadata["admit_version"] = version
+            group.samples = samples
+            group.accepted = (not cfg.trainer.dynamic_sampling.enabled) or mixed_outcomes(samples, cfg)
+            if group.accepted and on_accepted is not None:
+                on_accepted(group)
+        except (EnvActorLost, PromptTooLongError) as exc:
+            group.failed = f"{type(exc).__name__}: {exc}"
+        except Exception as exc:  # a bug: surfaced by the consumer with its group
+            group.failed = f"{type(exc).__name__}: {exc}"
+            group.error = exc
+        group.completed_at = time.perf_counter()
+        return group
+
+    async def validate(self, refs: list[TaskRef], step: int, version: int) -> dict[str, float]:
+        """One validation pass; appends to `validation.jsonl` and returns the `val_*` metrics."""
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        specs = []
+        for index, task in enumerate(refs):
+            # Same seeds at every validation, so steps differ only by the policy.
+            specs.extend(episode_specs(cfg.seed, index, task, version, cfg.trainer.val_group_size,
+                                       tag="val", greedy=cfg.trainer.val_greedy))
+        # Validation re-uses its seeds at every pass; a fresh ledger per pass keeps ids unique.
+        self.val_ledger = EpisodeLedger()
+        samples = await self.episodes(specs, self.val_ledger)
+        for s in samples:
+            s.correct = is_correct(s, cfg)
+            s.reward = shape_reward(s, cfg)
+        metrics = rollout_metrics(samples, cfg.rollout.max_response_tokens, prefix="val_")
+        metrics["val_env_reward_mean"] = metrics.pop("val_env_reward_mean", 0.0)
+        metrics["val_time_s"] = time.perf_counter() - t0
+        with (self.run_dir / "validation.jsonl").open("a", encoding="utf-8") as handle:
+            handle.write(json.dumps({"step": step, **metrics}) + "\n")
+        if cfg.trainer.save_trajectories:
+            write_samples(samples, self.run_dir / "validation" / f"step_{step:06d}.parquet", step=step)
+        self.last_val = metrics
+        self.log(f"[validation] step {step}: accuracy {metrics['val_accuracy']:.3f}, reward "
+                 f"{metrics['val_reward_mean']:.3f} (env {metrics['val_env_reward_mean']:.3f}) over "
+                 f"{len(samples)} episodes in {metrics['val_time_s']:.1f}s")
+        return metrics

@@ -1,0 +1,56 @@
+"""The driver's part of a run checkpoint (`driver.json`: step, data position, groups to re-admit,
+counters) and the save / restore of a whole checkpoint across the learner, the teacher and the driver.
+The layout is in learner/checkpoint.py."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+from learner.batching import BatchScheduler
+from learner.checkpoint import (checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints, read_json,
+                                write_json_atomic)
+from learner.teacher_client import TeacherClient
+
+DRIVER_STATE = "driver.json"
+
+
+async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: TeacherClient | None,
+                              scheduler: BatchScheduler, counters: dict[str, int], ledger: dict[str, Any],
+                              keep_last: int) -> Path:
+    """Write `RUN_DIR/checkpoints/step_N/` (learner, teacher, driver.json), then mark it `latest`."""
+    directory = checkpoint_dir(run_dir, step)
+    directory.mkdir(parents=True, exist_ok=True)
+    await learner.save_checkpoint.remote(str(directory))
+    if teacher is not None:
+        await teacher.save(str(directory))
+    write_json_atomic(directory / DRIVER_STATE, {
+        "step": step, "teacher_version": teacher.version if teacher is not None else 0,
+        **scheduler.state_dict(), "counters": counters, "ledger": ledger,
+    })
+    mark_latest(run_dir, step)
+    prune_checkpoints(run_dir, keep_last)
+    return directory
+
+
+async def restore_run_checkpoint(run_dir: Path, learner, teacher: TeacherClient | None, scheduler: BatchScheduler,
+                                 counters: dict[str, int], log: Callable[[str], None]) -> tuple[int, Path] | None:
+    """Load the latest checkpoint into the learner, the teacher and the scheduler.
+
+    Returns:
+        (step, directory), or None when the run has no checkpoint yet.
+    """
+    directory = latest_checkpoint(run_dir)
+    if directory is None:
+        log(f"[resume] {run_dir} has no checkpoint yet: starting from step 0")
+        return None
+    state = read_json(directory / DRIVER_STATE)
+    learner_state = await learner.load_checkpoint.remote(str(directory))
+    step = int(state["step"])
+    if int(learner_state["step"]) != step:
+        raise RuntimeError(f"{directory}: learner step {learner_state['step']} != driver step {step}")
+    scheduler.load_state_dict(state, version=step)
+    counters.update(state["counters"])
+    if teacher is not None:
+        await teacher.restore(str(directory), int(state["teacher_version"]))
+    return step, directory
