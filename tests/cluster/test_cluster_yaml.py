@@ -1,0 +1,104 @@
+"""cluster.yaml against Ray's own schema and the checks `ray up` runs before it touches a cloud,
+and the promises docs/cluster.md makes about it: Python >= 3.11 from uv, the `gpu` extra, data and
+model on every node, token auth on, the dashboard on loopback."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import shlex
+from pathlib import Path
+
+import jsonschema
+import pytest
+import yaml
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CLUSTER_YAML = REPO_ROOT / "cluster.yaml"
+SUBMITTED_CONFIG = REPO_ROOT / "configs" / "qwen35_9b_ttopd.yaml"  # the config docs/cluster.md submits
+VENV = "~/hcgym-venv"
+
+
+@pytest.fixture(scope="module")
+def cluster() -> dict:
+    return yaml.safe_load(CLUSTER_YAML.read_text(encoding="utf-8"))
+
+
+def ray_schema() -> dict:
+    import ray.autoscaler
+
+    return json.loads((Path(ray.autoscaler.__file__).parent / "ray-schema.json").read_text(encoding="utf-8"))
+
+
+def test_cluster_yaml_passes_rays_schema_and_ray_up_validation(cluster):
+    from ray.autoscaler._private.commands import prepare_config
+    from ray.autoscaler._private.util import validate_config
+
+    jsonschema.validate(cluster, ray_schema())
+    # What `ray up` does first (offline: node resources are given, so no cloud call).
+    prepared = prepare_config(copy.deepcopy(cluster))
+    validate_config(prepared)
+    assert prepared["head_node_type"] in prepared["available_node_types"]
+
+
+@pytest.mark.parametrize("mutation, error", [
+    (lambda c: c.update(setup_command=c.pop("setup_commands")), jsonschema.ValidationError),  # misspelt key
+    (lambda c: c["provider"].pop("type"), jsonschema.ValidationError),
+    (lambda c: c.update(head_node_type="head_h100x8"), ValueError),  # not among available_node_types
+])
+def test_the_validation_rejects_a_broken_cluster_file(cluster, mutation, error):
+    from ray.autoscaler._private.commands import prepare_config
+    from ray.autoscaler._private.util import validate_config
+
+    broken = copy.deepcopy(cluster)
+    mutation(broken)
+    with pytest.raises(error):
+        jsonschema.validate(broken, ray_schema())
+        validate_config(prepare_config(broken))
+
+
+def commands(cluster: dict, key: str) -> list[str]:
+    return [" ".join(c.split()) for c in cluster[key]]
+
+
+def test_every_node_gets_python_311_from_uv_the_gpu_extra_data_and_the_submitted_model(cluster):
+    from envs.cli import build_parser
+    from learner.config import load_config
+
+    setup = commands(cluster, "setup_commands")
+    venv_line = next(c for c in setup if "uv venv" in c)
+    version = re.search(r"--python (\d+)\.(\d+)", venv_line)
+    assert version and (int(version[1]), int(version[2])) >= (3, 11), venv_line
+    assert any(f"uv python install {version[1]}.{version[2]}" in c for c in setup)
+    install = next(c for c in setup if "pip install" in c)
+    assert f"--python {VENV}/bin/python" in install and '".[gpu]"' in install, install
+    assert any("sys.version_info >= (3, 11)" in c for c in setup)  # checked on the node, not assumed
+
+    # Every hcgym call is the venv's and parses with the project's own CLI (catches renamed commands).
+    hcgym_calls = [shlex.split(c.split("&&")[-1])[1:] for c in setup if "bin/hcgym " in c]
+    assert all(f"{VENV}/bin/hcgym" in c for c in setup if "hcgym " in c)
+    parser = build_parser()
+    parsed = [parser.parse_args(argv) for argv in hcgym_calls]
+    assert ["data", "model"] == [p.command for p in parsed]
+    fetched = next(p.model_id for p in parsed if p.command == "model")
+    # The cache is per node and runs are offline: the fetched id must be the submitted config's model.
+    assert load_config(SUBMITTED_CONFIG).model.path == fetched
+
+
+def test_ray_runs_from_the_venv_with_token_auth_and_a_loopback_dashboard(cluster):
+    head = commands(cluster, "head_start_ray_commands")
+    workers = commands(cluster, "worker_start_ray_commands")
+    for line in head + workers:
+        assert "ray " in line and f"{VENV}/bin/ray" in line, line
+    for line in (head[-1], workers[-1]):
+        assert "ray start" in line
+        # token auth decided explicitly, before `ray start`, on every node
+        assert line.index("export RAY_AUTH_MODE=token") < line.index("ray start"), line
+    assert "--dashboard-host=127.0.0.1" in head[-1]
+    text = CLUSTER_YAML.read_text(encoding="utf-8")
+    assert "0.0.0.0" not in yaml.safe_dump(cluster)  # nothing bound to every interface on purpose
+    assert "RAY_AUTH_MODE=disabled" not in text
+    # The token that `ray get-auth-token --generate` wrote on the user's machine, on every node.
+    assert cluster["file_mounts"]["/home/ubuntu/.ray/auth_token"] == "~/.ray/auth_token"
+    assert ".venv" in cluster["rsync_exclude"]  # a local CPU venv must not land on GPU nodes
