@@ -1,5 +1,12 @@
 """Starting a run's Ray cluster connection and actors (generators, learner, teacher, KB service)
-from the run config. The driver calls these once; placement of actors on nodes is decided here."""
+from the run config. The driver calls these once; placement of actors on nodes is decided here.
+
+Placement (learner/placement.py): `check_run_fits` first, so a run the cluster cannot hold fails
+naming the missing resources; generators and the teacher are placed by resources (CPUs, GPUs and
+the custom resources of `ray.generator_resources` / `ray.teacher_resources`); the learner places its
+DeepSpeed ranks in a placement group itself; `wait_started` waits for every actor's constructor
+(model loading) before any rendezvous clock starts.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +14,7 @@ from typing import Any
 
 from actors.generator import generator_actor_class
 from learner.config import RunConfig
+from learner.placement import check_cluster_fits, learner_world_size, rank_placement, run_demands, wait_all_ready
 
 
 def init_ray(cfg: RunConfig) -> None:
@@ -25,9 +33,17 @@ def init_ray(cfg: RunConfig) -> None:
     ray.init(**kwargs)
 
 
+def check_run_fits(cfg: RunConfig) -> None:
+    """Raise `PlacementError` naming every resource the cluster lacks for this run's actors
+    (skipped with `ray.check_resources: false`, e.g. on autoscaling clusters)."""
+    if cfg.ray.check_resources:
+        check_cluster_fits(run_demands(cfg), {"learner rank": cfg.ray.learner_placement_strategy})
+
+
 def start_generators(cfg: RunConfig, policy_dir: str, stop_ids: list[int]) -> list:
     g = cfg.generator
     gen_cls = generator_actor_class().options(num_cpus=g.num_cpus, num_gpus=g.num_gpus, max_restarts=g.max_restarts,
+                                              resources=dict(cfg.ray.generator_resources) or None,
                                               max_task_retries=0, max_concurrency=1000)
     return [gen_cls.remote(g.backend, policy_dir, g.sampling.model_dump(), stop_ids, 0, g.options,
                            g.max_batch_size, g.batch_wait_s)
@@ -37,8 +53,12 @@ def start_generators(cfg: RunConfig, policy_dir: str, stop_ids: list[int]) -> li
 def start_learner(cfg: RunConfig, policy_dir: str):
     from learner.learner_actor import LearnerActor
 
-    return LearnerActor.options(num_cpus=cfg.ray.learner_num_cpus, num_gpus=cfg.ray.learner_num_gpus) \
-        .remote(cfg.learner.model_dump(), policy_dir, cfg.seed)
+    rc = cfg.ray
+    # At world size 1 the learner actor holds the model, so it takes the learner's custom resources;
+    # with more ranks it only fans calls out, and the ranks' placement group takes them.
+    custom = dict(rc.learner_resources) if learner_world_size(cfg.learner) == 1 else {}
+    return LearnerActor.options(num_cpus=rc.learner_num_cpus, num_gpus=rc.learner_num_gpus, resources=custom or None) \
+        .remote(cfg.learner.model_dump(), policy_dir, cfg.seed, rank_placement(cfg).model_dump())
 
 
 def start_teacher(cfg: RunConfig, policy_dir: str):
@@ -46,8 +66,22 @@ def start_teacher(cfg: RunConfig, policy_dir: str):
 
     rc = cfg.ray
     return TeacherActor.options(num_cpus=rc.teacher_num_cpus, num_gpus=rc.teacher_num_gpus,
+                                resources=dict(rc.teacher_resources) or None,
                                 max_restarts=rc.teacher_max_restarts, max_task_retries=0) \
         .remote(cfg.teacher.model_dump(), policy_dir, cfg.seed)
+
+
+def wait_started(cfg: RunConfig, learner, generators: list, teacher=None) -> None:
+    """Block until every actor's constructor has finished (`ray.startup_timeout_s` for all together).
+
+    The first actor that fails to start fails the run at once with its error (`StartupError`), and
+    rendezvous timeouts (the weight-sync group's) count from here, not from actor creation.
+    """
+    members = {"learner": learner.policy_version.remote()}
+    members.update({f"generator-{i}": g.version.remote() for i, g in enumerate(generators)})
+    if teacher is not None:
+        members["teacher"] = teacher.teacher_version.remote()
+    wait_all_ready(members, cfg.ray.startup_timeout_s, "run actors")
 
 
 def start_kb_service(cfg: RunConfig):

@@ -45,7 +45,15 @@ from learner.batching import BatchScheduler, Group, is_correct, mixed_outcomes, 
 from learner.config import RunConfig, dump_config, load_config
 from learner.metrics import MetricsSink, write_samples
 from learner.rollouts import Rollouts
-from learner.run_actors import init_ray, start_generators, start_kb_service, start_learner, start_teacher
+from learner.run_actors import (
+    check_run_fits,
+    init_ray,
+    start_generators,
+    start_kb_service,
+    start_learner,
+    start_teacher,
+    wait_started,
+)
 from learner.run_checkpoint import restore_run_checkpoint, save_run_checkpoint
 from learner.step_metrics import StepTimes, progress_line, step_record
 from learner.tasks import TaskRef, TaskSampler, episode_seed, load_task_refs, prompt_lengths, select_tasks
@@ -110,6 +118,7 @@ class Trainer:
             self.val_refs = select_tasks(d.domains, d.val_split, d.max_val_tasks, d.task_id_pattern,
                                          what="validation", loop=loop, max_prompt_tokens=max_prompt, log=self.log)
         init_ray(cfg)
+        check_run_fits(cfg)  # before any actor exists: a run the cluster cannot hold fails naming what is missing
         self.log(f"[setup] {len(train_refs)} train / {len(self.val_refs)} validation tasks; policy {self.policy_dir}")
         self.kb_client = start_kb_service(cfg)
         if self.kb_client is not None:
@@ -129,7 +138,9 @@ class Trainer:
         if cfg.teacher.enabled:
             self.teacher = start_teacher(cfg, str(self.policy_dir))
             self.teacher_client = TeacherClient(self.teacher, self.learner, cfg, self.counters, self.log)
-        self.publisher = WeightPublisher(cfg, self.learner, self.generators, self.gen_client, self.log)
+        wait_started(cfg, self.learner, self.generators, self.teacher)  # rendezvous clocks start after this
+        member = self.teacher_client.group_member if self.teacher_client is not None else None
+        self.publisher = WeightPublisher(cfg, self.learner, self.generators, self.gen_client, self.log, member)
 
     async def _produce_group(self, seq: int, task: TaskRef, version: int) -> Group:
         submit = self.teacher_client.submit if self.teacher_client is not None else None
@@ -169,11 +180,12 @@ class Trainer:
         self.step += 1
 
         t_sync = time.perf_counter()
-        weights_ref = await self.publisher.publish(self.step)
+        published = await self.publisher.publish(self.step)
         teacher_action = "none"
         if self.teacher_client is not None:
             # Awaited: work admitted afterwards is scored by the updated teacher.
-            teacher_action = await self.teacher_client.update(self.step, weights_ref)
+            teacher_action = await self.teacher_client.update(self.step, published.weights_ref,
+                                                              published.teacher_result)
         sync_s = time.perf_counter() - t_sync
         if cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0:
             await self._save_checkpoint()
@@ -193,6 +205,7 @@ class Trainer:
         record = step_record(self.step, samples, learner_metrics, batch_info, times,
                              max_response_tokens=cfg.rollout.max_response_tokens, teacher_action=teacher_action,
                              teacher_version=self.teacher_client.version if self.teacher_client is not None else 0,
+                             teacher_sync=self.teacher_client.sync_metrics() if self.teacher_client is not None else {},
                              generator_failures=self.gen_client.failures,
                              episode_reruns=len(self.rollouts.ledger.lost_attempts), batch_groups=len(groups))
         self.sink.observe("response_length", [s.response_tokens for s in samples])

@@ -2,18 +2,32 @@
 object store or the collective group, and to the teacher at its EMA / hard-copy steps.
 
 `object_store`: the learner returns a CPU state dict once (an `ObjectRef`); every generator gets the
-ref, and so does the teacher when it updates. `collective`: the learner's rank 0 and the generators
-form a private process group (learner/weight_sync.py) and the weights travel in buckets; a group
-broken by a restarted generator is re-formed once and the sync retried.
+ref, and so does the teacher when it updates. `collective`: the learner's rank 0, the generators and
+the teacher form one private process group (learner/weight_sync.py) and the weights travel in
+buckets; nothing passes through the object store. The teacher receives every broadcast and applies
+its schedule bucket by bucket (`Teacher.receive_update`; at steps without an update it drops the
+stream). A group broken by a restarted member is re-formed once and the sync retried; a teacher
+that cannot join (dead, restarting) is left out and updated through the object store instead
+(`TeacherClient.update`, counted as `teacher_sync_object_store`).
 """
 
 from __future__ import annotations
 
 import asyncio
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Awaitable, Callable
 
 from actors.generator import GeneratorClient
 from learner.config import RunConfig
+
+
+@dataclass
+class Published:
+    """Where one version's weights went: the object-store ref (None with the collective transport)
+    and the teacher's `receive_update` result when the teacher received them in the group."""
+
+    weights_ref: Any = None
+    teacher_result: dict[str, Any] | None = None
 
 
 class WeightPublisher:
@@ -25,10 +39,13 @@ class WeightPublisher:
         generators: The generator actors.
         gen_client: The generators' client (it remembers the latest version for restarted generators).
         log: Where notices go.
+        teacher_member: Collective transport with a teacher: returns the teacher's handle when it may
+            join the group (alive, at the driver's version), or None to leave it out this time.
     """
 
     def __init__(self, cfg: RunConfig, learner, generators: list, gen_client: GeneratorClient,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print,
+                 teacher_member: Callable[[], Awaitable[Any]] | None = None) -> None:
         self.cfg = cfg
         self.learner = learner
         self.generators = generators
@@ -36,6 +53,8 @@ class WeightPublisher:
         self.log = log
         self.collective = cfg.weight_sync.transport == "collective"
         self.formations = 0
+        self.teacher_member = teacher_member if self.collective else None
+        self.teacher_in_group = None  # the teacher's handle while it is a member of the current group
 
     async def start(self) -> None:
         """Form the collective group (no-op for the object store)."""
@@ -43,44 +62,54 @@ class WeightPublisher:
             await self.form_group()
 
     async def form_group(self) -> None:
-        """The learner's rank 0 and every generator join one private process group."""
-        from learner.learner_actor import free_port
-
+        """The learner's rank 0, every generator and (when it can join) the teacher form one group."""
         config = self.cfg.weight_sync.model_dump()
-        # Every (re-)formation needs a fresh rendezvous: the old store may still hold the port.
-        config["master_port"] = free_port() if self.formations or not config["master_port"] else config["master_port"]
+        # The group's store is served by learner rank 0: members on any node connect to its node,
+        # at a port free there. Every (re-)formation needs a fresh port: the old store may still hold it.
+        address = await self.learner.rendezvous_address.remote()
+        config["master_addr"] = address["ip"]
+        config["master_port"] = address["port"] if self.formations or not config["master_port"] else config["master_port"]
         self.formations += 1
-        world = 1 + len(self.generators)
+        self.teacher_in_group = None
+        teacher = await self.teacher_member() if self.teacher_member is not None else None
         names = ["learner-rank0"] + [f"generator-{i}" for i in range(len(self.generators))]
-        await asyncio.wait_for(asyncio.gather(
-            self.learner.join_weight_sync.remote(config, world, names),
-            *[g.join_weight_sync.remote(config, i + 1, world, names) for i, g in enumerate(self.generators)],
-        ), self.cfg.weight_sync.timeout_s + 30)
+        names += ["teacher"] if teacher is not None else []
+        world = len(names)
+        joins = [self.learner.join_weight_sync.remote(config, world, names),
+                 *[g.join_weight_sync.remote(config, i + 1, world, names) for i, g in enumerate(self.generators)]]
+        if teacher is not None:
+            joins.append(teacher.join_weight_sync.remote(config, world - 1, world, names))
+        await asyncio.wait_for(asyncio.gather(*joins), self.cfg.weight_sync.timeout_s + 30)
+        self.teacher_in_group = teacher
 
-    async def publish(self, version: int):
-        """Send the learner's weights of `version` to every generator. Returns the object-store ref
-        of the weights (for the teacher), or None when they travelled through the collective group."""
+    async def publish(self, version: int) -> Published:
+        """Send the learner's weights of `version` (= the learner step) to every generator, and in the
+        collective group to the teacher too (it applies that step's EMA / hard copy as they arrive)."""
         if self.collective:
-            await self._broadcast(version)
-            return None
+            if self.teacher_member is not None and self.teacher_in_group is None:
+                await self.form_group()  # the teacher was left out last time: let it back in
+            return Published(teacher_result=await self._broadcast(version))
         weights_ref = self.learner.get_weights.remote()
         await self.gen_client.sync_all(weights_ref, version)
-        return weights_ref
+        return Published(weights_ref=weights_ref)
 
     async def sync_object_store(self, version: int) -> None:
         """Push the learner's current weights through the object store whatever the transport (resume)."""
         await self.gen_client.sync_all(self.learner.get_weights.remote(), version)
 
-    async def _broadcast(self, version: int) -> None:
-        """One collective sync of the new weights; a broken group (a generator restarted) is re-formed
-        once and the sync retried, and a generator that still fails catches up via the object store."""
+    async def _broadcast(self, version: int) -> dict[str, Any] | None:
+        """One collective sync of the new weights; a broken group (a generator or the teacher restarted)
+        is re-formed once and the sync retried, and a generator that still fails catches up via the
+        object store. Returns the teacher's `receive_update` result (None when it was not a member)."""
         timeout = self.cfg.weight_sync.timeout_s + 30
         for attempt in range(2):
+            teacher = self.teacher_in_group
+            calls = [self.learner.broadcast_weights.remote(),
+                     *[g.receive_weights.remote(version) for g in self.generators]]
+            if teacher is not None:
+                calls.append(teacher.receive_update.remote(version, version))
             try:
-                await asyncio.wait_for(asyncio.gather(
-                    self.learner.broadcast_weights.remote(),
-                    *[g.receive_weights.remote(version) for g in self.generators],
-                ), timeout)
+                results = await asyncio.wait_for(asyncio.gather(*calls), timeout)
                 break
             except Exception as exc:
                 if attempt == 1:
@@ -88,3 +117,4 @@ class WeightPublisher:
                 self.log(f"[weight sync] {type(exc).__name__}: {exc}; re-forming the group")
                 await self.form_group()
         self.gen_client.publish(None, version)
+        return results[-1] if teacher is not None else None
