@@ -54,8 +54,10 @@ class LocalRayHead:
         return dict(self.env)
 
     def get(self, path: str, *, token: str | None = "own", timeout: float = 30.0) -> tuple[int, object]:
-        """GET a dashboard endpoint; returns (HTTP status, parsed JSON or text)."""
-        headers = {} if token is None else {"Authorization": f"Bearer {self.token if token == 'own' else token}"}
+        """GET a dashboard endpoint with the head's token ("own"), another one, or none (None);
+        returns (HTTP status, parsed JSON or text)."""
+        sent = self.token if token == "own" else token
+        headers = {} if sent is None else {"Authorization": f"Bearer {sent}"}
         request = urllib.request.Request(self.dashboard_url + path, headers=headers)
         try:
             with urllib.request.urlopen(request, timeout=timeout) as response:
@@ -88,7 +90,7 @@ class LocalRayHead:
                 continue
         return sorted(pids)
 
-    def stop(self, grace_s: float = 10.0) -> None:
+    def stop(self, grace_s: float = 5.0) -> None:
         import psutil
 
         pids = self.processes()
@@ -145,7 +147,8 @@ def start_local_head(num_cpus: int = 2, timeout_s: float = 90.0) -> LocalRayHead
             except OSError:
                 pass
             if time.monotonic() > deadline:
-                raise RuntimeError(f"dashboard at {head.dashboard_url} did not answer within {timeout_s:.0f} s")
+                raise RuntimeError(f"dashboard at {head.dashboard_url} did not answer "
+                                   f"within {timeout_s:.0f} s")
             time.sleep(0.5)
     except BaseException:
         proc.kill()

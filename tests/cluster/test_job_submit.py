@@ -27,14 +27,16 @@ def tiny_ttopd_job_config(run_dir, policy_dir) -> dict:
         "model": {"kind": "pretrained", "path": policy_dir},
         "data": {"domains": ["ward"], "domain_modules": WARD, "train_split": "train", "val_split": "test"},
         "rollout": {"group_size": 2, "max_turns": 2, "max_new_tokens_per_turn": 8, "max_response_tokens": 200,
-                    "num_env_actors": ENV_ACTORS, "slots_per_env_actor": 4, "env_vars": {"HCGYM_EMBEDDINGS": "0"}},
+                    "num_env_actors": ENV_ACTORS, "slots_per_env_actor": 4,
+                    "env_vars": {"HCGYM_EMBEDDINGS": "0"}},  # token-overlap grading: no embedding model load
         "generator": {"num_generators": 1, "num_cpus": 0, "max_batch_size": 8, "batch_wait_s": 0.005},
         "reward": {"kind": "cosine", "max_length": 100},
         "trainer": {"batch_size": 2, "max_steps": STEPS, "max_staleness": 1, "checkpoint_interval": 0,
                     "val_interval": 0, "val_at_start": False, "dynamic_sampling": {"enabled": False}},
         "teacher": {"enabled": True, "ema_interval": 1, "hard_copy_interval": 2, "ema_alpha": 0.5},
-        "learner": {"optim": {"lr": 1e-3},
-                    "loss": {"distill": {"enabled": True, "lambda_distill": 1.0, "drop_length_truncated_turns": False}}},
+        # A random policy's turns all hit the token limit: keep them in the distillation term.
+        "learner": {"optim": {"lr": 1e-3}, "loss": {"distill": {"enabled": True, "lambda_distill": 1.0,
+                                                                "drop_length_truncated_turns": False}}},
         # As on a cluster: the driver joins the running cluster (RAY_ADDRESS, set by the job
         # supervisor) instead of starting its own; asking for CPUs there is an error in ray.init.
         "ray": {"address": "auto", "num_cpus": None, "learner_num_cpus": 0},
@@ -49,8 +51,8 @@ def listening_addresses(port: int) -> set[str]:
             if c.status == psutil.CONN_LISTEN and c.laddr.port == port}
 
 
-def test_tiny_ttopd_job_runs_through_ray_job_submit_and_shows_in_the_dashboard(local_ray_head, ward_policy_dir,
-                                                                              tmp_path):
+def test_tiny_ttopd_job_runs_through_ray_job_submit_and_shows_in_the_dashboard(
+        local_ray_head, ward_policy_dir, tmp_path):
     from learner.config import validate_config
     from learner.metrics import read_metrics
 
@@ -71,11 +73,13 @@ def test_tiny_ttopd_job_runs_through_ray_job_submit_and_shows_in_the_dashboard(l
     # docs/cluster.md's command: the venv first on PATH, so the entrypoint's `python` is the
     # project's (without it the job supervisor's shell finds the system python).
     runtime_env = {"env_vars": {"PATH": f"{VENV_BIN}:${{PATH}}"}}
-    command = [str(RAY_CLI), "job", "submit", "--address", head.dashboard_url, "--submission-id", submission_id,
-               "--working-dir", str(REPO_ROOT), "--runtime-env-json", json.dumps(runtime_env), "--",
+    command = [str(RAY_CLI), "job", "submit", "--address", head.dashboard_url,
+               "--submission-id", submission_id, "--working-dir", str(REPO_ROOT),
+               "--runtime-env-json", json.dumps(runtime_env), "--",
                "python", "-m", "learner.train", "--config", str(config_path)]
     # Without --no-wait the CLI follows the job's logs and exits 0 only when the job succeeded.
-    done = subprocess.run(command, env=head.client_env(), cwd=tmp_path, capture_output=True, text=True, timeout=240)
+    done = subprocess.run(command, env=head.client_env(), cwd=tmp_path, capture_output=True, text=True,
+                          timeout=240)
     output = done.stdout + done.stderr
     assert done.returncode == 0, output[-6000:]
     assert f"Job '{submission_id}' succeeded" in output
