@@ -10,7 +10,7 @@ DeepSpeed ranks in a placement group itself; `wait_started` waits for every acto
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from actors.generator import generator_actor_class
 from learner.config import RunConfig
@@ -71,17 +71,31 @@ def start_teacher(cfg: RunConfig, policy_dir: str):
         .remote(cfg.teacher.model_dump(), policy_dir, cfg.seed)
 
 
-def wait_started(cfg: RunConfig, learner, generators: list, teacher=None) -> None:
+def wait_started(cfg: RunConfig, learner, generators: list, teacher=None,
+                 log: Callable[[str], None] | None = None) -> dict[str, list]:
     """Block until every actor's constructor has finished (`ray.startup_timeout_s` for all together).
 
     The first actor that fails to start fails the run at once with its error (`StartupError`), and
     rendezvous timeouts (the weight-sync group's) count from here, not from actor creation.
+
+    Returns:
+        The learner's `placement_report()` (Ray node id of each rank and of each bundle), also logged.
     """
+    import time
+
+    import ray
+
+    started = time.perf_counter()
     members = {"learner": learner.policy_version.remote()}
     members.update({f"generator-{i}": g.version.remote() for i, g in enumerate(generators)})
     if teacher is not None:
         members["teacher"] = teacher.teacher_version.remote()
     wait_all_ready(members, cfg.ray.startup_timeout_s, "run actors")
+    report = ray.get(learner.placement_report.remote())
+    if log is not None:
+        log(f"[setup] {len(members)} actors started in {time.perf_counter() - started:.1f}s; learner rank nodes "
+            f"{[n[:8] for n in report['rank_nodes']]}")
+    return report
 
 
 def start_kb_service(cfg: RunConfig):
@@ -91,3 +105,20 @@ def start_kb_service(cfg: RunConfig):
     from kb_service.service import start_kb_service as start
 
     return start(cfg.kb.replicas, cfg.kb.path, cfg.kb.name, cfg.kb.num_cpus)
+
+
+def stop_learner(learner, timeout_s: float = 30.0) -> None:
+    """Shut the learner down (its ranks' process groups, the ranks, their placement group), then kill it.
+
+    A placement group lives as long as the job that created it, not as long as the actor that
+    created it: killing the learner actor alone would hold the ranks' resources until the driver
+    process exits (a second run in the same process could not be placed).
+    """
+    import contextlib
+
+    import ray
+
+    with contextlib.suppress(Exception):  # a dead or hung learner: killing it is all that is left
+        ray.get(learner.shutdown.remote(), timeout=timeout_s)
+    with contextlib.suppress(Exception):
+        ray.kill(learner)

@@ -52,6 +52,7 @@ from learner.run_actors import (
     start_kb_service,
     start_learner,
     start_teacher,
+    stop_learner,
     wait_started,
 )
 from learner.run_checkpoint import restore_run_checkpoint, save_run_checkpoint
@@ -138,7 +139,7 @@ class Trainer:
         if cfg.teacher.enabled:
             self.teacher = start_teacher(cfg, str(self.policy_dir))
             self.teacher_client = TeacherClient(self.teacher, self.learner, cfg, self.counters, self.log)
-        wait_started(cfg, self.learner, self.generators, self.teacher)  # rendezvous clocks start after this
+        wait_started(cfg, self.learner, self.generators, self.teacher, self.log)  # rendezvous clocks start after this
         member = self.teacher_client.group_member if self.teacher_client is not None else None
         self.publisher = WeightPublisher(cfg, self.learner, self.generators, self.gen_client, self.log, member)
 
@@ -275,7 +276,9 @@ class Trainer:
 
         if self.kb_client is not None:
             self.kb_client.shutdown()
-        actors = [self.learner, self.teacher, *self.generators, *(self.pool.actors if self.pool is not None else [])]
+        if self.learner is not None:
+            stop_learner(self.learner)  # releases the ranks' placement group too
+        actors = [self.teacher, *self.generators, *(self.pool.actors if self.pool is not None else [])]
         for handle in actors:
             if handle is not None:
                 try:

@@ -38,6 +38,7 @@ from learner.placement import (
 )
 from tests.training.conftest import SESSION_RAY_INIT
 from tests.training.learner_fixtures import make_batch, tiny_model_dir
+from tests.training.test_train import tiny_config
 
 pytestmark = pytest.mark.ray
 
@@ -220,3 +221,54 @@ def test_a_rank_that_fails_while_starting_fails_the_learner_within_seconds_with_
     while ray.available_resources().get("flaky_pair") != 2 and time.monotonic() < deadline:
         time.sleep(0.2)
     assert ray.available_resources().get("flaky_pair") == 2
+
+
+def _multinode_run(tmp_path, policy_dir, **ray_section):
+    return tiny_config(
+        tmp_path / "run", policy_dir,
+        learner={"backend": "deepspeed", "optim": {"lr": 1e-3, "micro_batch_size": 2},
+                 "loss": {"entropy_coef": 0.01, "grpo": {"kl_beta": 0.0}},
+                 "deepspeed": {"world_size": 2, "num_cpus_per_rank": 1, "timeout_s": 120}},
+        weight_sync={"transport": "collective", "backend": "gloo", "bucket_mb": 0.05, "timeout_s": 60},
+        trainer={"max_steps": 2, "checkpoint_interval": 0},
+        ray={"learner_num_cpus": 0, "learner_resources": {"learner_node": 1},
+             "generator_resources": {"rollout_node": 1}, **ray_section},
+    )
+
+
+def test_the_driver_refuses_a_run_the_cluster_cannot_hold_before_creating_actors(cluster, ward_policy_dir, tmp_path):
+    import ray
+
+    from learner.train import train
+
+    cfg = _multinode_run(tmp_path, ward_policy_dir, generator_resources={"rollout_node": 1, "gpu_box": 1})
+    started = time.monotonic()
+    with pytest.raises(PlacementError, match="gpu_box: the run needs 1 .*the cluster has 0"):
+        train(cfg, log=lambda line: None)
+    assert time.monotonic() - started < 30
+    # The check ran before any actor existed (only this test's cluster, and nothing alive on it).
+    alive = [a for a in ray._private.state.actors().values() if a["State"] == "ALIVE"]
+    assert alive == []
+
+
+def test_the_driver_trains_across_nodes_with_ranks_placed_and_the_sync_group_at_rank0(cluster, ward_policy_dir,
+                                                                                     tmp_path):
+    import ray
+
+    from learner.metrics import read_metrics
+    from learner.train import train
+
+    lines: list[str] = []
+    summary = train(_multinode_run(tmp_path, ward_policy_dir), log=lines.append)
+    assert summary["steps"] == 2
+    records = read_metrics(tmp_path / "run")
+    assert [r["step"] for r in records] == [1, 2]
+    assert all(r["policy_version"] == r["step"] for r in records)
+    placed = next(line for line in lines if "learner rank nodes" in line)
+    assert sorted(placed.split("learner rank nodes ")[1].strip("[]").replace("'", "").split(", ")) == \
+        sorted([cluster["train_a"][:8], cluster["train_b"][:8]])
+    # The run's learner (and with it its ranks and their placement group) is gone: resources are free.
+    deadline = time.monotonic() + 15
+    while ray.available_resources().get("learner_node") != 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert ray.available_resources().get("learner_node") == 2
