@@ -86,6 +86,24 @@ def test_every_node_gets_python_311_from_uv_the_gpu_extra_data_and_the_submitted
     assert load_config(SUBMITTED_CONFIG).model.path == fetched
 
 
+SUBMIT_DOCS = ["docs/cluster.md", "README.md", "docs/training.md", "cluster.yaml"]
+
+
+@pytest.mark.parametrize("doc", SUBMIT_DOCS)
+def test_documented_job_submission_puts_the_cluster_venv_first_on_path(cluster, doc):
+    """The submit command users copy (tested for real in test_job_submit.py with a local venv)
+    must name the venv that cluster.yaml's setup builds, for the config that its setup prepares."""
+    text = (REPO_ROOT / doc).read_text(encoding="utf-8")
+    venv_bin = f"/home/{cluster['auth']['ssh_user']}/hcgym-venv/bin"
+    submits = re.findall(r"ray job submit .*?--runtime-env-json '([^']*)'(.*?)--output-dir", text, flags=re.S)
+    assert submits, f"{doc}: no `ray job submit ... --runtime-env-json '...'` command"
+    for runtime_env, rest in submits:
+        assert json.loads(runtime_env)["env_vars"]["PATH"] == f"{venv_bin}:${{PATH}}", (doc, runtime_env)
+        config = re.search(r"python -m learner\.train --config (\S+)", rest)
+        assert config and (REPO_ROOT / config[1]) == SUBMITTED_CONFIG, (doc, rest)
+    assert "--address http://127.0.0.1:8265" in text and "RAY_AUTH_MODE=token" in text, doc
+
+
 def test_ray_runs_from_the_venv_with_token_auth_and_a_loopback_dashboard(cluster):
     head = commands(cluster, "head_start_ray_commands")
     workers = commands(cluster, "worker_start_ray_commands")
