@@ -113,6 +113,8 @@ class Learner:
         blocked in the rendezvous, are killed rather than waited for).
         """
         ds, spec = self.config.deepspeed, self.placement
+        if not ray.is_initialized():
+            ray.init()  # what Ray's auto-init on the first `.remote()` did before the resource check came first
         bundle = rank_bundle(self.config, spec.resources)
         if spec.check_resources:
             check_cluster_fits([ActorDemand(name="learner rank", count=ws, resources=bundle)],
