@@ -173,30 +173,32 @@ class HFGenerator(Generator):
                  initial_version: int = 0, options: dict[str, Any] | None = None) -> None:
         super().__init__(model_dir, sampling, stop_token_ids, initial_version, options)
         import torch
-        from transformers import AutoModelForCausalLM
+
+        from learner.hf_checkpoint import load_model
 
         self.options = HFOptions.model_validate(options or {})
         self.device = torch.device(self.options.device)
         dtype = getattr(torch, self.options.dtype)
-        self.model = AutoModelForCausalLM.from_pretrained(
-            model_dir, dtype=dtype, local_files_only=True, use_safetensors=True
-        ).to(self.device)
-        self.model.eval()
-        pad = self.model.config.pad_token_id
+        # The one loading path (learner/hf_checkpoint.py): the checkpoint's own architecture class,
+        # so published weight names (model.language_model.* for Qwen3.5) are this model's names.
+        self.model = load_model(model_dir, dtype, self.device)
+        # Multimodal configs (Qwen3.5) keep the token ids on their text config.
+        pad = getattr(self.model.config.get_text_config(), "pad_token_id", None)
         self.pad_id = int(pad if pad is not None else stop_token_ids[0])
 
     def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
         import torch
 
+        # A subset of the model's names is fine (a frozen vision tower left out, a tied lm_head.weight
+        # skipped); a name the model does not have is an error, checked before anything is written.
+        own = self.model.state_dict()
+        unknown = sorted(set(state_dict) - set(own))
+        if unknown:
+            raise ValueError(f"update_weights(version={version}): unexpected (unknown) name(s) for "
+                             f"{type(self.model).__name__}: {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
         with torch.no_grad():
-            missing, unexpected = self.model.load_state_dict(
-                {k: v.to(self.device) for k, v in state_dict.items()}, strict=False
-            )
-        if missing or unexpected:
-            raise ValueError(
-                f"update_weights(version={version}): state dict does not match the model: "
-                f"missing {sorted(missing)[:5]}, unexpected {sorted(unexpected)[:5]}"
-            )
+            for name, tensor in state_dict.items():
+                own[name].copy_(tensor.to(device=own[name].device, dtype=own[name].dtype))
         self.version = int(version)
 
     def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:

@@ -297,10 +297,15 @@ class Teacher:
         return self._version
 
     def _check_keys(self, weights: dict[str, torch.Tensor]) -> None:
+        """Student weights may be a subset of the teacher's names (a frozen vision tower left out of a
+        sync, a tied lm_head.weight skipped), never a name the teacher does not have."""
         own = set(self.model.state_dict())
-        missing, extra = sorted(own - set(weights)), sorted(set(weights) - own)
-        if missing or extra:
-            raise ValueError(f"student weights do not match the teacher: missing {missing[:5]}, unexpected {extra[:5]}")
+        extra = sorted(set(weights) - own)
+        if extra:
+            raise ValueError(f"student weights do not match the teacher ({type(self.model).__name__}): unknown "
+                             f"name(s) {extra[:5]}{' ...' if len(extra) > 5 else ''}")
+        if not weights:
+            raise ValueError("student weights are empty")
 
     def ema_update(self, weights: dict[str, torch.Tensor], alpha: float | None = None) -> dict[str, Any]:
         """theta_T <- alpha * theta_T + (1 - alpha) * theta_S, for every tensor of the state dict."""
@@ -312,6 +317,8 @@ class Teacher:
             state = self.model.state_dict()
             seen: set[int] = set()
             for name, target in (self._shadow or state).items():
+                if name not in weights:  # not sent (a subset): keeps its value
+                    continue
                 if target.data_ptr() in seen:  # a tied tensor listed under two names: update it once
                     continue
                 seen.add(target.data_ptr())
@@ -328,6 +335,8 @@ class Teacher:
         with self._weights_lock, torch.no_grad():
             state = self.model.state_dict()
             for name, target in state.items():
+                if name not in weights:  # not sent (a subset): keeps its value
+                    continue
                 target.copy_(weights[name].to(device=target.device, dtype=target.dtype))
                 if self._shadow is not None:
                     self._shadow[name].copy_(weights[name].float())

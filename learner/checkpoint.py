@@ -6,7 +6,8 @@ Loading never unpickles arbitrary objects: tensors come from safetensors, optimi
 Layout of a run's checkpoints (the driver owns the directory; each actor writes its part):
 
     RUN_DIR/checkpoints/step_000004/
-        learner/            model.safetensors, optimizer*.pt, rng*.json, learner_state.json
+        learner/            policy/ (HF checkpoint: sharded safetensors + index, config, tokenizer),
+                            optimizer*.pt, rng*.json, learner_state.json
         teacher/            teacher.safetensors, teacher_state.json
         driver.json         data position, step, ... (written by the driver)
     RUN_DIR/checkpoints/latest   -> "step_000004" (written last, so a crash mid-save leaves the old one)

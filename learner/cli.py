@@ -1,4 +1,4 @@
-"""`hcgym train`, `hcgym plot` and `hcgym replay` (registered by `envs.cli`)."""
+"""`hcgym train`, `hcgym plot`, `hcgym replay` and `hcgym model fetch` (registered by `envs.cli`)."""
 
 from __future__ import annotations
 
@@ -33,6 +33,14 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_fetch(args: argparse.Namespace) -> int:
+    from learner.hf_checkpoint import fetch_model
+
+    path = fetch_model(args.model_id, revision=args.revision, cache_dir=args.cache_dir)
+    print(path)
+    return 0
+
+
 def register(subparsers) -> None:
     """Add the training subcommands to the `hcgym` parser."""
     from learner.train import build_arg_parser
@@ -57,3 +65,15 @@ def register(subparsers) -> None:
     replay.add_argument("--model-dir", required=True, help="weights to evaluate (e.g. RUN_DIR/model/sft)")
     replay.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     replay.set_defaults(func=_replay)
+
+    model = subparsers.add_parser("model", help="model checkpoints (the Hugging Face cache)")
+    model_sub = model.add_subparsers(dest="model_command", required=True)
+    fetch = model_sub.add_parser(
+        "fetch", help="download a hub model into the Hugging Face cache (needs hub access)",
+        description="Download config, tokenizer and safetensors weights of a hub model into the Hugging Face "
+                    "cache (HF_HUB_CACHE, else HF_HOME/hub), where `model.path: ORG/NAME` finds it offline. "
+                    "Prints the snapshot folder.")
+    fetch.add_argument("model_id", metavar="ID", help="hub model id, e.g. Qwen/Qwen3.5-9B")
+    fetch.add_argument("--revision", default=None, help="branch, tag or commit (default: main)")
+    fetch.add_argument("--cache-dir", default=None, help="cache folder (default: the Hugging Face hub cache)")
+    fetch.set_defaults(func=_model_fetch)

@@ -54,16 +54,26 @@ class TinyModelConfig(_Strict):
 
 
 class ModelConfig(_Strict):
-    """Where the initial policy comes from: `tiny` builds one, `pretrained` loads a local directory."""
+    """Where the initial policy comes from: `tiny` builds one, `pretrained` loads a checkpoint.
+
+    `path` (kind: pretrained) is a local checkpoint folder or a hub id (`Qwen/Qwen3.5-9B`) resolved
+    through the Hugging Face cache without downloading (`hcgym model fetch ID` fills the cache).
+    Checkpoint layouts read: learner/hf_checkpoint.py.
+    """
 
     kind: Literal["tiny", "pretrained"] = "tiny"
-    path: str | None = Field(default=None, description="local model dir (kind: pretrained)")
+    path: str | None = Field(default=None, description="local checkpoint folder or cached hub id (kind: pretrained)")
+    revision: str | None = Field(default=None, description="hub revision (branch, tag or commit) when path is a hub id")
     tiny: TinyModelConfig = Field(default_factory=TinyModelConfig)
 
     @model_validator(mode="after")
     def _path(self) -> "ModelConfig":
         if self.kind == "pretrained" and not self.path:
             raise ValueError("model.path is required when model.kind is 'pretrained'")
+        if self.kind == "tiny" and (self.path or self.revision):
+            raise ValueError("model.path / model.revision are only read when model.kind is 'pretrained'")
+        if self.revision is not None and self.path and Path(self.path).expanduser().exists():
+            raise ValueError(f"model.revision is for hub ids; model.path {self.path!r} is a local folder")
         return self
 
 

@@ -130,6 +130,9 @@ class LearnerConfig(_Strict):
     optim: OptimConfig = Field(default_factory=OptimConfig)
     deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)
     reference_model_dir: str | None = Field(default=None, description="frozen KL reference; None = the initial policy")
+    # Multimodal checkpoints (Qwen3.5, Qwen2.5-VL): the language model always trains; the vision
+    # tower (`model.visual.*`) stays frozen unless this is set. No effect on text-only models.
+    train_vision_tower: bool = False
 
     @model_validator(mode="after")
     def _consistent(self) -> LearnerConfig:

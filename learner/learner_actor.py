@@ -24,7 +24,8 @@ import torch
 
 from actors.types import RolloutSample, TeacherOutput
 from learner.backends.worker import RankWorker, combine_rank_metrics
-from learner.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
+from learner.checkpoint import read_json, write_json_atomic
+from learner.hf_checkpoint import DEFAULT_MAX_SHARD_SIZE, read_checkpoint_tensors, save_sharded_checkpoint
 from learner.config_models import LearnerConfig
 from learner.placement import (
     ActorDemand,
@@ -42,6 +43,7 @@ from learner.placement import (
 )
 
 LEARNER_SUBDIR = "learner"
+POLICY_SUBDIR = "policy"  # learner/policy/: the policy weights as a Hugging Face checkpoint
 
 
 def free_port() -> int:
@@ -220,7 +222,10 @@ class Learner:
 
     # -- weights -------------------------------------------------------------------------------
     def get_state_dict(self) -> dict[str, torch.Tensor]:
-        """Full CPU weights (ZeRO-3: gathered module by module, never the whole model at once)."""
+        """Full CPU weights (ZeRO-3: gathered module by module, never the whole model at once).
+
+        Keyed by the checkpoint architecture's parameter names (`model.language_model.*` for Qwen3.5),
+        a tied `lm_head.weight` included."""
         return self._all("full_state_dict")[0]
 
     get_weights = get_state_dict
@@ -251,11 +256,16 @@ class Learner:
         return out
 
     # -- checkpoints ---------------------------------------------------------------------------
-    def save_checkpoint(self, directory: str) -> str:
-        """Write weights (safetensors), optimizer and RNG states of every rank, step and version.
+    def save_checkpoint(self, directory: str, max_shard_size: str | int = DEFAULT_MAX_SHARD_SIZE) -> str:
+        """Write weights, optimizer and RNG states of every rank, step and version.
+
+        The policy weights go to `directory/learner/policy/` as a Hugging Face checkpoint (sharded
+        safetensors + index, config and tokenizer of the initial model), which
+        `transformers.AutoModel*.from_pretrained`, vLLM and `model.path` load unchanged.
 
         Args:
             directory: The step's checkpoint directory; the learner writes `directory/learner/`.
+            max_shard_size: Shard limit of the policy weights ('5GB', '400KB', bytes).
 
         Returns:
             The learner subdirectory written.
@@ -263,7 +273,8 @@ class Learner:
         out = Path(directory) / LEARNER_SUBDIR
         out.mkdir(parents=True, exist_ok=True)
         weights = self.get_state_dict()
-        save_tensors(out / "model.safetensors", weights, metadata={"policy_version": str(self._version)})
+        save_sharded_checkpoint(out / POLICY_SUBDIR, weights, source_dir=self.model_dir, max_shard_size=max_shard_size,
+                                metadata={"policy_version": str(self._version)})
         self._all("save_rank_state", str(out))
         write_json_atomic(out / "learner_state.json", {
             "step": self._step, "policy_version": self._version, "backend": self.config.backend,
@@ -284,7 +295,7 @@ class Learner:
                 f"checkpoint {src} was written by backend={meta['backend']} world_size={meta['world_size']}, "
                 f"this learner runs backend={self.config.backend} world_size={self.world_size}"
             )
-        weights = load_tensors(src / "model.safetensors")
+        weights = read_checkpoint_tensors(src / POLICY_SUBDIR)
         self._all("load_full_state_dict", weights)
         self._all("load_rank_state", str(src))
         self._step = int(meta["step"])

@@ -270,26 +270,26 @@ def build_tiny_model(
 
 
 def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32, *, tokenizer_dir=None):
-    """Load a causal LM and its tokenizer from a local directory (safetensors only).
+    """Load a policy (the checkpoint's own architecture class) and its tokenizer.
+
+    Goes through `learner.hf_checkpoint.load_model`, the one loading path: sharded or single-file
+    safetensors, tied or untied embeddings, multimodal wrappers (Qwen3.5, Qwen2.5-VL), a local
+    folder or a hub id already in the Hugging Face cache.
 
     Args:
-        model_dir: Directory written by `build_tiny_model` or `save_pretrained`.
+        model_dir: A checkpoint folder (`build_tiny_model`, `save_pretrained`, `save_sharded_checkpoint`)
+            or a cached hub id.
         dtype: Parameter dtype.
         tokenizer_dir: Tokenizer directory when it is not stored next to the model.
 
     Returns:
         `(model, tokenizer)`; the model is in eval mode.
     """
-    from transformers import AutoModelForCausalLM
+    from learner.hf_checkpoint import load_model, resolve_model_path
 
     _quiet_transformers()
-    path = Path(model_dir)
-    if not (path / "config.json").exists():
-        raise FileNotFoundError(f"no model config.json in {path}")
-    model = AutoModelForCausalLM.from_pretrained(
-        str(path), dtype=dtype, local_files_only=True, use_safetensors=True
-    )
-    model.eval()
+    path = resolve_model_path(model_dir)
+    model = load_model(path, dtype)
     tokenizer = load_tokenizer(tokenizer_dir or path)
     return model, tokenizer
 

@@ -122,10 +122,14 @@ def hinted_example(sample: RolloutSample, tokenizer, hints, kind: str) -> SFTExa
 
 def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[RolloutSample | SFTExample], *, epochs: float,
             lr: float, batch_size: int, seed: int, weight_decay: float = 0.0, warmup_frac: float = 0.05,
-            max_grad_norm: float = 1.0, log: Callable[[str], None] = print) -> dict[str, Any]:
+            max_grad_norm: float = 1.0, train_vision_tower: bool = False, max_shard_size: str | int = "5GB",
+            log: Callable[[str], None] = print) -> dict[str, Any]:
     """Next-token cross-entropy on the assistant tokens (loss mask 1) of `samples`.
 
-    AdamW with linear warmup and cosine decay; the model and tokenizer are saved to `output_dir`.
+    AdamW with linear warmup and cosine decay. The model is loaded through the one loading path
+    (`learner.hf_checkpoint`); a multimodal checkpoint's vision tower stays frozen unless
+    `train_vision_tower`. `output_dir` receives a Hugging Face checkpoint (sharded safetensors +
+    index, config, tokenizer) that `from_pretrained`, vLLM and the learner load unchanged.
 
     Returns:
         {"steps", "first_loss", "last_loss", "seconds"}.
@@ -133,6 +137,7 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
     import numpy as np
     import torch
 
+    from learner.hf_checkpoint import freeze_vision_tower, save_sharded_checkpoint
     from learner.model import load_policy, pad_batch, per_token_logprobs
 
     if not samples:
@@ -140,8 +145,10 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     model, tokenizer = load_policy(model_dir)
+    freeze_vision_tower(model, train_vision_tower=train_vision_tower)
     model.train()
-    optim = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=weight_decay)
+    trainable = [p for p in model.parameters() if p.requires_grad]
+    optim = torch.optim.AdamW(trainable, lr=lr, weight_decay=weight_decay)
     batches_per_epoch = math.ceil(len(samples) / batch_size)
     total = max(1, int(round(epochs * batches_per_epoch)))
     warmup = int(warmup_frac * total)
@@ -170,7 +177,7 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
             group["lr"] = lr_at(step)
         optim.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(trainable, max_grad_norm)
         optim.step()
         losses.append(float(loss.detach()))
         if step == 0 or (step + 1) % max(1, total // 10) == 0 or step + 1 == total:
@@ -179,8 +186,8 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
     model.eval()
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    model.save_pretrained(str(out), safe_serialization=True)
-    tokenizer.save_pretrained(str(out))
+    # Config, generation config and tokenizer files are copied from `model_dir`.
+    save_sharded_checkpoint(out, model.state_dict(), source_dir=model_dir, max_shard_size=max_shard_size)
     return {"steps": total, "first_loss": losses[0], "last_loss": losses[-1],
             "seconds": time.perf_counter() - started, "samples": len(samples)}
 
@@ -222,9 +229,12 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
     root.mkdir(parents=True, exist_ok=True)
     info: dict[str, Any] = {}
     if cfg.model.kind == "pretrained":
-        base = Path(cfg.model.path)
-        if not (base / "config.json").exists():
-            raise FileNotFoundError(f"model.path: {base} has no config.json")
+        from learner.hf_checkpoint import resolve_model_path
+
+        try:  # a local folder, or a hub id already in the Hugging Face cache (never downloaded here)
+            base = resolve_model_path(cfg.model.path, revision=cfg.model.revision)
+        except (FileNotFoundError, ValueError) as exc:
+            raise type(exc)(f"model.path: {exc}") from exc
     else:
         t0 = time.perf_counter()
         tiny = cfg.model.tiny
@@ -259,7 +269,8 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
             log(f"[sft] {len(chosen)} of {len(samples)} examples carry a teacher hint turn")
         info["sft"] = run_sft(base, root / "sft", examples, epochs=s.epochs, lr=s.lr, batch_size=s.batch_size,
                               seed=cfg.seed, weight_decay=s.weight_decay, warmup_frac=s.warmup_frac,
-                              max_grad_norm=s.max_grad_norm, log=log)
+                              max_grad_norm=s.max_grad_norm, train_vision_tower=cfg.learner.train_vision_tower,
+                              log=log)
         policy = root / "sft"
     record.write_text(json.dumps({"policy_dir": str(policy.resolve()), "fingerprint": fingerprint, **info}, indent=1))
     return policy.resolve()

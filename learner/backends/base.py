@@ -25,7 +25,7 @@ class LearnerBackend(ABC):
 
     Args:
         config: Learner settings.
-        model_dir: Local model directory (config.json + model.safetensors).
+        model_dir: Checkpoint folder (config.json + sharded or single safetensors) or a cached hub id.
         seed: Seed for this rank's RNGs.
         rank: Data-parallel rank.
         world_size: Number of ranks.
@@ -78,6 +78,9 @@ class LearnerBackend(ABC):
     def iter_full_parameters(self) -> Iterator[tuple[str, torch.Tensor]]:
         """Yield (name, full tensor) one module at a time (ZeRO-3: gathered, then released).
 
+        Names are the checkpoint architecture's parameter names; a tied `lm_head.weight` is yielded
+        under its own name too (receivers that tie may skip it).
+
         A yielded tensor is only valid until the next iteration; consumers copy or send it at once.
         Every rank must iterate (gathering is collective); all ranks see the full tensors.
         """
@@ -85,7 +88,8 @@ class LearnerBackend(ABC):
     def parameter_specs(self) -> list[tuple[str, list[int], torch.dtype]]:
         """(name, full shape, dtype) of what `iter_full_parameters` yields, in the same order, without gathering."""
         out = []
-        for name, p in self.policy.named_parameters():
+        # remove_duplicate=False: a tied lm_head.weight is listed (and published) under its own name.
+        for name, p in self.policy.named_parameters(remove_duplicate=False):
             out.append((name, list(getattr(p, "ds_shape", p.shape)), p.dtype))
         return out
 
@@ -134,13 +138,12 @@ def make_backend(config: LearnerConfig, model_dir: str, seed: int, rank: int = 0
     raise ValueError(f"learner.backend={config.backend!r}: expected 'torch' or 'deepspeed'")
 
 
-def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu") -> torch.nn.Module:
-    """A causal LM from a local directory (safetensors only), without progress bars."""
-    from transformers import AutoModelForCausalLM
-    from transformers.utils import logging as hf_logging
+def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu", *,
+                   train_vision_tower: bool = False) -> torch.nn.Module:
+    """The policy from a checkpoint folder or cached hub id (`learner.hf_checkpoint.load_model`),
+    with the vision tower of a multimodal checkpoint frozen unless `train_vision_tower`."""
+    from learner.hf_checkpoint import freeze_vision_tower, load_model
 
-    hf_logging.disable_progress_bar()
-    if not (Path(model_dir) / "config.json").exists():
-        raise FileNotFoundError(f"no config.json in model directory {model_dir}")
-    model = AutoModelForCausalLM.from_pretrained(model_dir, dtype=dtype, local_files_only=True, use_safetensors=True)
-    return model.to(device)
+    model = load_model(model_dir, dtype, device)
+    freeze_vision_tower(model, train_vision_tower=train_vision_tower)
+    return model

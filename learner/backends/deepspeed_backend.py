@@ -13,8 +13,9 @@ Choices that come from measurements on our machines (docs/../stack_notes):
 - `managed_gradient_accumulation: false`: the learner decides how many micro-batches a step has
   (it varies with dynamic sampling) and calls `step()` once per batch.
 
-The policy is built under `zero.Init` (partitioned from birth) and its weights are loaded from the
-safetensors file one module at a time, so no rank ever holds the whole model. The same layer-by-
+The policy is built under `zero.Init` (partitioned from birth) as the checkpoint's own architecture
+class and its weights are loaded from the (sharded) safetensors checkpoint one module at a time
+(`learner.hf_checkpoint.load_weights_by_module`), so no rank ever holds the whole model. The same layer-by-
 layer gathering serves `iter_full_parameters` (weight sync, checkpoints).
 
 Checkpoints are our own, not DeepSpeed's (whose loader unpickles with weights_only=False): each
@@ -80,27 +81,38 @@ def _ds_config(config: LearnerConfig) -> dict:
 
 
 def _load_weights_module_by_module(model: torch.nn.Module, model_dir: str, rank: int) -> None:
-    """Fill a zero.Init-partitioned model from safetensors, one module's parameters at a time."""
+    """Fill a zero.Init-partitioned model from its (sharded) safetensors checkpoint, one module's
+    parameters at a time: rank 0 reads and writes, every rank joins the gather (collective)."""
     import deepspeed
-    from safetensors import safe_open
 
-    path = Path(model_dir) / "model.safetensors"
-    if not path.exists():
-        raise FileNotFoundError(f"deepspeed backend: {path} not found (sharded checkpoints are not supported here)")
-    with safe_open(str(path), framework="pt", device="cpu") as f:
-        keys = set(f.keys())
-        for mod_name, module in model.named_modules():
-            params = list(module.named_parameters(recurse=False))
-            if not params:
-                continue
-            with deepspeed.zero.GatheredParameters([p for _, p in params], modifier_rank=0):
-                if rank == 0:
-                    for pname, param in params:
-                        key = f"{mod_name}.{pname}" if mod_name else pname
-                        if key not in keys:
-                            raise KeyError(f"{path} has no tensor {key!r}")
-                        with torch.no_grad():
-                            param.copy_(f.get_tensor(key).to(param.dtype))
+    from learner.hf_checkpoint import load_weights_by_module
+
+    load_weights_by_module(model, model_dir,
+                           gather=lambda params: deepspeed.zero.GatheredParameters(params, modifier_rank=0),
+                           write=rank == 0)
+
+
+def _register_external_parameters(model: torch.nn.Module) -> int:
+    """Let ZeRO-3 gather parameters that a module reads from its child without calling the child.
+
+    ZeRO-3 gathers a module's own parameters around its forward. The gated delta net of Qwen3-Next /
+    Qwen3.5 (linear attention) passes `self.conv1d.weight` to a conv kernel instead of calling
+    `self.conv1d(...)`, so that weight would stay a partitioned, empty tensor (an IndexError in the
+    first forward); registered as external parameters of the parent, it is gathered with it.
+
+    Returns:
+        How many parameters were registered.
+    """
+    import deepspeed
+
+    count = 0
+    for module in model.modules():
+        conv = getattr(module, "conv1d", None)
+        if isinstance(conv, torch.nn.Conv1d) and type(module).__name__.endswith("GatedDeltaNet"):
+            for param in conv.parameters(recurse=False):
+                deepspeed.zero.register_external_parameter(module, param)
+                count += 1
+    return count
 
 
 class DeepSpeedBackend(LearnerBackend):
@@ -121,9 +133,9 @@ class DeepSpeedBackend(LearnerBackend):
             # attribute), so patch through sys.modules.
             __import__("deepspeed.comm.torch")
             sys.modules["deepspeed.comm.torch"].build_shm_op = lambda: None
-        from transformers import AutoConfig, AutoModelForCausalLM
-        from transformers.initialization import no_init_weights
         from transformers.utils import logging as hf_logging
+
+        from learner.hf_checkpoint import build_empty_model, freeze_vision_tower, load_hf_config, resolve_model_path
 
         hf_logging.disable_progress_bar()
         torch.manual_seed(seed)
@@ -134,25 +146,28 @@ class DeepSpeedBackend(LearnerBackend):
             torch.cuda.set_device(int(os.environ["LOCAL_RANK"]))
         self._dtype = DTYPES[config.dtype]
         self._ds_config = _ds_config(config)
-        hf_config = AutoConfig.from_pretrained(model_dir, local_files_only=True)
 
         def build(directory: str) -> torch.nn.Module:
-            cfg = hf_config if directory == model_dir else AutoConfig.from_pretrained(directory, local_files_only=True)
-            # No random init: every tensor is loaded below (and HF's init indexes the embedding's
-            # padding row, which a partitioned parameter does not have).
-            # No `dtype=` here: DeepSpeed 0.19.8 ignores an explicit dtype on accelerators without fp16
-            # (CPU) and picks bf16; without it the dtype follows the config's bf16 switch.
-            with no_init_weights(), deepspeed.zero.Init(config_dict_or_path=self._ds_config):
-                model = AutoModelForCausalLM.from_config(cfg, dtype=self._dtype)
-            _load_weights_module_by_module(model, directory, rank)
+            path = resolve_model_path(directory)
+            # The checkpoint's own architecture class (config.architectures[0]), so parameter names are
+            # the checkpoint's (model.language_model.* for Qwen3.5). No random init: every tensor is
+            # loaded below (and HF's init indexes the embedding's padding row, which a partitioned
+            # parameter does not have). zero.Init picks the partitions' dtype from the config's bf16
+            # switch (DeepSpeed 0.19.8 ignores an explicit dtype on CPU).
+            with deepspeed.zero.Init(config_dict_or_path=self._ds_config):
+                model = build_empty_model(load_hf_config(path), self._dtype)
+            _load_weights_module_by_module(model, str(path), rank)
+            _register_external_parameters(model)
             return model
 
         model = build(model_dir)
+        freeze_vision_tower(model, train_vision_tower=config.train_vision_tower)
         if config.gradient_checkpointing:
             model.gradient_checkpointing_enable()
         model.train()
         o = config.optim
-        optimizer = torch.optim.AdamW(model.parameters(), lr=o.lr, betas=o.betas, eps=o.eps,
+        trainable = [p for p in model.parameters() if p.requires_grad]  # not a frozen vision tower
+        optimizer = torch.optim.AdamW(trainable, lr=o.lr, betas=o.betas, eps=o.eps,
                                       weight_decay=o.weight_decay)
         self._engine, self._optimizer, _, _ = deepspeed.initialize(model=model, optimizer=optimizer,
                                                                    config=self._ds_config)
@@ -194,6 +209,7 @@ class DeepSpeedBackend(LearnerBackend):
 
         module = self._engine.module
         for mod_name, sub in module.named_modules():
+            # Module by module, so a tied lm_head.weight is yielded under its own name as well.
             params = list(sub.named_parameters(recurse=False))
             if not params:
                 continue
@@ -207,12 +223,14 @@ class DeepSpeedBackend(LearnerBackend):
 
         module = self._engine.module
         if self.rank == 0:
-            own = {n for n, _ in module.named_parameters()}
+            own = {n for n, _ in module.named_parameters()}  # canonical names: a tied alias may be absent
             missing = sorted(own - set(state))
             if missing:
                 raise ValueError(f"weights lack {missing[:5]}")
+        seen: set[int] = set()
         for mod_name, sub in module.named_modules():
-            params = list(sub.named_parameters(recurse=False))
+            params = [(n, p) for n, p in sub.named_parameters(recurse=False) if id(p) not in seen]
+            seen.update(id(p) for _, p in params)
             if not params:
                 continue
             with deepspeed.zero.GatheredParameters([p for _, p in params], modifier_rank=0):

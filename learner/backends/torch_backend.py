@@ -10,6 +10,7 @@ import torch
 from learner.backends.base import DTYPES, LearnerBackend, load_causal_lm
 from learner.checkpoint import load_torch_state, save_torch_state
 from learner.config_models import LearnerConfig
+from learner.hf_checkpoint import tied_parameter_aliases
 
 
 class TorchBackend(LearnerBackend):
@@ -23,7 +24,7 @@ class TorchBackend(LearnerBackend):
         super().__init__(config, model_dir, seed, rank, world_size)
         torch.manual_seed(seed)
         dtype = DTYPES[config.dtype]
-        self._model = load_causal_lm(model_dir, dtype, config.device)
+        self._model = load_causal_lm(model_dir, dtype, config.device, train_vision_tower=config.train_vision_tower)
         if config.gradient_checkpointing:
             self._model.gradient_checkpointing_enable()
         self._model.train()
@@ -67,6 +68,9 @@ class TorchBackend(LearnerBackend):
 
     def load_full_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         missing, unexpected = self._model.load_state_dict(state, strict=False)
+        # A tied alias (lm_head.weight) may be absent: it is loaded through the tensor it shares.
+        aliases = tied_parameter_aliases(self._model)
+        missing = [m for m in missing if m not in aliases]
         if missing or unexpected:
             raise ValueError(f"weights do not match the policy: missing {missing[:5]}, unexpected {unexpected[:5]}")
 

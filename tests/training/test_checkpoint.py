@@ -12,7 +12,6 @@ from learner.checkpoint import (
     capture_rng_state,
     checkpoint_dir,
     latest_checkpoint,
-    load_tensors,
     load_torch_state,
     mark_latest,
     prune_checkpoints,
@@ -20,6 +19,7 @@ from learner.checkpoint import (
     save_torch_state,
 )
 from learner.config_models import LearnerConfig
+from learner.hf_checkpoint import read_checkpoint_tensors
 from learner.learner_actor import Learner
 from tests.training.learner_fixtures import make_batch, tiny_model_dir
 
@@ -57,7 +57,7 @@ def test_resume_gives_identical_weights_torch_backend(tmp_path):
     assert resumed.policy_version() == straight.policy_version() == 4
     # Without the optimizer state the run would differ: the test can tell.
     no_opt = Learner(cfg, model_dir)
-    no_opt.set_weights(load_tensors(ckpt / "learner" / "model.safetensors"))
+    no_opt.set_weights(read_checkpoint_tensors(ckpt / "learner" / "policy"))
     no_opt.train_step(batches[2])
     no_opt.train_step(batches[3])
     c = no_opt.get_state_dict()

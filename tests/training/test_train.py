@@ -12,6 +12,7 @@ from learner.checkpoint import load_tensors
 from learner.config import validate_config
 from learner.metrics import REQUIRED_KEYS, read_metrics, read_samples
 from tests.training.conftest import NO_EMBEDDINGS
+from learner.hf_checkpoint import read_checkpoint_tensors
 
 pytestmark = pytest.mark.ray
 WARD = {"ward": "tests.fixtures.ward_domain.environment"}
@@ -42,7 +43,7 @@ def tiny_config(run_dir, policy_dir, **sections):
 def final_weights(run_dir):
     from learner.checkpoint import latest_checkpoint
 
-    return load_tensors(latest_checkpoint(run_dir) / "learner" / "model.safetensors")
+    return read_checkpoint_tensors(latest_checkpoint(run_dir) / "learner" / "policy")
 
 
 def test_grpo_runs_streams_on_policy_and_resumes_exactly(ray_cluster, ward_policy_dir, tmp_path):
@@ -93,7 +94,7 @@ def test_grpo_runs_streams_on_policy_and_resumes_exactly(ray_cluster, ward_polic
     assert a.keys() == b.keys()
     changed = [k for k in a if not (a[k] == b[k]).all()]
     assert not changed, f"resumed run differs in {changed[:3]}"
-    first = load_tensors(split / "checkpoints" / "step_000002" / "learner" / "model.safetensors")
+    first = read_checkpoint_tensors(split / "checkpoints" / "step_000002" / "learner" / "policy")
     assert any(not (first[k] == a[k]).all() for k in a), "steps 3-4 did not change the weights"
 
     from learner.plot import plot_runs

@@ -77,6 +77,6 @@ def test_sft_lowers_the_loss_on_gold_turns(gold, ward_policy_dir, tmp_path):
                    log=lambda line: None)
     assert info["steps"] == 10 and info["last_loss"] < info["first_loss"]
     assert nll(tmp_path / "sft") < nll(ward_policy_dir) - 1.0
-    assert (tmp_path / "sft" / "model.safetensors").exists() and (tmp_path / "sft" / "tokenizer.json").exists()
+    assert (tmp_path / "sft" / "model.safetensors.index.json").exists() and (tmp_path / "sft" / "tokenizer.json").exists()
     with pytest.raises(ValueError, match="no training samples"):
         run_sft(ward_policy_dir, tmp_path / "x", [], epochs=1, lr=1e-3, batch_size=1, seed=0)

@@ -1,0 +1,368 @@
+"""Checkpoints as people have them: tiny twins of Qwen3, Qwen3.5 (with its vision tower) and a tied Llama,
+saved sharded, loaded through the one loading path (learner/hf_checkpoint.py) by every component.
+
+Log-prob agreement is checked on the generator's own samples: the HF generator reports the log-prob
+of each token it draws; the learner's `logprob_abs_diff` (mean |learner - rollout| over the sampled
+tokens) and the teacher's log-probs (hints off) must match them. Tolerance: 2e-5 nats per token
+(fp32; the generator scores incrementally over a KV cache / recurrent state with left padding, the
+learner and teacher in one right-padded forward, so only float summation order differs; measured
+differences are <= 2e-6). After one learner step (lr 1e-2) the old log-probs are off by > 1e-3.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from actors.types import RolloutSample, TurnSpan
+from tests.training.learner_fixtures import CORPUS
+from tests.training.twins import TWIN_ARCHITECTURES, TWIN_FAMILIES, build_twin
+
+LOGPROB_TOL = 2e-5
+STEP_MOVES_LOGPROBS = 1e-3
+
+
+@pytest.fixture(scope="module")
+def twin_root(tmp_path_factory) -> Path:
+    from learner.model import train_tokenizer
+
+    root = tmp_path_factory.mktemp("twins")
+    tok = train_tokenizer(CORPUS, 1024, root / "tok", max_stdlib_files=40)
+    for family in TWIN_FAMILIES:
+        build_twin(family, root / family, tok)
+    return root
+
+
+def _weight_map(model_dir: Path) -> dict[str, str]:
+    return json.loads((model_dir / "model.safetensors.index.json").read_text())["weight_map"]
+
+
+# -- layouts and the loader ------------------------------------------------------------------------
+
+
+def test_twins_have_the_real_layouts_and_are_sharded(twin_root):
+    for family in TWIN_FAMILIES:
+        d = twin_root / family
+        names = _weight_map(d)
+        assert len(set(names.values())) >= 2, family
+        assert json.loads((d / "config.json").read_text())["architectures"] == [TWIN_ARCHITECTURES[family]]
+        assert (d / "tokenizer.json").exists()
+    assert "model.layers.0.self_attn.q_norm.weight" in _weight_map(twin_root / "qwen3")
+    qwen35 = _weight_map(twin_root / "qwen3_5")
+    assert any(n.startswith("model.visual.blocks.0.") for n in qwen35)
+    assert "model.language_model.layers.0.linear_attn.A_log" in qwen35  # the hybrid linear-attention layer
+    assert "model.language_model.layers.1.self_attn.q_proj.weight" in qwen35
+    assert "lm_head.weight" in qwen35 and not any(n.startswith("model.layers.") for n in qwen35)
+    assert "lm_head.weight" not in _weight_map(twin_root / "llama_tied")  # tied: not stored
+
+
+@pytest.mark.parametrize("family", TWIN_FAMILIES)
+def test_load_model_equals_transformers_from_pretrained(twin_root, family):
+    import transformers
+
+    from learner.hf_checkpoint import load_model, tied_parameter_aliases
+
+    d = twin_root / family
+    ours = load_model(d)
+    theirs = getattr(transformers, TWIN_ARCHITECTURES[family]).from_pretrained(str(d))
+    assert type(ours) is type(theirs)
+    a, b = ours.state_dict(), theirs.state_dict()
+    assert set(a) == set(b)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    if family == "llama_tied":
+        assert tied_parameter_aliases(ours) == {"lm_head.weight": "model.embed_tokens.weight"}
+        assert ours.lm_head.weight is ours.model.embed_tokens.weight
+    half = load_model(d, torch.bfloat16)
+    assert all(p.dtype == torch.bfloat16 for n, p in half.named_parameters() if "A_log" not in n)
+
+
+def test_a_pre_4_52_multimodal_layout_loads_into_the_same_names(twin_root, tmp_path):
+    """Qwen2.5-VL checkpoints published before transformers nested the language model store
+    `model.layers.*` and `visual.*`; the loader reads them into `model.language_model.*` / `model.visual.*`."""
+    import shutil
+
+    from safetensors.torch import save_file
+
+    from learner.hf_checkpoint import load_model, read_checkpoint_tensors
+
+    src = twin_root / "qwen3_5"
+    legacy = {}
+    for name, t in read_checkpoint_tensors(src).items():
+        name = name.replace("model.language_model.", "model.").replace("model.visual.", "visual.")
+        legacy[name] = t.contiguous()
+    for f in src.iterdir():
+        if not f.name.startswith("model"):
+            shutil.copy2(f, tmp_path / f.name)
+    save_file(legacy, str(tmp_path / "model.safetensors"))  # unsharded this time
+    a, b = load_model(tmp_path).state_dict(), load_model(src).state_dict()
+    assert set(a) == set(b) and all(torch.equal(a[k], b[k]) for k in a)
+    # A checkpoint missing a tensor is named, with the folder.
+    del legacy["visual.blocks.0.norm1.weight"]
+    save_file(legacy, str(tmp_path / "model.safetensors"))
+    with pytest.raises(KeyError, match=r"has no tensor 'model\.visual\.blocks\.0\.norm1\.weight'"):
+        load_model(tmp_path)
+
+
+def test_missing_weights_and_bad_index_are_named(tmp_path, twin_root):
+    import shutil
+
+    from learner.hf_checkpoint import checkpoint_weight_map
+
+    (tmp_path / "config.json").write_text("{}")
+    (tmp_path / "pytorch_model.bin").write_bytes(b"")
+    with pytest.raises(FileNotFoundError, match="only safetensors checkpoints are read"):
+        checkpoint_weight_map(tmp_path)
+    broken = tmp_path / "broken"
+    shutil.copytree(twin_root / "qwen3", broken)
+    next(broken.glob("model-00002-of-*.safetensors")).unlink()
+    with pytest.raises(FileNotFoundError, match="names shard model-00002-of-"):
+        checkpoint_weight_map(broken)
+
+
+# -- hub ids through the Hugging Face cache ---------------------------------------------------------
+
+
+def _write_cache_snapshot(cache: Path, repo_id: str, revision: str, twin_dir: Path) -> Path:
+    """The hub cache layout, written by us: models--org--name/{blobs,snapshots/<rev>,refs/main}."""
+    repo = cache / ("models--" + repo_id.replace("/", "--"))
+    snapshot = repo / "snapshots" / revision
+    snapshot.mkdir(parents=True)
+    (repo / "blobs").mkdir()
+    for f in twin_dir.iterdir():  # the hub cache stores blobs by hash and links them from the snapshot
+        blob = repo / "blobs" / f"blob-{f.name}"
+        blob.write_bytes(f.read_bytes())
+        (snapshot / f.name).symlink_to(os.path.relpath(blob, snapshot))
+    (repo / "refs").mkdir()
+    (repo / "refs" / "main").write_text(revision)
+    return snapshot
+
+
+def test_hub_id_resolves_from_the_cache_offline_and_its_absence_is_named(twin_root, tmp_path, monkeypatch):
+    from learner.config import ModelConfig
+    from learner.hf_checkpoint import resolve_model_path
+    from learner.model import load_policy
+
+    cache = tmp_path / "hub"
+    rev = "0123456789abcdef0123456789abcdef01234567"
+    snapshot = _write_cache_snapshot(cache, "tiny-org/Tiny-Qwen3.5", rev, twin_root / "qwen3_5")
+    monkeypatch.setenv("HF_HUB_CACHE", str(cache))
+    assert resolve_model_path("tiny-org/Tiny-Qwen3.5") == snapshot
+    assert resolve_model_path("tiny-org/Tiny-Qwen3.5", revision=rev) == snapshot
+    model, tokenizer = load_policy("tiny-org/Tiny-Qwen3.5")
+    assert type(model).__name__ == "Qwen3_5ForConditionalGeneration" and len(tokenizer) == 1024
+    with pytest.raises(FileNotFoundError, match=rf"'tiny-org/absent' is not in the Hugging Face cache {cache}"):
+        resolve_model_path("tiny-org/absent")
+    with pytest.raises(FileNotFoundError, match="at revision 'v2'"):
+        resolve_model_path("tiny-org/Tiny-Qwen3.5", revision="v2")
+    with pytest.raises(ValueError, match="does not exist and is not a hub id"):
+        resolve_model_path(str(tmp_path / "no" / "such" / "dir"))
+    with pytest.raises(FileNotFoundError, match="has no config.json"):
+        resolve_model_path(tmp_path)
+    ModelConfig(kind="pretrained", path="tiny-org/Tiny-Qwen3.5", revision=rev)
+    with pytest.raises(ValueError, match="model.revision is for hub ids"):
+        ModelConfig(kind="pretrained", path=str(snapshot), revision=rev)
+
+
+def test_model_fetch_offline_fails_with_a_clear_message(tmp_path):
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HUB_CACHE": str(tmp_path)}
+    proc = subprocess.run([sys.executable, "-m", "envs.cli", "model", "fetch", "tiny-org/never-fetched"],
+                          capture_output=True, text=True, env=env, timeout=120, cwd=Path(__file__).parents[2])
+    assert proc.returncode == 2
+    assert "could not download 'tiny-org/never-fetched'" in proc.stderr and str(tmp_path) in proc.stderr
+    assert "HF_HUB_OFFLINE" in proc.stderr
+    bad = subprocess.run([sys.executable, "-m", "envs.cli", "model", "fetch", "not a model id"],
+                         capture_output=True, text=True, env=env, timeout=120, cwd=Path(__file__).parents[2])
+    assert bad.returncode == 2 and "is not of the form 'org/name'" in bad.stderr
+
+
+# -- every component holds the same weights --------------------------------------------------------
+
+
+def _generate_samples(generator, tokenizer, prompts: list[str], version: int, max_new_tokens: int = 6):
+    from actors.generator import GenerationRequest
+
+    requests = [GenerationRequest(request_id=f"r{i}", prompt_ids=tokenizer.encode(p, add_special_tokens=False),
+                                  max_new_tokens=max_new_tokens, seed=i)
+                for i, p in enumerate(prompts)]
+    samples = []
+    for i, (req, res) in enumerate(zip(requests, generator.generate(requests))):
+        ids = list(req.prompt_ids) + list(res.token_ids)
+        n_prompt = len(req.prompt_ids)
+        samples.append(RolloutSample(
+            sample_id=f"g:{i}", task_id="g", domain="synthetic", group_id="g", seed=i, prompt_length=n_prompt,
+            input_ids=ids, loss_mask=[0] * n_prompt + [1] * len(res.token_ids),
+            sampling_logprobs=[0.0] * n_prompt + list(res.logprobs),
+            policy_versions=[-1] * n_prompt + [version] * len(res.token_ids),
+            turns=[TurnSpan(start=n_prompt, end=len(ids))], reward=float(i % 2), correct=bool(i % 2),
+            reward_components={"accuracy": float(i % 2), "total": float(i % 2)}, response_tokens=len(res.token_ids)))
+    return samples
+
+
+def _teacher_gap(teacher, samples) -> float:
+    """Max |teacher - generator| log-prob over the sampled tokens."""
+    gap = 0.0
+    for s, out in zip(samples, teacher.compute(samples)):
+        for p, m in enumerate(s.loss_mask):
+            if m:
+                gap = max(gap, abs(out.logprobs[p] - s.sampling_logprobs[p]))
+    return gap
+
+
+PROMPTS = ["Check the interaction between warfarin and aspirin", "Creatinine clearance is 45", "Answer: B."]
+
+
+def _learner_cfg(backend: str, **extra):
+    from learner.config_models import LearnerConfig
+
+    return LearnerConfig(backend=backend, optim={"lr": 1e-2, "micro_batch_size": 2},
+                         deepspeed={"world_size": 2 if backend == "deepspeed" else 1, "num_cpus_per_rank": 1},
+                         **extra)
+
+
+def _check_component_agreement(model_dir: Path, learner, family: str):
+    """Generator, learner and teacher agree before and after one learner step."""
+    from actors.generator import HFGenerator, SamplingConfig
+    from actors.teacher import Teacher
+    from learner.config_models import TeacherConfig
+    from learner.model import IM_END, load_tokenizer
+
+    tokenizer = load_tokenizer(model_dir)
+    generator = HFGenerator(str(model_dir), SamplingConfig(), [tokenizer.convert_tokens_to_ids(IM_END)])
+    teacher = Teacher(TeacherConfig(hints={"enabled": False}), str(model_dir), start_worker=False)
+    before = _generate_samples(generator, tokenizer, PROMPTS, 0)
+    assert learner.evaluate_loss(before)["logprob_abs_diff"] < LOGPROB_TOL
+    assert _teacher_gap(teacher, before) < LOGPROB_TOL
+
+    initial = learner.get_state_dict()
+    learner.train_step(before, step=1)
+    weights = learner.get_state_dict()
+    # Published under the checkpoint's own names; a tied lm_head.weight is included.
+    assert set(weights) == set(generator.model.state_dict()) and "lm_head.weight" in weights
+    if family == "llama_tied":
+        assert torch.equal(weights["lm_head.weight"], weights["model.embed_tokens.weight"])
+    moved = [k for k in weights if not torch.equal(weights[k], initial[k])]
+    if family == "qwen3_5":  # the vision tower is frozen by default; the language model trains
+        assert moved and not any(k.startswith("model.visual.") for k in moved)
+        assert any(k.startswith("model.language_model.") for k in moved)
+    generator.update_weights(weights, 1)
+    teacher.hard_copy(weights)
+    after = _generate_samples(generator, tokenizer, PROMPTS, 1)
+    assert learner.evaluate_loss(after)["logprob_abs_diff"] < LOGPROB_TOL
+    assert _teacher_gap(teacher, after) < LOGPROB_TOL
+    # The step really changed what everyone computes: the pre-step log-probs no longer match.
+    assert learner.evaluate_loss(before)["logprob_abs_diff"] > STEP_MOVES_LOGPROBS
+    assert _teacher_gap(teacher, before) > STEP_MOVES_LOGPROBS
+    teacher.shutdown()
+    return weights
+
+
+@pytest.mark.parametrize("family", TWIN_FAMILIES)
+def test_generator_torch_learner_and_teacher_agree_before_and_after_a_step(twin_root, family, tmp_path):
+    import transformers
+
+    from learner.hf_checkpoint import checkpoint_metadata, load_model
+    from learner.learner_actor import Learner
+
+    model_dir = twin_root / family
+    learner = Learner(_learner_cfg("torch"), str(model_dir))
+    try:
+        weights = _check_component_agreement(model_dir, learner, family)
+        # The learner's checkpoint is a Hugging Face checkpoint that transformers loads unchanged.
+        learner.save_checkpoint(str(tmp_path), max_shard_size="1MB")
+    finally:
+        learner.shutdown()
+    saved = tmp_path / "learner" / "policy"
+    assert len(set(_weight_map(saved).values())) >= 2
+    assert checkpoint_metadata(saved)["policy_version"] == "1"
+    auto = transformers.AutoModelForImageTextToText if family == "qwen3_5" else transformers.AutoModelForCausalLM
+    reloaded = auto.from_pretrained(str(saved)).state_dict()
+    assert all(torch.equal(reloaded[k], weights[k]) for k in weights)
+    assert transformers.AutoTokenizer.from_pretrained(str(saved)).chat_template
+    assert all(torch.equal(v, weights[k]) for k, v in load_model(saved).state_dict().items())
+
+
+@pytest.mark.ray
+@pytest.mark.parametrize("family", ["qwen3_5", "llama_tied"])
+def test_zero3_two_ranks_agree_with_generator_and_teacher(ray_cluster, twin_root, family):
+    from learner.learner_actor import Learner
+
+    model_dir = twin_root / family
+    learner = Learner(_learner_cfg("deepspeed"), str(model_dir))
+    try:
+        _check_component_agreement(model_dir, learner, family)
+    finally:
+        learner.shutdown()
+
+
+def test_vision_tower_trains_only_when_configured(twin_root):
+    from learner.backends.torch_backend import TorchBackend
+    from learner.hf_checkpoint import freeze_vision_tower, load_model
+
+    model_dir = str(twin_root / "qwen3_5")
+    frozen = TorchBackend(_learner_cfg("torch"), model_dir, seed=0)
+    trainable = TorchBackend(_learner_cfg("torch", train_vision_tower=True), model_dir, seed=0)
+
+    def optimised(backend) -> set[str]:
+        ids = {id(p) for g in backend._optimizer.param_groups for p in g["params"]}
+        return {n for n, p in backend.policy.named_parameters() if id(p) in ids}
+
+    visual = {n for n, _ in frozen.policy.named_parameters() if n.startswith("model.visual.")}
+    assert visual and not visual & optimised(frozen)
+    assert visual <= optimised(trainable)
+    assert {n for n, _ in frozen.policy.named_parameters()} - visual <= optimised(frozen)
+    assert freeze_vision_tower(load_model(twin_root / "qwen3"), train_vision_tower=False) == []
+
+
+def test_receivers_accept_a_subset_and_name_unknown_weights(twin_root):
+    from actors.generator import HFGenerator, SamplingConfig
+
+    generator = HFGenerator(str(twin_root / "qwen3_5"), SamplingConfig(), [0])
+    state = generator.model.state_dict()
+    language_only = {k: v + 0.5 for k, v in state.items() if not k.startswith("model.visual.")}
+    generator.update_weights(language_only, 3)
+    after = generator.model.state_dict()
+    assert generator.version == 3
+    assert all(torch.equal(after[k], v) for k, v in language_only.items())
+    with pytest.raises(ValueError, match=r"unknown\) name\(s\).*model\.layers\.0\.mlp\.up_proj\.weight"):
+        # the text-model name of a multimodal checkpoint's weight is unknown to it
+        generator.update_weights({"model.layers.0.mlp.up_proj.weight": torch.zeros(1)}, 4)
+    assert generator.version == 3
+
+
+def test_save_sharded_checkpoint_checks_names_and_sft_output_loads(twin_root, tmp_path):
+    import transformers
+
+    from learner.hf_checkpoint import load_model, parse_size, save_sharded_checkpoint
+    from learner.model import load_tokenizer
+    from learner.sft import SFTExample, run_sft
+
+    assert parse_size("5GB") == 5 * 10**9 and parse_size("2MiB") == 2 * 2**20 and parse_size(7) == 7
+    with pytest.raises(ValueError, match="max_shard_size='lots'"):
+        parse_size("lots")
+    src = twin_root / "llama_tied"
+    state = load_model(src).state_dict()
+    with pytest.raises(ValueError, match=r"unknown \['model.bogus'\]"):
+        save_sharded_checkpoint(tmp_path / "x", {**state, "model.bogus": torch.zeros(1)}, source_dir=src)
+    with pytest.raises(ValueError, match=r"missing \['model.norm.weight'\]"):
+        save_sharded_checkpoint(tmp_path / "x", {k: v for k, v in state.items() if k != "model.norm.weight"},
+                                source_dir=src)
+    half = save_sharded_checkpoint(tmp_path / "half", state, source_dir=src, dtype=torch.bfloat16, max_shard_size="1MB")
+    assert transformers.AutoModelForCausalLM.from_pretrained(str(half)).dtype == torch.bfloat16
+
+    tok = load_tokenizer(src)
+    ids = tok.encode("Check the interaction between warfarin and aspirin before prescribing.", add_special_tokens=False)
+    examples = [SFTExample(ids, [0] * 3 + [1] * (len(ids) - 3))] * 2
+    run_sft(src, tmp_path / "sft", examples, epochs=1, lr=1e-2, batch_size=2, seed=0, max_shard_size="1MB",
+            log=lambda _: None)
+    out = tmp_path / "sft"
+    assert len(set(_weight_map(out).values())) >= 2 and "lm_head.weight" not in _weight_map(out)
+    tuned = transformers.AutoModelForCausalLM.from_pretrained(str(out))
+    assert tuned.lm_head.weight is tuned.model.embed_tokens.weight
+    assert not torch.equal(tuned.model.norm.weight, state["model.norm.weight"])
+    assert transformers.AutoTokenizer.from_pretrained(str(out)).chat_template
