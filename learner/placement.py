@@ -169,9 +169,10 @@ def missing_resources(demands: Sequence[ActorDemand], totals: Mapping[str, float
     """What the demands need that the cluster lacks, one readable line per problem (empty: it fits).
 
     Checks, in order: the cluster's totals per resource; that each single actor fits on some node
-    (a request is never split across nodes); and for demands placed with STRICT_PACK (named in
-    `strategy_groups`), that one node holds all of them together. A best-effort check: actors of
-    different kinds may still compete for one node; the placement-group wait covers that.
+    (a request is never split across nodes); for demands placed as one group (named in
+    `strategy_groups`), that one node holds all of them (STRICT_PACK) or that enough nodes hold one
+    each (STRICT_SPREAD). A best-effort check: actors of different kinds may still compete for one
+    node; the placement-group wait covers that.
 
     Args:
         demands: What the run creates.
@@ -204,6 +205,11 @@ def missing_resources(demands: Sequence[ActorDemand], totals: Mapping[str, float
             if not any(_fits(together, cap) for cap in node_caps):
                 problems.append(f"STRICT_PACK: no node can hold all {d.count} {d.name}s together "
                                 f"({_describe(together)})")
+        elif (strategy_groups or {}).get(d.name) == "STRICT_SPREAD":
+            able = sum(_fits(d.resources, cap) for cap in node_caps)
+            if able < d.count:
+                problems.append(f"STRICT_SPREAD: {d.count} {d.name}s need {d.count} nodes that can each hold "
+                                f"one ({_describe(d.resources)}), the cluster has {able}")
     return problems
 
 
@@ -250,8 +256,9 @@ def create_placement_group(bundles: Sequence[Mapping[str, float]], strategy: Str
     bundles = [dict(b) for b in bundles]
     for i, b in enumerate(bundles):
         if not b:
-            raise ValueError(f"{what}: bundle {i} asks for no resources; give the ranks CPUs, GPUs or a custom "
-                             "resource (learner.deepspeed.num_cpus_per_rank / num_gpus_per_rank, ray.learner_resources)")
+            raise ValueError(f"{what}: bundle {i} asks for no resources; give the ranks CPUs, GPUs or a "
+                             "custom resource (learner.deepspeed.num_cpus_per_rank / num_gpus_per_rank, "
+                             "ray.learner_resources)")
     pg = placement_group(bundles, strategy=strategy)
     ready, _ = ray.wait([pg.ready()], timeout=timeout_s)
     if ready:

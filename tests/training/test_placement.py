@@ -91,7 +91,8 @@ def _node_ip(node_id: str) -> str:
     return next(n["NodeManagerAddress"] for n in ray.nodes() if n["NodeID"] == node_id)
 
 
-def _logprobs_under(state: dict[str, torch.Tensor], model_dir: str, prompt: list[int], tokens: list[int]) -> torch.Tensor:
+def _logprobs_under(state: dict[str, torch.Tensor], model_dir: str, prompt: list[int],
+                    tokens: list[int]) -> torch.Tensor:
     """Log-probs of `tokens` after `prompt` under a model holding `state` (what the generator must report)."""
     from learner.model import load_policy, per_token_logprobs
 
@@ -202,6 +203,10 @@ def test_missing_resources_checks_totals_and_single_nodes():
     assert problems == ["CPU: the run needs 4 (2 x learner rank at 1 each, 1 x generator at 2 each), the cluster has 3",
                         "no node can hold one generator (CPU 2); nodes have: CPU 1, GPU 1; CPU 1, GPU 1; CPU 1"]
     assert missing_resources(demands, {"CPU": 4, "GPU": 2}, [{"CPU": 2, "GPU": 2}, {"CPU": 2}]) == []
+    # The same cluster, but the ranks must each have a node of their own.
+    assert missing_resources(demands, {"CPU": 4, "GPU": 2}, [{"CPU": 2, "GPU": 2}, {"CPU": 2}],
+                             {"learner rank": "STRICT_SPREAD"}) == [
+        "STRICT_SPREAD: 2 learner ranks need 2 nodes that can each hold one (CPU 1, GPU 1), the cluster has 1"]
 
 
 def test_a_rank_that_fails_while_starting_fails_the_learner_within_seconds_with_its_error(cluster):
