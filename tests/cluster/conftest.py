@@ -124,6 +124,10 @@ def start_local_head(num_cpus: int = 2, timeout_s: float = 90.0) -> LocalRayHead
     # The token goes by file path, not by RAY_AUTH_TOKEN, so it is not copied into every process's
     # environment dump; ~/.ray/auth_token of the machine is left alone.
     env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN_PATH=str(token_file), RAY_USAGE_STATS_ENABLED="0")
+    # Like a cluster node, the head does not have the venv on PATH (even if pytest was started from
+    # an activated venv): a job's `python` is the venv's only if its runtime env says so.
+    path = env.get("PATH", "").split(os.pathsep)
+    env["PATH"] = os.pathsep.join(p for p in path if p and Path(p) != VENV_BIN)
     head.env = env
     command = [str(RAY_CLI), "start", "--head", "--node-ip-address=127.0.0.1", "--dashboard-host=127.0.0.1",
                f"--port={head.gcs_port}", f"--dashboard-port={head.dashboard_port}",
