@@ -359,6 +359,15 @@ class Teacher:
         self._history[-1]["step"] = step
         return out
 
+    def adopt(self, weights: dict[str, torch.Tensor], version: int) -> dict[str, Any]:
+        """theta_T <- theta_S at the driver's confirmed `version`: how a restarted teacher is recovered
+        when no EMA snapshot is kept (collective weight sync keeps none in the object store)."""
+        self.hard_copy(weights)
+        with self._weights_lock:
+            self._version = int(version)
+            self._history[-1].update(action="adopt", teacher_version=self._version)
+        return dict(self._history[-1])
+
     def join_weight_sync(self, config: dict, rank: int, world_size: int, peer_names: list[str]) -> None:
         """Join the learner's collective weight-sync group as a receiver (GPU path)."""
         from learner.config_models import WeightSyncConfig
@@ -368,37 +377,53 @@ class Teacher:
                                            device=self.config.device)
 
     def receive_update(self, version: int, step: int) -> dict[str, Any]:
-        """Apply the step's scheduled update from weights streamed bucket by bucket (never a full copy).
+        """Apply the step's scheduled update from weights streamed bucket by bucket.
 
-        Must be called when the learner broadcasts, also on steps whose action is "none" only if the
-        learner broadcasts then (the driver broadcasts to the teacher only at EMA / hard-copy steps).
+        The driver's collective weight sync includes the teacher in every broadcast (one group for
+        the generators and the teacher), so this is called at every step: at "none" steps the stream
+        is drained and dropped. EMA and hard copy act on each tensor as its bucket arrives, directly
+        on the fp32 weights (the model's own when it is fp32, else the fp32 master): no full state
+        dict and no second fp32 copy. Every streamed name must be a teacher weight; names not sent
+        (a frozen vision tower) keep their values; a tied tensor sent under two names moves once.
+
+        Returns:
+            {"action", "step", "teacher_version", "bytes"} (bytes received).
         """
         group = getattr(self, "_sync_group", None)
         if group is None:
             raise RuntimeError("receive_update before join_weight_sync")
         action = teacher_update_action(step, self.config)
+        received = 0
+        if action == "none":  # outside the weights lock: scoring goes on while the stream drains
+            for name, tensor in group.receive(version):
+                received += tensor.numel() * tensor.element_size()
+            return {"action": "none", "step": step, "teacher_version": self._version, "bytes": float(received)}
         a = self.config.ema_alpha
         with self._weights_lock, torch.no_grad():
             state = self.model.state_dict()
             targets = self._shadow or state
+            seen: set[int] = set()
             for name, tensor in group.receive(version):
                 if name not in targets:
-                    raise ValueError(f"streamed tensor {name!r} is not a teacher weight")
+                    raise ValueError(f"streamed tensor {name!r} is not a teacher weight "
+                                     f"({type(self.model).__name__})")
+                received += tensor.numel() * tensor.element_size()
                 target = targets[name]
-                src = tensor.to(device=target.device, dtype=target.dtype)
+                if target.data_ptr() in seen:  # tied: the same storage under a second name
+                    continue
+                seen.add(target.data_ptr())
+                src = tensor.to(device=target.device, dtype=target.dtype)  # no copy when already fp32
                 if action == "ema":
                     target.lerp_(src, 1.0 - a)
-                elif action == "hard_copy":
+                else:
                     target.copy_(src)
-                if self._shadow is not None and action != "none":
+                if self._shadow is not None:
                     state[name].copy_(target)
-            if action != "none":
-                self._version += 1
-        if action == "none":
-            return {"action": "none", "step": step, "teacher_version": self._version}
+            self._version += 1
         out = self._record(action, **({"alpha": a} if action == "ema" else {}))
         self._history[-1]["step"] = step
         out["step"] = step
+        out["bytes"] = float(received)
         return out
 
     def _record(self, action: str, **extra) -> dict[str, Any]:

@@ -6,6 +6,14 @@ it needs to rebuild the EMA state the teacher had: a confirmed snapshot (None = 
 weights) and the updates applied after it, replayed in order; the snapshot requested after the
 latest update replaces both once it exists. Groups submitted but not yet fetched are re-submitted.
 
+With the collective weight sync (`weight_sync.transport: collective`) no full state dict of the
+teacher or the student goes through the object store: the teacher's updates arrive in the weight-sync
+group's buckets (learner/weight_publisher.py), and no EMA snapshot is kept. A restarted teacher is
+then recovered by adopting the student's current weights at the driver's teacher version (the EMA
+history is lost; counted as `teacher_recoveries_inexact`). An update that cannot go through the group
+falls back to the object store; `teacher_sync_object_store` (count) and `..._bytes` measure that path,
+`teacher_sync_collective_bytes` the streamed one.
+
 Retries live here, beside `actors.generator.GeneratorClient`'s: a step is retried (up to five times)
 when the teacher died before or during the fetch, an update up to three times.
 """
@@ -22,6 +30,16 @@ from learner.config_models import teacher_update_action
 
 STEP_ATTEMPTS = 5
 UPDATE_ATTEMPTS = 3
+
+
+def object_store_bytes(ref) -> int:
+    """Size of an object in Ray's object store (what an object-store update moves), 0 if unknown."""
+    import ray
+
+    try:
+        return int(ray.experimental.get_object_locations([ref])[ref]["object_size"] or 0)
+    except Exception:  # noqa: BLE001  (a metric only: never fail a step over it)
+        return 0
 
 
 class TeacherClient:
@@ -42,7 +60,10 @@ class TeacherClient:
         self.cfg = cfg
         self.log = log
         self.counters = counters
-        self.counters.setdefault("teacher_recoveries", 0)
+        self.collective = cfg.weight_sync.transport == "collective"
+        for key in ("teacher_recoveries", "teacher_sync_object_store", "teacher_sync_object_store_bytes",
+                    "teacher_sync_collective_bytes"):
+            self.counters.setdefault(key, 0)
         self.version = 0                      # teacher version after the latest confirmed update
         self.base_ref = None                  # recovery snapshot (None = the constructor's weights)
         self.replay: list[tuple[Any, int]] = []   # (weights ref, step) applied after the snapshot
@@ -112,16 +133,28 @@ class TeacherClient:
         raise RuntimeError(f"teacher failed to serve step {step} {STEP_ATTEMPTS} times")
 
     # -- updates ---------------------------------------------------------------------------------
-    async def update(self, step: int, weights_ref) -> str:
-        """EMA / hard copy after learner step `step` (Algorithm 1) from `weights_ref` (None: fetch
-        the learner's weights through the object store), awaited so that work admitted afterwards is
-        scored by the updated teacher. Returns the action ("none", "ema", "hard_copy")."""
+    async def update(self, step: int, weights_ref=None, streamed: dict[str, Any] | None = None) -> str:
+        """EMA / hard copy after learner step `step` (Algorithm 1), awaited so that work admitted
+        afterwards is scored by the updated teacher. Returns the action ("none", "ema", "hard_copy").
+
+        Args:
+            step: The learner step just taken.
+            weights_ref: The step's weights in the object store (None: fetched from the learner).
+            streamed: The teacher's `receive_update` result when the collective group already
+                delivered and applied the update; only confirmed here.
+        """
         action = teacher_update_action(step, self.cfg.teacher)
+        if streamed is not None:
+            self.counters["teacher_sync_collective_bytes"] += int(streamed.get("bytes", 0))
+            if action != "none":
+                self._confirmed(streamed, action, step)
+            return action
         if action == "none":
             return action
         if weights_ref is None:
             weights_ref = self.learner.get_weights.remote()
-        self._confirm_snapshot()
+        if not self.collective:
+            self._confirm_snapshot()
         for attempt in range(UPDATE_ATTEMPTS):
             try:
                 result = await self.handle.update.remote(weights_ref, step)
@@ -133,9 +166,28 @@ class TeacherClient:
                     raise
                 await self.recover(f"{type(exc).__name__} during update")
         self._confirmed(result, action, step)
-        self.replay.append((weights_ref, step))
-        self.snapshot_pending = self.handle.get_state.remote()
+        self.counters["teacher_sync_object_store"] += 1
+        self.counters["teacher_sync_object_store_bytes"] += object_store_bytes(weights_ref)
+        if not self.collective:  # recovery state: full state dicts, kept only on the object-store path
+            self.replay.append((weights_ref, step))
+            self.snapshot_pending = self.handle.get_state.remote()
         return action
+
+    def sync_metrics(self) -> dict[str, float]:
+        """Cumulative teacher-sync figures for the step record."""
+        return {k: float(self.counters[k]) for k in ("teacher_sync_object_store", "teacher_sync_object_store_bytes",
+                                                     "teacher_sync_collective_bytes")}
+
+    async def group_member(self):
+        """The teacher's handle if it may join the collective weight-sync group now (it answers; a
+        restarted one is recovered first), else None: it is then updated through the object store."""
+        try:
+            current = await asyncio.wait_for(self.handle.teacher_version.remote(), 30)
+        except Exception:  # dead or still restarting: left out of this group
+            return None
+        if current != self.version:
+            await self.recover("restarted before joining the weight-sync group")
+        return self.handle
 
     def _confirmed(self, result: dict[str, Any], action: str, step: int) -> None:
         if result["action"] != action:
@@ -170,7 +222,16 @@ class TeacherClient:
                 break
             except Exception:
                 await asyncio.sleep(0.5)
-        if current != self.version:  # restarted: its weights are the constructor's
+        if current != self.version and self.collective:
+            # No snapshot in collective mode: start again from the student's current weights.
+            weights_ref = self.learner.get_weights.remote()
+            await self.handle.adopt.remote(weights_ref, self.version)
+            self.counters["teacher_recoveries_inexact"] = self.counters.get("teacher_recoveries_inexact", 0) + 1
+            self.counters["teacher_sync_object_store"] += 1
+            self.counters["teacher_sync_object_store_bytes"] += object_store_bytes(weights_ref)
+            self.log(f"[teacher] restarted teacher adopted the student's weights at version {self.version} "
+                     "(collective weight sync keeps no EMA snapshot)")
+        elif current != self.version:  # restarted: its weights are the constructor's
             if self.base_ref is not None:
                 await self.handle.set_state.remote(self.base_ref)
             for weights_ref, step in self.replay:
@@ -191,4 +252,5 @@ class TeacherClient:
         self.version = int(await self.handle.teacher_version.remote())
         if self.version != expected_version:
             raise RuntimeError(f"{directory}: teacher version {self.version} != driver's {expected_version}")
-        self.base_ref = self.handle.get_state.remote()
+        if not self.collective:
+            self.base_ref = self.handle.get_state.remote()

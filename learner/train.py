@@ -206,7 +206,7 @@ class Trainer:
         record = step_record(self.step, samples, learner_metrics, batch_info, times,
                              max_response_tokens=cfg.rollout.max_response_tokens, teacher_action=teacher_action,
                              teacher_version=self.teacher_client.version if self.teacher_client is not None else 0,
-                             teacher_sync=self.teacher_client.sync_metrics() if self.teacher_client is not None else {},
+                             teacher_sync=self.teacher_client.sync_metrics() if self.teacher_client else {},
                              generator_failures=self.gen_client.failures,
                              episode_reruns=len(self.rollouts.ledger.lost_attempts), batch_groups=len(groups))
         self.sink.observe("response_length", [s.response_tokens for s in samples])

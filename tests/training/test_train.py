@@ -5,14 +5,16 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from pathlib import Path
 
 import pytest
+import torch
 
 from learner.checkpoint import load_tensors
 from learner.config import validate_config
+from learner.hf_checkpoint import read_checkpoint_tensors
 from learner.metrics import REQUIRED_KEYS, read_metrics, read_samples
 from tests.training.conftest import NO_EMBEDDINGS
-from learner.hf_checkpoint import read_checkpoint_tensors
 
 pytestmark = pytest.mark.ray
 WARD = {"ward": "tests.fixtures.ward_domain.environment"}
@@ -148,3 +150,58 @@ def test_collective_weight_sync_over_gloo(ray_cluster, ward_policy_dir, tmp_path
     for r in records:
         assert r["logprob_abs_diff"] < 1e-3, r  # generators hold the learner's weights of step - 1
         assert r["policy_lag_max"] == 0
+
+
+def ttopd_config(run_dir, policy_dir, **sections):
+    """TT-OPD on the tiny config: teacher schedule none, EMA, hard copy over steps 1-3, repeating."""
+    teacher = {"enabled": True, "ema_interval": 2, "hard_copy_interval": 3, "ema_alpha": 0.5, **sections.pop("teacher", {})}
+    return tiny_config(
+        run_dir, policy_dir, teacher=teacher,
+        learner={"optim": {"lr": 1e-3}, "loss": {"entropy_coef": 0.01, "distill": {"enabled": True, "lambda_distill": 1.0,
+                                                                       "drop_length_truncated_turns": False}}},
+        **sections,
+    )
+
+
+def teacher_weights(run_dir):
+    from learner.checkpoint import latest_checkpoint
+
+    return load_tensors(latest_checkpoint(run_dir) / "teacher" / "teacher.safetensors")
+
+
+def test_teacher_updates_over_the_collective_group_equal_the_object_store_path(ray_cluster, ward_policy_dir, tmp_path):
+    """Collective weight sync: the teacher is a member of the group and applies EMA / hard copy bucket
+    by bucket; nothing goes through the object store, and the result is bit-identical to the
+    object-store path (staleness 0 makes both runs deterministic)."""
+    from learner.train import train
+
+    steps = {"max_steps": 3, "checkpoint_interval": 0}
+    by_store = ttopd_config(tmp_path / "store", ward_policy_dir, trainer=steps)
+    by_group = ttopd_config(tmp_path / "group", ward_policy_dir, trainer=steps,
+                            weight_sync={"transport": "collective", "backend": "gloo", "bucket_mb": 0.05,
+                                         "timeout_s": 60})
+    train(by_store, log=lambda line: None)
+    summary = train(by_group, log=lambda line: None)
+    store, group = read_metrics(by_store.output_dir), read_metrics(by_group.output_dir)
+    assert [r["teacher_action"] for r in group] == [0.0, 1.0, 2.0]  # none, EMA, hard copy
+    assert [r["teacher_updates"] for r in group] == [0.0, 1.0, 2.0]
+    # The object-store path counts every update it carried; the collective run used it for none.
+    assert [r["teacher_sync_object_store"] for r in store] == [0.0, 1.0, 2.0]
+    assert store[-1]["teacher_sync_object_store_bytes"] > 0 and store[-1]["teacher_sync_collective_bytes"] == 0
+    assert all(r["teacher_sync_object_store"] == 0 and r["teacher_sync_object_store_bytes"] == 0 for r in group)
+    # The teacher received every broadcast (also step 1's, whose stream it dropped): the model's bytes
+    # each time, about what one object-store update moves (its size in the store: tensors + framing).
+    per_sync = group[0]["teacher_sync_collective_bytes"]
+    assert [r["teacher_sync_collective_bytes"] for r in group] == [per_sync, 2 * per_sync, 3 * per_sync]
+    assert per_sync <= store[-1]["teacher_sync_object_store_bytes"] / 2 < 1.05 * per_sync
+    assert summary["counters"]["teacher_sync_object_store"] == 0
+    for a, b in zip(store, group):
+        assert (a["kl_teacher"], a["loss"], a["grad_norm"]) == (b["kl_teacher"], b["loss"], b["grad_norm"]), a["step"]
+        assert b["logprob_abs_diff"] < 1e-3  # the generators hold the learner's weights too
+    ta, tb = teacher_weights(tmp_path / "store"), teacher_weights(tmp_path / "group")
+    assert ta.keys() == tb.keys()
+    assert not [k for k in ta if not torch.equal(ta[k], tb[k])], "collective teacher update differs"
+    initial = {}
+    for shard in Path(ward_policy_dir).glob("*.safetensors"):
+        initial.update(load_tensors(shard))
+    assert any(not torch.equal(initial[k], tb[k]) for k in tb if k in initial), "the teacher never moved"
