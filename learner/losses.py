@@ -28,8 +28,9 @@ Eq. 1 and every sampled-token KL estimate are expectations over x ~ pi_old (resp
 batch holds x ~ mu. Without a correction (`tis_cap` None) a stale token is
 trained as if pi_old had sampled it: its ratio is 1 and its KL_ref term k3(pi_ref / pi_theta) is
 taken at a token the current policy may have moved far away from. On the demo (lr 3e-4, S = 1)
-that made KL_ref 70 nats/token and the grad norm 3.5 at step 2: a few lag-1 tokens with
-r = pi_ref / pi_theta ~ 1e5 (docs/training.md, "Off-policy correction").
+that made KL_ref 70 nats/token and the grad norm 3.5 at step 2: 184 of its 13,193 lag-1 tokens
+(the ` "` of a malformed `{"answer", "`, which step 1 had made ~2e4 times less likely: pi 0.8-1.0
+-> 4e-5) carried 99.7 % of the k3 sum (docs/training.md, "Off-policy correction").
 
 We use the decoupled PPO objective (Hilton et al. 2022, "Batch size-invariance for policy
 optimization"; AReaL, Fu et al. 2025) with a truncated behaviour weight (TIS, Yao et al. 2025):
@@ -49,10 +50,15 @@ Why this form and not the ratio taken directly against mu (rho' = pi_theta / mu,
   on tokens the policy now likes more than the sampler did. Tokens the policy has moved away from
   (pi_old << mu), the ones that produced the spike, get weights near 0, which is exact IS.
 - The KL terms need the same weight: k(x) estimates KL(pi_theta || q) only when x ~ pi_theta. With
-  w_t the k3 term of a token that pi_theta has moved away from is w * k3 = (p/mu)(q/p - 1 - log q/p)
-  <= q/mu + (p/mu)|log q/p|; at lag 1 from the reference (mu = q) that is below 1 instead of
-  q/p ~ 1e5, so one token can no longer dominate the logged mean nor (through the unbiased
-  surrogate, whose per-token gradient is w * -log r) the gradient.
+  p = pi_theta, r = q / p, the weighted k3 term is w * k3 = min(p/mu, C) * (r - 1 - log r):
+    r > 1 (the policy moved away from a token q likes): < (p/mu) * r = q/mu, and when the sampler
+      was the reference (mu = q, the demo's step 2) 1 - 1/r - log(r)/r < 1 instead of r ~ 2e4;
+    r < 1: < C * |log r| <= 2 * 20 (log r is clamped at +-20 before exp).
+  q/mu is large only for a token the sampler found much less likely than the reference does,
+  and such a token is drawn with probability mu; `kl_ref_max` reports the largest term (10.6 and
+  19.7 nats on the demo's steps 2-3, against means over ~13,000 tokens). The per-token gradient of
+  the unbiased surrogate is w * -log r, at most C * 20 in size, so one token cannot dominate it.
+  Eq. 1's meaning is unchanged: beta * KL(pi_theta || pi_ref), estimated from samples of mu.
 - With `updates_per_batch` = 1 (our default) rho_t is 1 in value and the clip never binds: the
   correction lives entirely in w_t. On-policy (S = 0) mu and pi_old are the same weights and w_t is
   1 up to the generator's numerics; `tis_cap` is None there unless set, so nothing changes.
