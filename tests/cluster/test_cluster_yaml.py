@@ -76,12 +76,20 @@ def test_every_node_gets_python_311_from_uv_the_gpu_extra_data_and_the_submitted
     assert any("sys.version_info >= (3, 11)" in c for c in setup)  # checked on the node, not assumed
 
     # Every hcgym call is the venv's and parses with the project's own CLI (catches renamed commands).
-    hcgym_calls = [shlex.split(c.split("&&")[-1])[1:] for c in setup if "bin/hcgym " in c]
-    assert all(f"{VENV}/bin/hcgym" in c for c in setup if "hcgym " in c)
+    hcgym_lines = [c for c in setup if "hcgym " in c]
+    assert all(f"{VENV}/bin/hcgym" in c for c in hcgym_lines)
+    hcgym_calls = []
+    for line in hcgym_lines:
+        words = shlex.split(line.split("&&")[-1])
+        binary = next(i for i, w in enumerate(words) if w.endswith("/bin/hcgym"))
+        hcgym_calls.append((words[:binary], words[binary + 1:]))  # (VAR=value prefixes, arguments)
     parser = build_parser()
-    parsed = [parser.parse_args(argv) for argv in hcgym_calls]
-    assert ["data", "model"] == [p.command for p in parsed]
-    fetched = next(p.model_id for p in parsed if p.command == "model")
+    parsed = [(prefix, parser.parse_args(argv)) for prefix, argv in hcgym_calls]
+    assert ["data", "model"] == [p.command for _, p in parsed]
+    fetch_env, fetch = next((prefix, p) for prefix, p in parsed if p.command == "model")
+    # Importing the project sets HF_HUB_OFFLINE=1 when unset; the fetch must say it is online.
+    assert "HF_HUB_OFFLINE=0" in fetch_env, fetch_env
+    fetched = fetch.model_id
     # The cache is per node and runs are offline: the fetched id must be the submitted config's model.
     assert load_config(SUBMITTED_CONFIG).model.path == fetched
 
