@@ -34,7 +34,7 @@ import json
 import os
 import re
 import shutil
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import torch
@@ -125,7 +125,7 @@ def fetch_model(model_id: str, *, revision: str | None = None, cache_dir: str | 
 
     cache = Path(cache_dir) if cache_dir else hf_hub_cache_dir()
     # Weights as safetensors only: .bin / .pt would need unpickling, which nothing here does.
-    patterns = ["*.json", "*.safetensors", "*.jinja", "*.txt", "*.model", "*.tiktoken", "*.py"]
+    patterns = ["*.json", "*.safetensors", "*.jinja", "*.txt", "*.model", "*.tiktoken"]  # no remote code
     try:
         path = snapshot_download(model_id, revision=revision, cache_dir=str(cache), allow_patterns=patterns)
     except Exception as exc:  # huggingface_hub raises several unrelated types for "no network"
@@ -323,14 +323,15 @@ def load_weights_by_module(
                                 key = f"{mod_name}.{pname}" if mod_name else pname
                                 param.copy_(reader.get(key).to(param.dtype))
                                 copied += 1
-            if write:
-                for bname, buf in module.named_buffers(recurse=False):
-                    key = f"{mod_name}.{bname}" if mod_name else bname
-                    if bname in module._non_persistent_buffers_set or reader.stored_name(key) is None:
-                        continue
-                    with torch.no_grad():
-                        buf.copy_(reader.get(key).to(buf.dtype))
-                    copied += 1
+            # Persistent buffers stored in the checkpoint (rare) are never partitioned: every
+            # process fills its own copy.
+            for bname, buf in module.named_buffers(recurse=False):
+                key = f"{mod_name}.{bname}" if mod_name else bname
+                if bname in module._non_persistent_buffers_set or reader.stored_name(key) is None:
+                    continue
+                with torch.no_grad():
+                    buf.copy_(reader.get(key).to(buf.dtype))
+                copied += 1
     return copied
 
 
