@@ -315,7 +315,7 @@ def _masked_sum(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 def _masked_max(x: torch.Tensor, mask: torch.Tensor) -> float:
-    """Largest value on the mask (0.0 for an empty mask: every logged max here is of a value >= 0)."""
+    """Largest value on the mask; 0.0 for an empty mask (a micro-batch without generated tokens)."""
     picked = x[mask > 0]
     return float(picked.max()) if picked.numel() else 0.0
 
