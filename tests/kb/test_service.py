@@ -14,7 +14,8 @@ pytestmark = pytest.mark.ray
 def cluster():
     started = not ray.is_initialized()  # reuse a session cluster if another conftest started one
     if started:
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+        # "local": never attach to a head another test or user left running (it rejects num_cpus)
+        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     if started:
         ray.shutdown()

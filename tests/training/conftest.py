@@ -18,7 +18,8 @@ NO_EMBEDDINGS = {"HCGYM_EMBEDDINGS": "0"}
 
 
 # The session cluster's arguments (test_placement.py restarts it after its own multi-node cluster).
-SESSION_RAY_INIT = {"num_cpus": 2, "include_dashboard": False, "namespace": "hcgym-tests", "log_to_driver": False}
+# "local": a fresh cluster even while a `ray start --head` (tests/cluster, a user) runs on this machine.
+SESSION_RAY_INIT = {"address": "local", "num_cpus": 2, "include_dashboard": False, "namespace": "hcgym-tests", "log_to_driver": False}
 
 
 @pytest.fixture(scope="session")
