@@ -45,4 +45,5 @@ def configure_cpu_runtime(overrides: dict[str, str] | None = None) -> dict[str, 
     return applied
 
 
-configure_cpu_runtime()
+# What the import set (not the user): `hcgym model fetch` goes online unless the user asked for offline.
+APPLIED_DEFAULTS: dict[str, str] = configure_cpu_runtime()

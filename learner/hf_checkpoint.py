@@ -121,6 +121,15 @@ def fetch_model(model_id: str, *, revision: str | None = None, cache_dir: str | 
     """
     if not is_hub_id(model_id):
         raise ValueError(f"model id {model_id!r} is not of the form 'org/name'")
+    from envs._runtime import APPLIED_DEFAULTS
+
+    if "HF_HUB_OFFLINE" in APPLIED_DEFAULTS:
+        # Importing the project set HF_HUB_OFFLINE=1 (run time never reaches the hub); this command is
+        # the one meant to. A value the user set is respected.
+        os.environ["HF_HUB_OFFLINE"] = "0"
+        import huggingface_hub.constants
+
+        huggingface_hub.constants.HF_HUB_OFFLINE = False
     from huggingface_hub import snapshot_download
 
     cache = Path(cache_dir) if cache_dir else hf_hub_cache_dir()

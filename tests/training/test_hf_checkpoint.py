@@ -192,6 +192,13 @@ def test_model_fetch_offline_fails_with_a_clear_message(tmp_path, capsys):
     assert proc.returncode == 2
     assert "could not download 'tiny-org/never-fetched'" in proc.stderr and str(tmp_path) in proc.stderr
     assert "HF_HUB_OFFLINE" in proc.stderr
+    # Without HF_HUB_OFFLINE from the user, fetch goes online although importing the project sets it
+    # (envs/_runtime.py): here it reaches a closed local port, and says so.
+    online = {k: v for k, v in env.items() if k != "HF_HUB_OFFLINE"} | {"HF_ENDPOINT": "http://127.0.0.1:9"}
+    proc = subprocess.run([sys.executable, "-m", "envs.cli", "model", "fetch", "tiny-org/never-fetched"],
+                          capture_output=True, text=True, env=online, timeout=120, cwd=Path(__file__).parents[2])
+    assert proc.returncode == 2 and "could not download 'tiny-org/never-fetched'" in proc.stderr
+    assert "Connection refused" in proc.stderr and "HF_HUB_OFFLINE is set" not in proc.stderr
     assert main(["model", "fetch", "not a model id", "--cache-dir", str(tmp_path)]) == 2
     assert "is not of the form 'org/name'" in capsys.readouterr().err
 
