@@ -136,6 +136,15 @@ def test_missing_weights_and_bad_index_are_named(tmp_path, twin_root):
     next(broken.glob("model-00002-of-*.safetensors")).unlink()
     with pytest.raises(FileNotFoundError, match="names shard model-00002-of-"):
         checkpoint_weight_map(broken)
+    from learner.hf_checkpoint import architecture_class, load_hf_config
+
+    config = load_hf_config(twin_root / "qwen3")
+    config.architectures = ["Qwen3Model"]  # no LM head: no token log-probs
+    with pytest.raises(ValueError, match="'Qwen3Model' is not a generative language model class"):
+        architecture_class(config)
+    config.architectures = ["Qwen9ForCausalLM"]
+    with pytest.raises(ValueError, match="'Qwen9ForCausalLM' is not a class of transformers"):
+        architecture_class(config)
 
 
 # -- hub ids through the Hugging Face cache ---------------------------------------------------------
