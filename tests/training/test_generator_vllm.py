@@ -214,6 +214,18 @@ def test_multimodal_and_tied_checkpoint_names(tmp_path, ward_policy_dir):
     assert "lm_head.weight" in tied  # published even though the file does not store it
 
 
+def test_generator_interpreter_resolution(tmp_path):
+    """`generator.python_executable`: auto picks .venv-vllm for vllm (this venv has no vllm) and the
+    driver's interpreter for hf; a path that is not an executable is refused, naming the field."""
+    from actors.generator_vllm import VLLM_CPU_VENV
+
+    assert GeneratorConfig(backend="vllm").runtime_env() == {"py_executable": str(VLLM_CPU_VENV / "bin" / "python")}
+    assert GeneratorConfig(backend="hf").runtime_env() is None
+    assert GeneratorConfig(backend="vllm", python_executable=None).runtime_env() is None
+    with pytest.raises(ValueError, match="generator.python_executable: .*not an executable file"):
+        GeneratorConfig(backend="vllm", python_executable=str(tmp_path / "missing" / "python")).runtime_env()
+
+
 def vllm_run_config(run_dir, policy_dir, **sections):
     """TT-OPD on the tiny config with vLLM generators."""
     teacher = {"enabled": True, "ema_interval": 1, "hard_copy_interval": 0, **sections.pop("teacher", {})}
