@@ -17,7 +17,8 @@ import yaml
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CLUSTER_YAML = REPO_ROOT / "cluster.yaml"
 SUBMITTED_CONFIG = REPO_ROOT / "configs" / "qwen35_9b_ttopd.yaml"  # the config docs/cluster.md submits
-VENV = "~/hcgym-venv"
+VENV = "~/hcgym-venv"  # the project: driver, learner, teacher, env actors
+VLLM_VENV = "~/hcgym-vllm"  # the vLLM generators
 
 
 @pytest.fixture(scope="module")
@@ -62,18 +63,43 @@ def commands(cluster: dict, key: str) -> list[str]:
     return [" ".join(c.split()) for c in cluster[key]]
 
 
-def test_every_node_gets_python_311_from_uv_the_gpu_extra_data_and_the_submitted_model(cluster):
+def test_every_node_gets_python_311_from_uv_the_project_vllm_data_and_the_submitted_model(cluster):
+    import tomllib
+
     from envs.cli import build_parser
     from learner.config import load_config
 
     setup = commands(cluster, "setup_commands")
-    venv_line = next(c for c in setup if "uv venv" in c)
-    version = re.search(r"--python (\d+)\.(\d+)", venv_line)
-    assert version and (int(version[1]), int(version[2])) >= (3, 11), venv_line
-    assert any(f"uv python install {version[1]}.{version[2]}" in c for c in setup)
-    install = next(c for c in setup if "pip install" in c)
-    assert f"--python {VENV}/bin/python" in install and '".[gpu]"' in install, install
+    submitted = load_config(SUBMITTED_CONFIG)
+    venv_lines = [c for c in setup if "uv venv" in c]
+    assert {c.split()[-1] for c in venv_lines} == {VENV, VLLM_VENV}
+    for line in venv_lines:  # Ray workers need the driver's Python version: one version for both
+        version = re.search(r"--python (\d+)\.(\d+)", line)
+        assert version and (int(version[1]), int(version[2])) >= (3, 11), line
+        assert any(f"uv python install {version[1]}.{version[2]}" in c for c in setup)
+    assert len({re.search(r"--python (\S+)", c)[1] for c in venv_lines}) == 1, venv_lines
     assert any("sys.version_info >= (3, 11)" in c for c in setup)  # checked on the node, not assumed
+
+    installs = [c for c in setup if "uv pip install" in c]
+    project = [c for c in installs if f"--python {VENV}/bin/python" in c]
+    vllm_side = [c for c in installs if f"--python {VLLM_VENV}/bin/python" in c]
+    assert len(project) + len(vllm_side) == len(installs)
+    # The project's venv: exact tested versions, no vLLM (its numba pin clashes with ours).
+    assert all("-c constraints-cpu.txt" in c and "vllm" not in c for c in project), project
+    # vLLM's venv: the `gpu` extra's vLLM with the same constraints (same torch/Ray/transformers as
+    # the learner on the other end of the weight sync), then the project without its dependencies.
+    pyproject = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    gpu_extra = pyproject["project"]["optional-dependencies"]["gpu"]
+    assert any(all(f'"{spec.replace(" ", "")}"' in c for spec in gpu_extra) and "-c constraints-cpu.txt" in c
+               for c in vllm_side), (gpu_extra, vllm_side)
+    assert any("--no-deps -e ." in c for c in vllm_side), vllm_side
+    assert any("sys.version_info[:2], torch.__version__, ray.__version__" in c and c.startswith("test ")
+               for c in setup)  # both interpreters agree on Python, torch and Ray, checked on the node
+    # The generators of the submitted config run in that venv.
+    home = f"/home/{cluster['auth']['ssh_user']}"
+    assert submitted.generator.backend == "vllm"
+    on_node = submitted.generator.python_executable.replace("~", home, 1)
+    assert on_node == f"{VLLM_VENV.replace('~', home, 1)}/bin/python", on_node
 
     # Every hcgym call is the venv's and parses with the project's own CLI (catches renamed commands).
     hcgym_lines = [c for c in setup if "hcgym " in c]
@@ -91,7 +117,7 @@ def test_every_node_gets_python_311_from_uv_the_gpu_extra_data_and_the_submitted
     assert "HF_HUB_OFFLINE=0" in fetch_env, fetch_env
     fetched = fetch.model_id
     # The cache is per node and runs are offline: the fetched id must be the submitted config's model.
-    assert load_config(SUBMITTED_CONFIG).model.path == fetched
+    assert submitted.model.path == fetched
 
 
 SUBMIT_DOCS = ["docs/cluster.md", "README.md", "docs/training.md", "cluster.yaml"]
