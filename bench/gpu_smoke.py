@@ -6,7 +6,8 @@ log-prob gap on the tokens vLLM sampled after the sync (bf16 on both sides: expe
 most; a gap near the random-init entropy would mean the sync did not land).
 
 Without a GPU it prints why and exits with status 0 (so `make bench` passes on CPU machines);
-without vLLM in the generator's interpreter (the `gpu` extra) it says which install is missing.
+without vLLM in the generator's interpreter (`--vllm-python`, default: this one if it imports vllm,
+else `.venv-vllm`; on cluster nodes `~/hcgym-vllm/bin/python`) it says which install is missing.
 
 The pieces are the production ones, as Ray actors on a local cluster with one GPU shared by
 fractions: `GeneratorService` with the `vllm` backend (actors/generator_vllm.py), `LearnerActor`
@@ -163,13 +164,14 @@ def main() -> int:
     parser.add_argument("--new-tokens", type=int, default=256)
     parser.add_argument("--micro-batch", type=int, default=4)
     parser.add_argument("--peak-tflops", type=float, default=None, help="dense bf16 peak of the GPU")
+    parser.add_argument("--vllm-python", default="auto", help="interpreter with vLLM (generator.python_executable)")
     args = parser.parse_args()
 
     import torch
 
     if not torch.cuda.is_available():
         print(f"bench/gpu_smoke.py: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
-              "nothing run. Run it on a GPU node with the `gpu` extra installed.")
+              "nothing run. Run it on a GPU node (vLLM in --vllm-python's interpreter).")
         return 0
     name = torch.cuda.get_device_name(0)
     if args.peak_tflops is None:
@@ -178,8 +180,8 @@ def main() -> int:
             parser.error(f"unknown GPU {name!r}: pass --peak-tflops (dense bf16) for the MFU")
     from learner.config import GeneratorConfig
 
-    try:  # the generator's interpreter: this one with the `gpu` extra, or the one configured
-        runtime_env = GeneratorConfig(backend="vllm").runtime_env()
+    try:  # the generator's interpreter: --vllm-python, or this one if it imports vllm, or .venv-vllm
+        runtime_env = GeneratorConfig(backend="vllm", python_executable=args.vllm_python).runtime_env()
     except ValueError as exc:
         print(f"bench/gpu_smoke.py: no vLLM for the generator: {exc}")
         return 1
