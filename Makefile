@@ -44,8 +44,8 @@ $(VLLM_STAMP): pyproject.toml constraints-cpu.txt
 	$(VLLM_VENV)/bin/python -c "import torch, vllm, ray, actors.generator_vllm; \
 		assert torch.__version__ == '2.13.0+cpu', torch.__version__; \
 		assert ray.__version__ == '2.60.0', ray.__version__"
-	test "$$($(VLLM_VENV)/bin/python -c 'import sys; print(sys.version_info[:2])')" = \
-		"$$($(BIN)/python -c 'import sys; print(sys.version_info[:2])')"  # Ray workers need the driver's Python
+	test "$$($(VLLM_VENV)/bin/python -c 'import sys; print(sys.version.split()[0])')" = \
+		"$$($(BIN)/python -c 'import sys; print(sys.version.split()[0])')"  # Ray workers need the driver's Python
 	touch $(VLLM_STAMP)
 
 data: setup
