@@ -214,6 +214,28 @@ def test_multimodal_and_tied_checkpoint_names(tmp_path, ward_policy_dir):
     assert "lm_head.weight" in tied  # published even though the file does not store it
 
 
+def test_vllm_runs_a_sharded_tied_twin_and_takes_its_published_names(ray_cluster, ward_policy_dir, tmp_path):
+    """A sharded Llama twin with tied embeddings: vLLM's log-probs equal transformers', and an update
+    keyed as the learner publishes it (tied `lm_head.weight` included) lands."""
+    from tests.training.twins import build_twin
+
+    twin = str(build_twin("llama_tied", tmp_path / "llama_tied", Path(ward_policy_dir).parent / "tok"))
+    handle = start_vllm_generator(ray_cluster, twin)
+    try:
+        requests, results = sample(ray_cluster, handle)
+        assert max_logprob_gap(requests, results, hf_model(twin)) < LOGPROB_TOLERANCE
+        base = hf_model(twin).state_dict()
+        assert "lm_head.weight" in base
+        new = perturbed(base, seed=5)
+        new["lm_head.weight"] = new["model.embed_tokens.weight"]  # still tied
+        ray_cluster.get(handle.update_weights.remote(new, 1), timeout=120)
+        requests, results = sample(ray_cluster, handle, min_version=1)
+        assert max_logprob_gap(requests, results, hf_model(twin, new)) < LOGPROB_TOLERANCE
+        assert max_logprob_gap(requests, results, hf_model(twin, base)) > 1e-2
+    finally:
+        ray_cluster.kill(handle)
+
+
 def test_generator_interpreter_resolution(tmp_path):
     """`generator.python_executable`: auto picks .venv-vllm for vllm (this venv has no vllm) and the
     driver's interpreter for hf; a path that is not an executable is refused, naming the field."""
