@@ -62,7 +62,7 @@ def start_vllm_generator(ray, model_dir: str, temperature: float = TEMPERATURE):
 def vllm_generator(ray_cluster, vllm_policy_dir):
     handle = start_vllm_generator(ray_cluster, vllm_policy_dir)
     yield handle
-    ray_cluster.kill(handle)  # at module end: its engine holds ~1-2 GB of RAM
+    ray_cluster.kill(handle)  # at module end: frees the engine (KV cache and weights)
 
 
 def hf_model(model_dir: str, state_dict: dict[str, torch.Tensor] | None = None):
