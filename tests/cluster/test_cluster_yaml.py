@@ -153,4 +153,4 @@ def test_ray_runs_from_the_venv_with_token_auth_and_a_loopback_dashboard(cluster
     assert "RAY_AUTH_MODE=disabled" not in text
     # The token that `ray get-auth-token --generate` wrote on the user's machine, on every node.
     assert cluster["file_mounts"]["/home/ubuntu/.ray/auth_token"] == "~/.ray/auth_token"
-    assert ".venv" in cluster["rsync_exclude"]  # a local CPU venv must not land on GPU nodes
+    assert {".venv", ".venv-vllm"} <= set(cluster["rsync_exclude"])  # local CPU venvs stay local
