@@ -89,3 +89,52 @@ def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_po
         assert all(extras[i]["teacher_logprobs"] is not None for i in ids)
     consumed_groups = status.get("consumed", 0) + status.get("filled", 0)
     assert consumed_groups * 2 == len(seen)
+
+
+def test_collective_weight_sync_survives_a_teacher_death(ray_cluster, ward_policy_dir, tmp_path):
+    """With the collective transport the teacher is a member of the weight-sync group: killed, it breaks
+    the group; the group is re-formed with the restarted teacher, which first adopts the student's
+    weights at the driver's teacher version (no EMA snapshot is kept in this mode)."""
+    from learner.train import Trainer
+
+    steps = 4
+    cfg = tiny_config(
+        tmp_path / "collective_faults", ward_policy_dir,
+        trainer={"max_steps": steps, "checkpoint_interval": 0},
+        teacher={"enabled": True, "ema_interval": 1, "hard_copy_interval": 0},
+        weight_sync={"transport": "collective", "backend": "gloo", "bucket_mb": 0.05, "timeout_s": 15},
+        learner={"optim": {"lr": 1e-3}, "loss": {"entropy_coef": 0.01, "distill": {"enabled": True, "lambda_distill": 1.0,
+                                                                       "drop_length_truncated_turns": False}}},
+    )
+    trainer = Trainer(cfg, log=lambda line: None)
+    outcome: dict = {}
+
+    def run():
+        try:
+            outcome["summary"] = trainer.run()
+        except BaseException as exc:  # surfaced below
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        # Once it holds EMA state that a restart loses (killed earlier, its initial weights are exact).
+        wait_for(lambda: trainer.teacher_client is not None and trainer.teacher_client.version >= 1,
+                 what="the first teacher update")
+        ray_cluster.kill(trainer.teacher, no_restart=False)
+    finally:
+        thread.join(timeout=600)
+    if "error" in outcome:
+        raise outcome["error"]
+    summary = outcome["summary"]
+    assert summary["steps"] == steps
+    counters = summary["counters"]
+    assert counters["teacher_recoveries"] >= 1 and counters.get("teacher_recoveries_inexact", 0) >= 1, counters
+    records = read_metrics(cfg.output_dir)
+    assert [r["teacher_updates"] for r in records] == [1.0, 2.0, 3.0, 4.0]  # no update lost or repeated
+    # The adoption went through the object store (counted), the other updates through the group.
+    assert records[-1]["teacher_sync_object_store"] >= counters["teacher_recoveries_inexact"]
+    assert records[-1]["teacher_sync_collective_bytes"] > records[0]["teacher_sync_collective_bytes"] > 0
+    for step in range(1, steps + 1):
+        samples, extras = read_samples(tmp_path / "collective_faults" / "trajectories" / f"step_{step:06d}.parquet")
+        assert all(extras[s.sample_id]["teacher_logprobs"] is not None for s in samples)
