@@ -214,7 +214,7 @@ class TrainerConfig(_Strict):
 
 
 class RayConfig(_Strict):
-    address: str | None = Field(default=None, description="None = start a local cluster")
+    address: str | None = Field(default=None, description="None = the cluster in RAY_ADDRESS (set for `ray job submit` jobs), else a new local one")
     num_cpus: int | None = Field(default=2, ge=1)
     include_dashboard: bool = False
     namespace: str = "hcgym"

@@ -10,6 +10,7 @@ DeepSpeed ranks in a placement group itself; `wait_started` waits for every acto
 
 from __future__ import annotations
 
+import os
 from typing import Any, Callable
 
 from actors.generator import generator_actor_class
@@ -26,9 +27,14 @@ def init_ray(cfg: RunConfig) -> None:
     rc = cfg.ray
     kwargs: dict[str, Any] = {"namespace": rc.namespace, "include_dashboard": rc.include_dashboard,
                               "log_to_driver": True}
-    if rc.address:
-        kwargs["address"] = rc.address
+    # `ray job submit` runs the driver with RAY_ADDRESS set: a config without `ray.address` joins that
+    # cluster instead of failing on `num_cpus` (which Ray refuses when connecting).
+    address = rc.address or os.environ.get("RAY_ADDRESS")
+    if address:
+        kwargs["address"] = address
     else:
+        # A fresh local cluster, never a head some other process left running on this machine.
+        kwargs["address"] = "local"
         kwargs["num_cpus"] = rc.num_cpus
     ray.init(**kwargs)
 

@@ -40,7 +40,8 @@ def tiny_ttopd_job_config(run_dir, policy_dir) -> dict:
                                                                 "drop_length_truncated_turns": False}}},
         # As on a cluster: the driver joins the running cluster (RAY_ADDRESS, set by the job
         # supervisor) instead of starting its own; asking for CPUs there is an error in ray.init.
-        "ray": {"address": "auto", "num_cpus": None, "learner_num_cpus": 0},
+        # No address: the driver must join the job's cluster through RAY_ADDRESS (set by the job supervisor).
+        "ray": {"address": None, "learner_num_cpus": 0},
         "metrics": {"tensorboard": False, "ray_metrics": True},
     }
 
