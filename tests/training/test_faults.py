@@ -3,6 +3,7 @@ trajectory is accounted for exactly once."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -23,6 +24,30 @@ def wait_for(predicate, timeout=120.0, what="condition"):
     raise AssertionError(f"timed out waiting for {what}")
 
 
+@contextlib.contextmanager
+def training_in_background(trainer, join_timeout: float = 600.0):
+    """Run `trainer.run()` on a thread while the body kills actors; afterwards re-raise the run's
+    error, or put its summary in the yielded dict under "summary"."""
+    outcome: dict = {}
+
+    def run():
+        try:
+            outcome["summary"] = trainer.run()
+        except BaseException as exc:  # surfaced below
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        yield outcome
+    finally:
+        thread.join(timeout=join_timeout)
+    if thread.is_alive():
+        raise AssertionError(f"training did not finish within {join_timeout:.0f} s")
+    if "error" in outcome:
+        raise outcome["error"]
+
+
 def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_policy_dir, tmp_path):
     from learner.train import Trainer
 
@@ -37,22 +62,10 @@ def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_po
                                                                        "drop_length_truncated_turns": False}}},
     )
     trainer = Trainer(cfg, log=lambda line: None)
-    outcome: dict = {}
-
-    def run():
-        try:
-            outcome["summary"] = trainer.run()
-        except BaseException as exc:  # surfaced below
-            outcome["error"] = exc
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    killed = {}
-    try:
+    with training_in_background(trainer) as outcome:
         wait_for(lambda: trainer.step >= 1, what="step 1")
         # An env actor while it hosts episodes.
         wait_for(lambda: trainer.pool.loads()[0] > 0, what="episodes on env actor 0")
-        killed["env_in_flight"] = trainer.pool.loads()[0]
         ray_cluster.kill(trainer.pool.actors[0], no_restart=False)
         wait_for(lambda: trainer.step >= 2, what="step 2")
         # A generator while requests are outstanding on it.
@@ -61,10 +74,6 @@ def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_po
         wait_for(lambda: trainer.step >= 3, what="step 3")
         # The teacher, with EMA state to lose (it has been updated at every step).
         ray_cluster.kill(trainer.teacher, no_restart=False)
-    finally:
-        thread.join(timeout=600)
-    if "error" in outcome:
-        raise outcome["error"]
     summary = outcome["summary"]
 
     assert summary["steps"] == steps
@@ -107,25 +116,11 @@ def test_collective_weight_sync_survives_a_teacher_death(ray_cluster, ward_polic
                                                                        "drop_length_truncated_turns": False}}},
     )
     trainer = Trainer(cfg, log=lambda line: None)
-    outcome: dict = {}
-
-    def run():
-        try:
-            outcome["summary"] = trainer.run()
-        except BaseException as exc:  # surfaced below
-            outcome["error"] = exc
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    try:
+    with training_in_background(trainer) as outcome:
         # Once it holds EMA state that a restart loses (killed earlier, its initial weights are exact).
         wait_for(lambda: trainer.teacher_client is not None and trainer.teacher_client.version >= 1,
                  what="the first teacher update")
         ray_cluster.kill(trainer.teacher, no_restart=False)
-    finally:
-        thread.join(timeout=600)
-    if "error" in outcome:
-        raise outcome["error"]
     summary = outcome["summary"]
     assert summary["steps"] == steps
     counters = summary["counters"]

@@ -11,7 +11,6 @@ Tolerances: the same fp32 weights give log-probs within 1e-4 nats/token in vLLM 
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import pytest
@@ -20,7 +19,7 @@ import torch
 from actors.generator import GenerationRequest, GeneratorBehindError, processed_logprobs
 from learner.config import GeneratorConfig
 from learner.metrics import read_metrics
-from tests.training.test_faults import wait_for
+from tests.training.test_faults import training_in_background, wait_for
 from tests.training.test_train import tiny_config
 
 pytestmark = pytest.mark.ray
@@ -287,24 +286,10 @@ def test_training_survives_a_vllm_generator_death(ray_cluster, vllm_policy_dir, 
     cfg = vllm_run_config(tmp_path / "faults", vllm_policy_dir,
                           trainer={"max_steps": steps, "max_staleness": 1, "checkpoint_interval": 0})
     trainer = Trainer(cfg, log=lambda line: None)
-    outcome: dict = {}
-
-    def run():
-        try:
-            outcome["summary"] = trainer.run()
-        except BaseException as exc:  # surfaced below
-            outcome["error"] = exc
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    try:
+    with training_in_background(trainer) as outcome:
         wait_for(lambda: trainer.step >= 1, timeout=300, what="step 1")
         wait_for(lambda: trainer.gen_client.outstanding[0] > 0, timeout=300, what="requests on the vLLM generator")
         ray_cluster.kill(trainer.generators[0], no_restart=False)
-    finally:
-        thread.join(timeout=600)
-    if "error" in outcome:
-        raise outcome["error"]
     summary = outcome["summary"]
     assert summary["steps"] == steps
     assert summary["generator_failures"] >= 1
