@@ -112,7 +112,8 @@ def part_vllm(args) -> dict:
     try:
         from vllm import LLM, SamplingParams
     except ImportError as exc:
-        return {"vllm": f"not installed ({exc}); install the `gpu` extra: pip install '.[gpu]'"}
+        return {"vllm": f"not installed ({exc}); run this part with the vLLM venv's python "
+                         "(~/hcgym-vllm on cluster.yaml nodes, docs/cluster.md)"}
     import random
 
     llm = LLM(model=args.model_dir, dtype="bfloat16", max_model_len=args.seq + args.new_tokens,
@@ -146,7 +147,7 @@ def main() -> int:
 
     if not torch.cuda.is_available():
         print(f"bench/gpu_step.py: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
-              "nothing measured. Run it on a GPU node with the `gpu` extra installed.")
+              "nothing measured. Run it on a GPU node (cluster.yaml installs both venvs).")
         return 0
     name = torch.cuda.get_device_name(0)
     if args.peak_tflops is None:
