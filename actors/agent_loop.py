@@ -102,20 +102,14 @@ def turn_seed(episode_seed: int, turn: int) -> int:
     return int.from_bytes(digest, "little") & 0x7FFF_FFFF_FFFF_FFFF
 
 
-def finished_info(env) -> dict[str, Any]:
+def finished_info(env, reason: str = "token_limit") -> dict[str, Any]:
     """Score an episode the agent loop had to stop (a token limit) before the env ended it.
 
-    Uses the env's public record and `envs.rewards.score_episode`, marking the record truncated.
+    The env scores it (`HealthcareGymEnv.truncate`: the domain's own scorer, as a turn-limit
+    truncation); nothing here re-implements scoring.
     """
-    from envs.rewards import score_episode
-
-    base = env.unwrapped
-    record = base.trajectory()
-    record.truncated = True
-    breakdown = score_episode(record, base.task, weights=base.reward_weights,
-                              context=base.domain_env.safety_context)
-    return {"reward": float(breakdown.total), "reward_components": dict(breakdown.components()),
-            "is_correct": bool(breakdown.is_correct)}
+    reward, info = env.unwrapped.truncate(reason)
+    return summarize_final_info(info, reward)
 
 
 def summarize_final_info(info: dict[str, Any], reward: float) -> dict[str, Any]:

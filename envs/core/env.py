@@ -208,6 +208,26 @@ class HealthcareGymEnv(gym.Env[str, str]):
             print(self._render_turn(turn))
         return observation, reward, terminated, truncated, info
 
+    def truncate(self, reason: str) -> tuple[float, dict[str, Any]]:
+        """End the running episode from outside the env (an agent runner's token or context limit),
+        scored exactly as a turn-limit truncation: by the domain's own scorer.
+
+        Args:
+            reason: Why the runner stopped (e.g. "token_limit"); returned as `info["end_reason"]`.
+
+        Returns:
+            (reward, info) with the same reward keys as the terminal `step`'s info.
+        """
+        if self._record is None:
+            raise RuntimeError("call reset() before truncate()")
+        if self._done:
+            raise RuntimeError(f"episode of task {self._record.task_id!r} is already over")
+        self._record.terminated, self._record.truncated = False, True
+        info: dict[str, Any] = {"end_reason": reason}
+        reward = self._finish(info)
+        self._done = True
+        return reward, info
+
     def _finish(self, info: dict[str, Any]) -> float:
         from envs.rewards import score_episode
 
