@@ -1,0 +1,114 @@
+"""Data that crosses the evaluation harness's boundaries (pydantic) and the `Policy` protocol.
+
+One `ResultRow` per (policy_id, benchmark, task_id, condition, seed): the runner writes them to
+`results.parquet` as episodes finish; `evals.metrics`, `evals.stats` and `evals.report` read them.
+A `PolicyReply` is one chat turn of a policy (text or agent condition).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal, Protocol, runtime_checkable
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Condition = Literal["text", "logprob", "agent"]
+CONDITIONS: tuple[str, ...] = ("text", "logprob", "agent")
+
+EndReason = Literal["answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error", "context_overflow"]
+END_REASONS: tuple[str, ...] = ("answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error",
+                                "context_overflow")
+
+# The columns that identify one episode; a results folder never holds two rows with the same key.
+RESULT_KEY: tuple[str, ...] = ("policy_id", "benchmark", "task_id", "condition", "seed")
+
+
+class PolicyReply(BaseModel):
+    """One assistant turn of a policy.
+
+    `error_kind` is set (and `text` may be empty) when the turn failed without a model answer,
+    e.g. "timeout", "http_429", "http_500", "malformed_json", "context_overflow"; the runner turns
+    it into an episode with `end_reason="endpoint_error"` (or "context_overflow").
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    text: str = ""
+    tool_calls: list[dict[str, Any]] | None = None  # OpenAI shape: {"id", "type": "function", "function": {...}}
+    prompt_tokens: int = Field(default=0, ge=0)
+    completion_tokens: int = Field(default=0, ge=0)
+    cost_usd: float | None = None
+    error_kind: str | None = None
+    finish_reason: str | None = None  # "stop", "length", "tool_calls", ...
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What the conditions need from a policy (local model, endpoint or scripted baseline)."""
+
+    policy_id: str
+
+    async def reply(self, messages: list[dict[str, Any]], tools: list[dict[str, Any]] | None, *,
+                    max_tokens: int, seed: int) -> PolicyReply: ...
+
+    def option_logprobs(self, messages: list[dict[str, Any]], letters: list[str]) -> dict[str, float] | None:
+        """Log-probability of each option letter as the next token after `messages` (None: unsupported)."""
+        ...
+
+
+class ResultRow(BaseModel):
+    """One evaluated episode (one line of `results.parquet`)."""
+
+    model_config = ConfigDict(extra="forbid")
+    policy_id: str
+    benchmark: str
+    domain: str
+    task_id: str
+    task_type: str
+    condition: Condition
+    seed: int
+    end_reason: EndReason
+    error_kind: str | None = None
+    answer: str | None = None
+    gold: str | None = None
+    options: dict[str, str] | None = None
+    correct: bool | None = None
+    reward: float | None = None
+    reward_components: dict[str, float] = Field(default_factory=dict)
+    safety_violations: dict[str, int] = Field(default_factory=dict)  # severity level -> count
+    turns: int = Field(default=0, ge=0)
+    tool_calls: int = Field(default=0, ge=0)
+    error_kinds: dict[str, int] = Field(default_factory=dict)  # tool/parse error kind -> count
+    prompt_tokens: int = Field(default=0, ge=0)
+    completion_tokens: int = Field(default=0, ge=0)
+    cost_usd: float | None = None
+    latency_s: float = Field(default=0.0, ge=0.0)
+    trajectory_ref: str | None = None  # e.g. "trajectories.parquet#<row id>"
+    extra: dict[str, Any] = Field(default_factory=dict)  # metric inputs, e.g. long-form text
+
+    def key(self) -> tuple[str, str, str, str, int]:
+        return (self.policy_id, self.benchmark, self.task_id, self.condition, self.seed)
+
+
+class EvalItem(BaseModel):
+    """One task of a suite to evaluate: which benchmark it counts for, and where the env finds it."""
+
+    model_config = ConfigDict(extra="forbid")
+    benchmark: str
+    domain: str
+    task_id: str
+    split: str | None = None
+
+
+class EvalSpec(BaseModel):
+    """What a results folder was produced by (`eval.json`)."""
+
+    model_config = ConfigDict(extra="forbid")
+    policy: str
+    policy_id: str
+    suite: str
+    condition: Condition
+    seeds: list[int]
+    limit: int | None = None
+    max_turns: int = Field(default=5, ge=1)
+    max_tokens: int = Field(default=512, ge=1)
+    versions: dict[str, str] = Field(default_factory=dict)
+    created_at: str | None = None
