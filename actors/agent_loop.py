@@ -113,9 +113,20 @@ def finished_info(env, reason: str = "token_limit") -> dict[str, Any]:
 
 
 def summarize_final_info(info: dict[str, Any], reward: float) -> dict[str, Any]:
-    """The parts of the env's final `info` that cross process boundaries (no pydantic objects)."""
+    """The parts of the env's final `info` that cross process boundaries (no pydantic objects).
+
+    Besides the reward, the evaluation harness (evals/) reads the submitted answer and the safety
+    violations counted by severity ("1".."5"), which exist only while the final info still holds
+    the trajectory and the reward breakdown.
+    """
+    violations: dict[str, int] = {}
+    for violation in (info.get("reward_breakdown") or {}).get("violations") or []:
+        level = str(violation.get("severity"))
+        violations[level] = violations.get(level, 0) + 1
+    trajectory = info.get("trajectory")
     return {"reward": float(reward), "reward_components": dict(info.get("reward_components") or {}),
-            "is_correct": bool(info.get("is_correct", False))}
+            "is_correct": bool(info.get("is_correct", False)), "safety_violations": violations,
+            "submitted_answer": getattr(trajectory, "submitted_answer", None)}
 
 
 def make_env(domain: str, split: str | None, max_turns: int, env_kwargs: dict[str, Any] | None = None):

@@ -100,9 +100,10 @@ class EnvActor:
 
     def step(self, key: str, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self._env(key).step(action)
+        final = summarize_final_info(info, float(reward)) if terminated or truncated else None
         info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
-        if terminated or truncated:
-            info["final"] = summarize_final_info(info, float(reward))
+        if final is not None:
+            info["final"] = final
         return obs, float(reward), bool(terminated), bool(truncated), info
 
     def finish(self, key: str, reason: str) -> dict[str, Any]:

@@ -1,0 +1,249 @@
+"""The three evaluation conditions of the paper. Each runs one episode of one task on an env
+handle (`actors.agent_loop.EnvHandle`: in-process `LocalEnv` or a Ray `RemoteEnv`) and returns an
+`EpisodeOutcome`; the env is always the scorer (its domain scorer, as in training).
+
+* `text`: one turn, no tools. The policy sees a short instruction and the task's ticket; its free
+  text is submitted through the env's `submit_answer`, so the reward's own extractor
+  (`envs.rewards.choice.extract_choice` for multiple choice) reads the answer.
+* `logprob`: multiple-choice only. `policy.option_logprobs(messages, letters)`: the next-token
+  log-probability of each option letter after the question; the argmax is the answer.
+* `agent`: the multi-turn runner: the env's system prompt (or the run's compact prompt), its tools,
+  its action parser, a turn budget and a response-token budget, as in training.
+
+End reasons (evals.types.END_REASONS): "answer" (submitted), "turn_limit", "token_limit",
+"parse_failure" (no readable answer), "endpoint_error", "context_overflow".
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from actors.agent_loop import EpisodeSpec, compact_system_prompt
+from evals.policies import submit_action
+from evals.types import PolicyReply
+
+TEXT_SYSTEM_PROMPT = ("You are a careful medical expert. Answer the question below directly. For a multiple-choice "
+                      "question, state the letter of the single best option.")
+LOGPROB_SYSTEM_PROMPT = "Answer the multiple-choice question with the letter of the single best option only."
+MAX_ANSWER_CHARS = 8000  # what the text condition submits of a reply (the env caps actions too)
+
+
+@dataclass
+class ConditionSettings:
+    max_turns: int = 5
+    max_tokens: int = 512            # new tokens per turn
+    max_response_tokens: int = 4096  # agent condition: completion tokens over the episode
+    prompt_style: str = "env"        # agent condition: "env" or "compact" (a run's tiny-model prompt)
+
+
+@dataclass
+class EpisodeOutcome:
+    """What a condition learned about one episode (the runner adds identity and timing)."""
+
+    end_reason: str
+    answer: str | None = None
+    correct: bool | None = None
+    reward: float | None = None
+    reward_components: dict[str, float] = field(default_factory=dict)
+    safety_violations: dict[str, int] = field(default_factory=dict)
+    error_kind: str | None = None
+    error_kinds: dict[str, int] = field(default_factory=dict)
+    turns: int = 0
+    tool_calls: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cost_usd: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    messages: list[dict[str, Any]] = field(default_factory=list)
+
+
+def is_multiple_choice(task) -> bool:
+    return bool(task.options)
+
+
+def episode_spec(task_id: str, domain: str, split: str | None, seed: int) -> EpisodeSpec:
+    return EpisodeSpec(sample_id=f"{task_id}:0:{seed}", task_id=task_id, domain=domain, split=split,
+                       group_id=task_id, seed=seed, greedy=True)
+
+
+def _account(outcome: EpisodeOutcome, reply: PolicyReply) -> None:
+    outcome.prompt_tokens += reply.prompt_tokens
+    outcome.completion_tokens += reply.completion_tokens
+    if reply.cost_usd is not None:
+        outcome.cost_usd = (outcome.cost_usd or 0.0) + reply.cost_usd
+
+
+def _error_end_reason(error_kind: str) -> str:
+    return "context_overflow" if error_kind == "context_overflow" else "endpoint_error"
+
+
+def _apply_final(outcome: EpisodeOutcome, final: dict[str, Any]) -> None:
+    outcome.reward = float(final["reward"])
+    outcome.reward_components = dict(final.get("reward_components") or {})
+    outcome.safety_violations = dict(final.get("safety_violations") or {})
+    if outcome.correct is None:
+        outcome.correct = bool(final.get("is_correct", False))
+
+
+async def _submit(env, answer: str) -> tuple[dict[str, Any], bool]:
+    """Submit `answer` through the env; returns (final info, whether the env accepted it)."""
+    _, reward, terminated, truncated, info = await env.step(submit_action(answer[:MAX_ANSWER_CHARS]))
+    if terminated or truncated:
+        return info.get("final") or {"reward": reward}, terminated
+    return await env.finish("parse_failure"), False
+
+
+async def run_text(policy, env, task, domain: str, split: str | None, seed: int,
+                   settings: ConditionSettings) -> EpisodeOutcome:
+    from envs.rewards.choice import extract_choice
+
+    _, info = await env.reset(episode_spec(task.id, domain, split, seed))
+    messages = [{"role": "system", "content": TEXT_SYSTEM_PROMPT}, {"role": "user", "content": info["ticket"]}]
+    reply = await policy.reply(messages, None, max_tokens=settings.max_tokens, seed=seed)
+    outcome = EpisodeOutcome(end_reason="answer", turns=1)
+    _account(outcome, reply)
+    messages.append({"role": "assistant", "content": reply.text})
+    outcome.messages = messages
+    outcome.extra["text"] = reply.text
+    if reply.error_kind:
+        outcome.end_reason, outcome.error_kind = _error_end_reason(reply.error_kind), reply.error_kind
+        outcome.error_kinds[reply.error_kind] = 1
+        _apply_final(outcome, await env.finish(outcome.end_reason))
+        outcome.correct = False
+        return outcome
+    if is_multiple_choice(task):
+        outcome.answer = extract_choice(reply.text, task.options)
+        if outcome.answer is None:
+            outcome.end_reason = "parse_failure"
+    else:
+        outcome.answer = reply.text.strip() or None
+        if outcome.answer is None:
+            outcome.end_reason = "parse_failure"
+    final, _ = await _submit(env, reply.text)
+    _apply_final(outcome, final)
+    return outcome
+
+
+async def run_logprob(policy, env, task, domain: str, split: str | None, seed: int,
+                      settings: ConditionSettings) -> EpisodeOutcome:
+    if not is_multiple_choice(task):
+        raise ValueError(f"task {task.id!r} is not multiple-choice; the logprob condition needs options")
+    _, info = await env.reset(episode_spec(task.id, domain, split, seed))
+    messages = [{"role": "system", "content": LOGPROB_SYSTEM_PROMPT}, {"role": "user", "content": info["ticket"]}]
+    letters = sorted(task.options)
+    scores = policy.option_logprobs(messages, letters)
+    outcome = EpisodeOutcome(end_reason="answer", turns=1, messages=messages)
+    if scores is None:
+        outcome.end_reason, outcome.error_kind = "endpoint_error", "logprobs_unavailable"
+        outcome.error_kinds["logprobs_unavailable"] = 1
+        _apply_final(outcome, await env.finish("endpoint_error"))
+        outcome.correct = False
+        return outcome
+    outcome.answer = max(letters, key=lambda letter: (scores[letter], -ord(letter[0])))
+    outcome.correct = outcome.answer == task.correct_answer
+    outcome.extra["option_logprobs"] = {k: float(v) for k, v in scores.items()}
+    final, _ = await _submit(env, outcome.answer)
+    _apply_final(outcome, final)
+    return outcome
+
+
+def action_text(reply: PolicyReply) -> str:
+    """The assistant turn as the env's parser reads it: native tool calls (OpenAI shape) become
+    `<tool_call>` blocks after the text; malformed argument JSON is passed through so the env's
+    parser reports it as it would for any model."""
+    parts = [reply.text] if reply.text else []
+    for call in reply.tool_calls or []:
+        fn = call.get("function", call)
+        arguments = fn.get("arguments", {})
+        if isinstance(arguments, str):
+            try:
+                arguments = json.loads(arguments) if arguments.strip() else {}
+            except json.JSONDecodeError:
+                parts.append('<tool_call>{"name": ' + json.dumps(fn.get("name", "")) + ', "arguments": '
+                             + arguments + "}</tool_call>")
+                continue
+        parts.append("<tool_call>" + json.dumps({"name": fn.get("name", ""), "arguments": arguments},
+                                                ensure_ascii=False) + "</tool_call>")
+    return "\n".join(parts)
+
+
+def _observation_messages(reply: PolicyReply, observation: str, had_tool_calls: bool) -> list[dict[str, Any]]:
+    """The env's answer as chat messages: one `tool` message per native tool call (the first
+    carries the env's whole observation, which covers every call), a `tool` message without an
+    id after text-format calls (the chat template renders it as `<tool_response>`, exactly as the
+    agent loop's `tool_turn_text`), else a `user` message."""
+    if reply.tool_calls:
+        out = [{"role": "tool", "tool_call_id": reply.tool_calls[0].get("id", "call_0"), "content": observation}]
+        for call in reply.tool_calls[1:]:
+            out.append({"role": "tool", "tool_call_id": call.get("id", ""),
+                        "content": "(the result of every call of this turn is in the first tool message)"})
+        return out
+    if had_tool_calls:
+        return [{"role": "tool", "content": observation}]
+    return [{"role": "user", "content": observation}]
+
+
+async def run_agent(policy, env, task, domain: str, split: str | None, seed: int,
+                    settings: ConditionSettings) -> EpisodeOutcome:
+    from actors.agent_loop import turn_seed
+
+    _, info = await env.reset(episode_spec(task.id, domain, split, seed))
+    system = info["system_prompt"] if settings.prompt_style == "env" else compact_system_prompt(info["tools"])
+    user: Any = info["ticket"]
+    if info.get("image_path"):
+        user = [{"type": "image", "image": info["image_path"]}, {"type": "text", "text": info["ticket"]}]
+    messages: list[dict[str, Any]] = [{"role": "system", "content": system}, {"role": "user", "content": user}]
+    outcome = EpisodeOutcome(end_reason="turn_limit")
+    final: dict[str, Any] | None = None
+    last_unparsed = False
+    while True:
+        budget = settings.max_response_tokens - outcome.completion_tokens
+        if budget <= 0:
+            outcome.end_reason = "token_limit"
+            break
+        reply = await policy.reply(messages, info["tools"], max_tokens=min(settings.max_tokens, budget),
+                                   seed=turn_seed(seed, outcome.turns))
+        _account(outcome, reply)
+        if reply.error_kind:
+            outcome.end_reason, outcome.error_kind = _error_end_reason(reply.error_kind), reply.error_kind
+            outcome.error_kinds[reply.error_kind] = outcome.error_kinds.get(reply.error_kind, 0) + 1
+            break
+        outcome.turns += 1
+        action = action_text(reply)
+        assistant: dict[str, Any] = {"role": "assistant", "content": reply.text}
+        if reply.tool_calls:
+            assistant["tool_calls"] = reply.tool_calls
+        messages.append(assistant)
+        observation, reward, terminated, truncated, step_info = await env.step(action)
+        calls = step_info.get("tool_calls") or []
+        outcome.tool_calls += len(calls)
+        for _ in step_info.get("parse_errors") or []:
+            outcome.error_kinds["parse_error"] = outcome.error_kinds.get("parse_error", 0) + 1
+        last_unparsed = not calls
+        if not calls:
+            outcome.error_kinds["no_tool_call"] = outcome.error_kinds.get("no_tool_call", 0) + 1
+        if terminated or truncated:
+            final = step_info.get("final") or {"reward": reward}
+            outcome.end_reason = "answer" if terminated else ("parse_failure" if last_unparsed else "turn_limit")
+            break
+        messages.extend(_observation_messages(reply, observation, bool(calls)))
+        if outcome.turns >= settings.max_turns:  # the env enforces it too
+            outcome.end_reason = "turn_limit"
+            break
+    if final is None:
+        final = await env.finish(outcome.end_reason)
+    _apply_final(outcome, final)
+    answer = final.get("submitted_answer")
+    if answer is not None and is_multiple_choice(task):
+        from envs.rewards.choice import extract_choice
+
+        outcome.extra["submitted_text"] = answer
+        answer = extract_choice(answer, task.options) or answer
+    outcome.answer = answer
+    outcome.messages = messages
+    return outcome
+
+
+CONDITION_RUNNERS = {"text": run_text, "logprob": run_logprob, "agent": run_agent}
