@@ -354,7 +354,7 @@ def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, 
     if text.startswith("openai:"):
         from evals import openai_policy
 
-        return openai_policy.from_policy_string(text, concurrency=concurrency), {"kind": "openai"}
+        return openai_policy.policy_from_string(text, concurrency=concurrency), {"kind": "openai"}
     path = Path(text).expanduser()
     if path.is_dir() and is_run_dir(path):
         run = run_policy(path)

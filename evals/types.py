@@ -112,3 +112,57 @@ class EvalSpec(BaseModel):
     max_tokens: int = Field(default=512, ge=1)
     versions: dict[str, str] = Field(default_factory=dict)
     created_at: str | None = None
+
+
+# ------------------------------------------------------------------------------------------------
+# results.parquet: one record per ResultRow. Parquet needs one type per column, and these fields
+# hold dicts whose keys vary by row, so they are stored as JSON text and decoded on reading.
+# ------------------------------------------------------------------------------------------------
+
+JSON_COLUMNS: tuple[str, ...] = ("options", "reward_components", "safety_violations", "error_kinds", "extra")
+RESULTS_FILE = "results.parquet"
+TRAJECTORIES_FILE = "trajectories.parquet"
+SPEC_FILE = "eval.json"
+
+
+def row_to_record(row: ResultRow) -> dict[str, Any]:
+    import json
+
+    record = row.model_dump()
+    for name in JSON_COLUMNS:
+        record[name] = None if record[name] is None else json.dumps(record[name], sort_keys=True)
+    return record
+
+
+def record_to_row(record: dict[str, Any]) -> ResultRow:
+    import json
+
+    data = dict(record)
+    for name in JSON_COLUMNS:
+        if isinstance(data.get(name), str):
+            data[name] = json.loads(data[name])
+    return ResultRow.model_validate(data)
+
+
+def read_results(path) -> list[ResultRow]:
+    """The rows of a results folder (or of a `results.parquet` path); [] when there are none yet.
+
+    Raises:
+        ValueError: naming the file and the row when a record does not validate.
+    """
+    from pathlib import Path
+
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / RESULTS_FILE
+    if not path.exists():
+        return []
+    rows = []
+    for index, record in enumerate(pq.read_table(path).to_pylist()):
+        try:
+            rows.append(record_to_row(record))
+        except Exception as exc:
+            raise ValueError(f"{path}: row {index} is not a valid result row: {exc}") from exc
+    return rows
