@@ -16,6 +16,7 @@ COMMAND_MODULES = [
     "envs.cli_commands",
     "kb_service.cli",
     "learner.cli",
+    "evals.cli",
 ]
 
 

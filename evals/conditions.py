@@ -235,7 +235,7 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
     if final is None:
         final = await env.finish(outcome.end_reason)
     _apply_final(outcome, final)
-    answer = final.get("submitted_answer")
+    answer = final.get("submitted_answer") or None  # "" submitted = no answer
     if answer is not None and is_multiple_choice(task):
         from envs.rewards.choice import extract_choice
 

