@@ -35,9 +35,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     stats.add_argument("--json", action="store_true")
     stats.set_defaults(func=cmd_tasks_stats)
     imp = tasks_sub.add_parser("import", help="convert benchmark files (MedQA, MedMCQA, MMLU, PubMedQA, "
-                               "MedLFQA, VQA-RAD, SLAKE, PathVQA, MIMIC-III, eICU) or reference-format task files")
+                               "MedLFQA, VQA-RAD, SLAKE, PathVQA, PMC-VQA, VQA-Med-2021, Quilt-VQA, MIMIC-III, eICU) or reference-format task files")
     imp.add_argument("--format", required=True,
-                     help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | "
+                     help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | pmc-vqa | vqa-med-2021 | quilt-vqa | "
                           "mimic3 | eicu (PATH is the CSV folder) | reference")
     imp.add_argument("--max-stays", type=int, default=None, help="mimic3/eicu: convert at most this many ICU stays")
     imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA)")
@@ -156,7 +156,8 @@ def cmd_tasks_import(args: argparse.Namespace) -> int:
     else:
         from envs.converters import convert
 
-        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa")
+        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa", "pmc-vqa",
+                                                                            "vqa-med-2021", "quilt-vqa")
                                  else "ehr_management" if args.format in ("mimic3", "eicu") else "medical_qa")
         result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base,
                          max_stays=args.max_stays)

@@ -10,13 +10,18 @@
 | vqa-rad | JSON list: image_name, question, answer, answer_type (CLOSED/OPEN) + image folder | visual_diagnosis | yes/no choice or exact |
 | slake | JSON list: img_name, question, answer, answer_type, q_lang + image folder | visual_diagnosis | same |
 | pathvqa | JSON list: image, question, answer + image folder | visual_diagnosis | same |
+| pmc-vqa | CSV: Figure_path, Question, Answer, Choice A..D ("A:text"), Answer_label + image folder | visual_diagnosis | option letter |
+| vqa-med-2021 | text: image id, question, answer separated by pipes, one per line + image folder | visual_diagnosis | yes/no choice or exact |
+| quilt-vqa | JSON list / lines: image, question, answer, answer_type (closed/open) + image folder | visual_diagnosis | same |
 | mimic3 | folder: PATIENTS, ADMISSIONS, ICUSTAYS, LABEVENTS, D_LABITEMS, DIAGNOSES_ICD, D_ICD_DIAGNOSES (.csv/.csv.gz) | ehr_management | tool-computed |
 | eicu | folder: patient, lab, diagnosis (.csv/.csv.gz) | ehr_management | tool-computed |
 """
 
 from __future__ import annotations
 
+import csv
 import hashlib
+import re
 import string
 from pathlib import Path
 from typing import Any, Callable
@@ -165,6 +170,9 @@ def convert_medlfqa(path: Path, domain: str = "medical_qa", **_: Any) -> Convers
             "description": {"source": "medlfqa", "task_type": "long_form"},
             "evaluation_criteria": {"nl_assertions": must, "rubric": rubric,
                                     "reward_basis": ["ANSWER", "NL_ASSERTION", "RUBRIC"]},
+            # MedLFQA ships one file per benchmark (live_qa, medication_qa, healthsearch_qa, kqa_golden,
+            # kqa_silver_wogold) in one format: the file name is what tells them apart for eval suites
+            "metadata": {"subset": path.stem},
         })
     return result
 
@@ -191,24 +199,128 @@ def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[.
             if image is None:
                 result.add_error(path, line, f"image {name!r} not found in {images}")
                 continue
-            answer = str(row["answer"]).strip()
-            closed = answer.lower() in ("yes", "no") or str(row.get("answer_type", "")).upper() == "CLOSED"
-            base = {
-                "id": _task_id(fmt, f"{name}|{row['question']}|{answer}"), "domain": domain,
-                "ticket": str(row["question"]), "image_path": str(image.resolve()),
-                "description": {"source": fmt, "task_type": "vqa_closed" if closed else "vqa_open"},
-                "evaluation_criteria": {"reward_basis": ["ANSWER"]},
-                "metadata": {k: row[k] for k in ("qid", "question_type", "modality", "location", "content_type") if k in row},
-            }
-            if closed and answer.lower() in ("yes", "no"):
-                base.update(options={"A": "yes", "B": "no"}, correct_answer="A" if answer.lower() == "yes" else "B",
-                            answer_type="choice")
-            else:
-                base.update(correct_answer=answer, answer_type="exact")
-            _add(result, path, line, base)
+            metadata = {k: row[k] for k in ("qid", "question_type", "modality", "location", "content_type") if k in row}
+            _add(result, path, line, _vqa_task(fmt, domain, name, image, str(row["question"]), str(row["answer"]),
+                                               str(row.get("answer_type", "")), metadata))
         return result
 
     return convert
+
+
+def _find_image(images: Path, name: str) -> Path | None:
+    candidates = [images / name] + [images / f"{name}{ext}" for ext in (".jpg", ".png", ".jpeg")]
+    return next((c for c in candidates if c.is_file()), None)
+
+
+def _image_folder(fmt: str, image_dir: str | Path | None, what: str) -> Path:
+    if image_dir is None:
+        raise SourceFileError(f"{fmt}: pass the image folder (--image-dir) that the file's {what} refer to")
+    images = Path(image_dir)
+    if not images.is_dir():
+        raise SourceFileError(f"{images}: image folder not found")
+    return images
+
+
+def _vqa_task(fmt: str, domain: str, name: str, image: Path, question: str, answer: str, answer_type: str,
+              metadata: dict[str, Any]) -> dict[str, Any]:
+    """A yes/no answer (or a CLOSED one) becomes a two-option choice; anything else an exact-match answer."""
+    answer = answer.strip()
+    closed = answer.lower() in ("yes", "no") or answer_type.upper() == "CLOSED"
+    base = {
+        "id": _task_id(fmt, f"{name}|{question}|{answer}"), "domain": domain,
+        "ticket": question, "image_path": str(image.resolve()),
+        "description": {"source": fmt, "task_type": "vqa_closed" if closed else "vqa_open"},
+        "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+        "metadata": metadata,
+    }
+    if closed and answer.lower() in ("yes", "no"):
+        base.update(options={"A": "yes", "B": "no"}, correct_answer="A" if answer.lower() == "yes" else "B",
+                    answer_type="choice")
+    else:
+        base.update(correct_answer=answer, answer_type="exact")
+    return base
+
+
+# PMC-VQA (Zhang et al. 2023), as distributed at huggingface.co/datasets/xmcmic/PMC-VQA (README "Sample"):
+# `train.csv` / `test.csv` / `test_clean.csv` (and the v2 `train2.csv` / `test2.csv`) with the header
+# Figure_path,Question,Answer,Choice A,Choice B,Choice C,Choice D,Answer_label; each choice carries its
+# letter as a prefix ("B:Focal uptake pattern"); Figure_path names a file of images.zip.
+PMC_VQA_COLUMNS = ("Figure_path", "Question", "Choice A", "Choice B", "Choice C", "Choice D", "Answer_label")
+_CHOICE_PREFIX = re.compile(r"^\s*([A-D])\s*[:.)]\s*")
+
+
+def convert_pmc_vqa(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
+                    **_: Any) -> ConversionResult:
+    images = _image_folder("pmc-vqa", image_dir, "'Figure_path' names")
+    if not path.exists():
+        raise SourceFileError(f"{path}: file not found")
+    result = ConversionResult()
+    # utf-8-sig: a file saved by a spreadsheet tool starts with a BOM that would rename the first column
+    with path.open(encoding="utf-8-sig", newline="") as handle:
+        reader = csv.DictReader(handle)
+        header = reader.fieldnames or []
+        absent = [c for c in PMC_VQA_COLUMNS if c not in header]
+        if absent:
+            raise SourceFileError(f"{path}: not a PMC-VQA CSV: header lacks column(s) {absent} (found {header})")
+        for row in reader:
+            line = reader.line_num
+            missing = require(row, ["Figure_path", "Question", "Answer_label"])
+            if missing:
+                result.add_error(path, line, f"missing field {missing!r}")
+                continue
+            options = {}
+            for letter in "ABCD":
+                text = (row.get(f"Choice {letter}") or "").strip()
+                if text:
+                    options[letter] = _CHOICE_PREFIX.sub("", text, count=1).strip()
+            label = row["Answer_label"].strip().upper()
+            if label not in options:
+                result.add_error(path, line, f"Answer_label {label!r} is not one of the choices {sorted(options)}")
+                continue
+            image = _find_image(images, row["Figure_path"].strip())
+            if image is None:
+                result.add_error(path, line, f"image {row['Figure_path']!r} not found in {images}")
+                continue
+            _add(result, path, line, {
+                "id": _task_id("pmc-vqa", f"{row['Figure_path']}|{row['Question']}|{label}"), "domain": domain,
+                "ticket": row["Question"].strip(), "image_path": str(image.resolve()), "options": options,
+                "correct_answer": label, "answer_type": "choice",
+                "description": {"source": "pmc-vqa", "task_type": "vqa_choice"},
+                "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+                "metadata": {"figure": row["Figure_path"].strip(), "answer_text": (row.get("Answer") or "").strip()},
+            })
+    return result
+
+
+# VQA-Med 2021 (ImageCLEF, github.com/abachaa/VQA-Med-2021): the QA files are plain text, one
+# pipe-separated line per question, `<image id>|<question>|<answer>` (the 2020 training set and the
+# 2021 validation set, e.g. VQA-Med-2021-VQAnswering-Task1-New-ValidationSet.txt, and the test set
+# with ground truth); the image id names `<image id>.jpg` in the images folder.
+def convert_vqa_med_2021(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
+                         **_: Any) -> ConversionResult:
+    images = _image_folder("vqa-med-2021", image_dir, "image ids")
+    if not path.exists():
+        raise SourceFileError(f"{path}: file not found")
+    result = ConversionResult()
+    with path.open(encoding="utf-8-sig") as handle:
+        for line, text in enumerate(handle, start=1):
+            if not text.strip():
+                continue
+            fields = [f.strip() for f in text.rstrip("\r\n").split("|")]
+            if len(fields) != 3:
+                result.add_error(path, line, f"expected 3 '|'-separated fields (image id|question|answer), got {len(fields)}")
+                continue
+            image_id, question, answer = fields
+            if not image_id or not question or not answer:
+                result.add_error(path, line, "empty image id, question or answer")
+                continue
+            image = _find_image(images, image_id)
+            if image is None:
+                result.add_error(path, line, f"image {image_id!r} not found in {images}")
+                continue
+            _add(result, path, line, _vqa_task("vqa-med-2021", domain, image_id, image, question, answer, "",
+                                               {"image_id": image_id}))
+    return result
 
 
 def _ehr(name: str) -> Callable[..., ConversionResult]:
@@ -229,6 +341,11 @@ CONVERTERS: dict[str, Callable[..., ConversionResult]] = {
     "vqa-rad": _vqa("vqa-rad", "image_name"),
     "slake": _vqa("slake", "img_name", lang_key="q_lang"),
     "pathvqa": _vqa("pathvqa", "image"),
+    "pmc-vqa": convert_pmc_vqa,
+    "vqa-med-2021": convert_vqa_med_2021,
+    # Quilt-VQA (Seyfioglu et al. 2024, huggingface.co/datasets/wisdomik/Quilt_VQA, 985 test rows): records
+    # `image`, `question`, `answer`, `answer_type` ("closed" / "open"), `context`, as a JSON list or lines
+    "quilt-vqa": _vqa("quilt-vqa", "image"),
     "mimic3": _ehr("convert_mimic3"),
     "eicu": _ehr("convert_eicu"),
 }
