@@ -123,12 +123,16 @@ def evaluate(args: argparse.Namespace) -> int:
     from evals.policies import LocalModelPolicy, resolve_policy
     from evals.runner import EvalOptions, run_eval
 
-    items, note = resolve_items(args.suite, args.limit)
-    if note:
-        print(note, file=sys.stderr)
     greedy = args.temperature is None
     policy, notes = resolve_policy(args.policy, greedy=greedy, temperature=args.temperature or 1.0,
                                    concurrency=args.concurrency)
+    if notes.get("domain_modules"):  # a run trained on extra domains: the suite may name them
+        from actors.env_actor import register_domains
+
+        register_domains(notes["domain_modules"])
+    items, note = resolve_items(args.suite, args.limit)
+    if note:
+        print(note, file=sys.stderr)
     if notes.get("kind") == "run":
         notes["run_dir"] = args.policy
     rollout = _run_limits(notes)

@@ -1,0 +1,146 @@
+"""The runner: resumable Parquet results, interruption, Ray pool vs plain loop, and `hcgym eval`
+end to end on a run folder (Ray env actors + a Ray HF generator actor) as a user runs it."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pyarrow.parquet as pq
+import pytest
+
+from actors.env_actor import register_domains
+from envs.cli import main as hcgym
+from evals.conditions import ConditionSettings
+from evals.policies import ScriptedPolicy
+from evals.runner import EvalOptions, run_eval
+from evals.types import RESULTS_FILE, TRAJECTORIES_FILE, EvalItem, read_results, row_to_record
+from tests.evals.test_policies import make_run_dir
+from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT, ward_policy_dir  # noqa: F401
+
+WARD = {"ward": "tests.fixtures.ward_domain.environment"}
+ITEMS = [EvalItem(benchmark="ward", domain="ward", task_id=t) for t in ("ward_choice", "ward_dose", "ward_record")]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _ward_registered():
+    os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
+    register_domains(WARD)
+
+
+@pytest.fixture(scope="module")
+def ray_session():
+    import ray
+
+    started = not ray.is_initialized()
+    if started:
+        ray.init(**SESSION_RAY_INIT)
+    yield ray
+    if started:
+        ray.shutdown()
+
+
+def options(**kw) -> EvalOptions:
+    base = dict(condition="agent", seeds=(0, 1), use_ray=False, progress=False, domain_modules=WARD,
+                settings=ConditionSettings(max_turns=3), flush_every_s=0.0, env_vars=NO_EMBEDDINGS)
+    base.update(kw)
+    return EvalOptions(**base)
+
+
+def comparable(rows):
+    return sorted((r.model_dump(exclude={"latency_s"}) for r in rows), key=lambda d: json.dumps(d, sort_keys=True))
+
+
+class CrashingGold(ScriptedPolicy):
+    """Gold replay that crashes (a process fault, not an episode outcome) on one task."""
+
+    def __init__(self, crash_task: str) -> None:
+        super().__init__("gold")
+        self.crash_task = crash_task
+
+    def for_episode(self, task, seed, benchmark=None, max_turns=5):
+        if task.id == self.crash_task:
+            raise RuntimeError(f"simulated crash on {task.id}")
+        return super().for_episode(task, seed, benchmark, max_turns)
+
+
+def test_results_are_keyed_resumed_and_never_recomputed(tmp_path):
+    out = tmp_path / "gold"
+    first = run_eval(ScriptedPolicy("gold"), ITEMS, out, options(), suite="ward")
+    assert (first["episodes_run"], first["episodes_skipped_done"]) == (6, 0)
+    rows = read_results(out)
+    assert {r.key() for r in rows} == {("scripted:gold", "ward", i.task_id, "agent", s) for i in ITEMS for s in (0, 1)}
+    assert all(r.correct and r.end_reason == "answer" for r in rows)
+    # Every row's trajectory can be found.
+    trajectories = {t["row_id"]: t for t in pq.read_table(out / TRAJECTORIES_FILE).to_pylist()}
+    for row in rows:
+        file, _, rid = row.trajectory_ref.partition("#")
+        assert file == TRAJECTORIES_FILE and trajectories[rid]["task_id"] == row.task_id
+        assert json.loads(trajectories[rid]["messages"])[0]["role"] == "system"
+    spec = json.loads((out / "eval.json").read_text())
+    assert spec["condition"] == "agent" and spec["seeds"] == [0, 1]
+
+    again = run_eval(ScriptedPolicy("gold"), ITEMS, out, options(), suite="ward")
+    assert (again["episodes_run"], again["episodes_skipped_done"]) == (0, 6)
+    assert comparable(read_results(out)) == comparable(rows)
+
+    # An interruption: the process crashes mid-run; what finished is on disk, the rest resumes.
+    crashed = tmp_path / "crashed"
+    with pytest.raises(RuntimeError, match="simulated crash on ward_record"):
+        run_eval(CrashingGold("ward_record"), ITEMS, crashed, options(concurrency=1), suite="ward")
+    kept = read_results(crashed)
+    assert 0 < len(kept) < 6 and all(r.task_id != "ward_record" for r in kept)
+    resumed = run_eval(ScriptedPolicy("gold"), ITEMS, crashed, options(), suite="ward")
+    assert resumed["episodes_run"] == 6 - len(kept)
+    assert comparable(read_results(crashed)) == comparable(rows)  # same rows as the uninterrupted run
+
+    with pytest.raises(ValueError, match="condition='agent', not 'text'"):
+        run_eval(ScriptedPolicy("gold"), ITEMS, out, options(condition="text"), suite="ward")
+
+
+def test_results_file_round_trips_dict_columns(tmp_path):
+    out = tmp_path / "r"
+    run_eval(ScriptedPolicy("random"), ITEMS, out, options(seeds=(3,)), suite="ward")
+    table = pq.read_table(out / RESULTS_FILE)
+    assert table.num_rows == 3 and table.schema.field("options").type == "string"  # JSON text
+    rows = read_results(out)
+    assert [row_to_record(r) for r in rows] == table.to_pylist()
+    choice = next(r for r in rows if r.task_id == "ward_choice")
+    assert choice.options == {"A": "Macrolides", "B": "Penicillins", "C": "Statins", "D": "Vitamin D analogues"}
+
+
+def test_ray_pool_gives_the_plain_loop_results(tmp_path, ray_session):
+    plain = run_eval(ScriptedPolicy("random"), ITEMS, tmp_path / "plain", options(seeds=(0, 1, 2)), suite="ward")
+    pooled = run_eval(ScriptedPolicy("random"), ITEMS, tmp_path / "ray",
+                      options(seeds=(0, 1, 2), use_ray=True, num_env_actors=2, slots_per_env_actor=2), suite="ward")
+    assert plain["episodes_run"] == pooled["episodes_run"] == 9
+    assert comparable(read_results(tmp_path / "plain")) == comparable(read_results(tmp_path / "ray"))
+
+
+def test_hcgym_eval_on_a_run_folder_end_to_end(tmp_path, ray_session, ward_policy_dir, capsys):  # noqa: F811
+    run = make_run_dir(tmp_path, ward_policy_dir, checkpoint=True)
+    out = tmp_path / "eval"
+    argv = ["eval", "--policy", str(run), "--suite", "gym-train:ward", "--condition", "agent", "--output", str(out),
+            "--seeds", "2", "--max-tokens", "16", "--env-actors", "1", "--generators", "1", "--no-report"]
+    assert hcgym(argv) == 0
+    rows = read_results(out)
+    assert sorted((r.task_id, r.seed) for r in rows) == [("ward_dose", 0), ("ward_dose", 1),
+                                                         ("ward_record", 0), ("ward_record", 1)]
+    for row in rows:
+        assert row.policy_id == str(run.resolve()) and row.benchmark == "gym_ward_train"
+        assert row.end_reason in ("answer", "turn_limit", "token_limit", "parse_failure")
+        assert 1 <= row.turns <= 3 and row.reward is not None  # the run's max_turns=3 applies
+        assert 0 < row.completion_tokens <= 3 * 16 and row.prompt_tokens > 0
+    spec = json.loads((out / "eval.json").read_text())
+    assert spec["max_turns"] == 3 and spec["policy"] == str(run)
+    assert "4 episodes run" in capsys.readouterr().out
+    assert hcgym(argv) == 0  # resumed: nothing left to run
+    assert "0 episodes run, 4 already done" in capsys.readouterr().out
+
+
+def test_cli_errors_name_the_argument(tmp_path, capsys):
+    assert hcgym(["eval", "--suite", "gym-test:ward", "--output", str(tmp_path)]) == 2
+    assert "--policy" in capsys.readouterr().err
+    assert hcgym(["eval", "--policy", "scripted:gold", "--suite", "gym-test:ward", "--output", str(tmp_path),
+                  "--seeds", "0"]) == 2
+    assert "--seeds must be >= 1" in capsys.readouterr().err
