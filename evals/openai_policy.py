@@ -47,7 +47,6 @@ import random
 import re
 import threading
 import time
-from collections import Counter
 from pathlib import Path
 from typing import Any, Literal
 
@@ -124,6 +123,32 @@ def policy_from_string(policy: str, **options: Any) -> "OpenAIChatPolicy":
     """An endpoint policy from `openai:BASE_URL:MODEL`, with further `EndpointConfig` fields as keywords."""
     base_url, model = parse_policy_string(policy)
     return OpenAIChatPolicy(EndpointConfig(base_url=base_url, model=model, **options))
+
+
+def load_endpoint_options(path: str | os.PathLike) -> dict[str, Any]:
+    """`EndpointConfig` fields (all but base_url and model, which the policy string gives) from a
+    YAML or JSON file, e.g. `{tool_mode: text, price_input_per_1m: 0.15, api_key_env: MY_KEY}`.
+
+    Raises:
+        FileNotFoundError: naming the file.
+        ValueError: naming the file and the field that is unknown or invalid.
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"endpoint config {path} does not exist")
+    data = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of EndpointConfig fields, got {type(data).__name__}")
+    for name in ("base_url", "model"):
+        if name in data:
+            raise ValueError(f"{path}: {name!r} comes from the policy string openai:BASE_URL:MODEL, not the file")
+    try:
+        EndpointConfig(base_url="http://placeholder", model="placeholder", **data)
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
+    return data
 
 
 class EndpointError(RuntimeError):
@@ -204,20 +229,13 @@ def tool_calls_as_text(tool_calls: list[dict[str, Any]]) -> str:
     return "\n".join(blocks)
 
 
-def action_text(reply: PolicyReply) -> str:
-    """The env action for a reply: its text followed by its native tool calls as Hermes blocks."""
-    if not reply.tool_calls:
-        return reply.text
-    calls = tool_calls_as_text(reply.tool_calls)
-    return f"{reply.text}\n{calls}" if reply.text else calls
-
-
 def to_endpoint_messages(messages: list[dict[str, Any]], *, tool_mode: str = "native",
                          images: str = "content_parts") -> list[dict[str, Any]]:
     """The chat history in the shape the endpoint accepts.
 
     native: assistant `tool_calls` get ids and JSON-string arguments; a `tool` message without
-    `tool_call_id` gets the id of the assistant call it answers (in order).
+    `tool_call_id` gets the id of the assistant call it answers (in order); one that answers no
+    native call (the model wrote its calls as text) becomes a `<tool_response>` user turn.
     text: assistant `tool_calls` become Hermes blocks in the content and `tool` messages become
     user turns with `<tool_response>` blocks (the training format), since an endpoint without
     `tools=` may refuse `tool` roles.
@@ -247,7 +265,9 @@ def to_endpoint_messages(messages: list[dict[str, Any]], *, tool_mode: str = "na
             continue
         if role == "tool":
             text = content if isinstance(content, str) else json.dumps(content, ensure_ascii=False)
-            if tool_mode == "text":
+            # A result of calls the model wrote as text (no native call to answer) goes back as
+            # text too: OpenAI refuses a `tool` message that follows no `tool_calls`.
+            if tool_mode == "text" or (not pending_ids and not message.get("tool_call_id")):
                 response = f"<tool_response>\n{text}\n</tool_response>"
                 if out and out[-1]["role"] == "user" and str(out[-1]["content"]).startswith("<tool_response>"):
                     out[-1]["content"] += "\n" + response  # consecutive results share one user turn
@@ -342,10 +362,11 @@ class OpenAIChatPolicy:
         endpoint's `top_logprobs` (one token, greedy).
 
         A letter's log-prob is the log-sum-exp over the top tokens that read as it once stripped
-        ("B" and " B"). Letters outside the top `top_logprobs` tokens are absent from the dict:
-        their log-prob is below every reported one, so an argmax over the dict is still the
-        model's choice among the letters. Returns None when the endpoint does not give log-probs
-        (no `logprobs` in the answer, or a 400 refusing the parameter; remembered).
+        ("B" and " B"). A letter outside the endpoint's top `top_logprobs` tokens is `-inf`
+        (unknown, below every reported one), so the argmax is still the model's choice among the
+        letters. Returns None when the endpoint gives no log-probs (no `logprobs` in the answer,
+        or a 400 refusing the parameter; remembered) and when no letter is in the top tokens
+        (nothing to choose from: the logprob condition records it as unavailable).
 
         Raises:
             EndpointError: When the request fails for good (timeouts, 5xx after the retries, ...).
@@ -377,7 +398,10 @@ class OpenAIChatPolicy:
             token = str(entry.get("token", "")).strip()
             if token in letters and entry.get("logprob") is not None:
                 by_letter.setdefault(token, []).append(float(entry["logprob"]))
-        return {letter: _logsumexp(values) for letter, values in by_letter.items()}
+        if not by_letter:
+            logger.info("%s: no option letter among the top %d tokens", self.policy_id, self.config.top_logprobs)
+            return None
+        return {letter: _logsumexp(by_letter[letter]) if letter in by_letter else -math.inf for letter in letters}
 
     # -- transport -------------------------------------------------------------------------------
     def _semaphore(self) -> asyncio.Semaphore:
@@ -521,8 +545,3 @@ def _run_coroutine(coroutine):
     if "error" in result:
         raise result["error"]
     return result["value"]
-
-
-def error_counts(replies: list[PolicyReply]) -> dict[str, int]:
-    """How many replies failed, by error kind."""
-    return dict(Counter(r.error_kind for r in replies if r.error_kind))

@@ -21,8 +21,9 @@ from typing import Any
 
 import pytest
 
-from evals.openai_policy import (EndpointConfig, EndpointError, OpenAIChatPolicy, action_text, parse_policy_string,
-                                 policy_from_string, to_endpoint_messages)
+from evals.conditions import action_text
+from evals.openai_policy import (EndpointConfig, EndpointError, OpenAIChatPolicy, load_endpoint_options,
+                                 parse_policy_string, policy_from_string, to_endpoint_messages)
 from evals.types import Policy
 from tests.evals.conftest import (ANSWER_TEXT, LETTER_ANSWER, LETTER_ONLY, LOOKUP_TOOL, SERVED_MODEL_NAME,
                                   TOOL_ARGUMENTS, TOOL_NAME, TOOLS_SYSTEM, TRAIN_QUESTIONS)
@@ -141,7 +142,7 @@ def chat_template_tokens(model_dir: str, messages, tools=None) -> int:
                                              return_dict=True)["input_ids"])
 
 
-def test_policy_strings_config_errors_and_key_handling(monkeypatch):
+def test_policy_strings_config_errors_and_key_handling(monkeypatch, tmp_path):
     assert parse_policy_string("openai:http://127.0.0.1:8000/v1:Qwen/Qwen3-8B") == (
         "http://127.0.0.1:8000/v1", "Qwen/Qwen3-8B")
     assert parse_policy_string("openai:http://host:11434/v1:llama3:8b") == ("http://host:11434/v1", "llama3:8b")
@@ -160,6 +161,15 @@ def test_policy_strings_config_errors_and_key_handling(monkeypatch):
     policy = policy_from_string("openai:http://h/v1:m", api_key_env="HCGYM_TEST_ENDPOINT_KEY")
     assert isinstance(policy, Policy) and policy.policy_id == "openai:http://h/v1:m"
     assert "sk-secret" not in repr(policy) + repr(policy.config) + policy.config.model_dump_json()
+    config = tmp_path / "endpoint.yaml"
+    config.write_text("tool_mode: text\nprice_input_per_1m: 0.5\n")
+    assert policy_from_string("openai:http://h/v1:m", **load_endpoint_options(config)).config.tool_mode == "text"
+    config.write_text("tool_mode: telepathy\n")
+    with pytest.raises(ValueError, match=r"(?s)endpoint.yaml.*tool_mode"):
+        load_endpoint_options(config)
+    config.write_text("model: other\n")
+    with pytest.raises(ValueError, match="'model' comes from the policy string"):
+        load_endpoint_options(config)
     with pytest.raises(ValueError, match=r"messages\[1\].role"):
         to_endpoint_messages([{"role": "user", "content": "x"}, {"role": "robot", "content": "y"}])
 
@@ -220,6 +230,11 @@ def test_native_and_text_tool_calls_reach_the_env_parser(proxy):
     assert [m["role"] for m in sent] == ["system", "user", "assistant", "user"]
     assert "<tool_call>" in sent[2]["content"] and sent[3]["content"].startswith("<tool_response>")
     assert reply(text_policy, messages=history).error_kind is None
+    # Native mode, but the model wrote its call as text: the result goes back as text.
+    history = messages + [{"role": "assistant", "content": written.text}, {"role": "tool", "content": "result"}]
+    sent = to_endpoint_messages(history)
+    assert sent[-1] == {"role": "user", "content": "<tool_response>\nresult\n</tool_response>"}
+    assert reply(native, messages=history, tools=[LOOKUP_TOOL]).error_kind is None
 
 
 def test_retries_on_429_and_500_then_success_counted_once(proxy):
@@ -322,8 +337,7 @@ def test_option_logprobs_match_an_independent_forward_pass(proxy, endpoint_model
     letters = ["A", "B", "C", "D"]
     policy = make_policy(proxy.base_url)
     got = policy.option_logprobs(messages, letters)
-    assert got is not None and LETTER_ANSWER in got and set(got) <= set(letters)
-    assert max(got, key=got.get) == LETTER_ANSWER
+    assert got is not None and set(got) == set(letters) and max(got, key=got.get) == LETTER_ANSWER
 
     tokenizer = AutoTokenizer.from_pretrained(endpoint_model_dir)
     model = AutoModelForCausalLM.from_pretrained(endpoint_model_dir, dtype=torch.float32).eval()
@@ -331,7 +345,9 @@ def test_option_logprobs_match_an_independent_forward_pass(proxy, endpoint_model
                                         return_dict=True)["input_ids"]
     with torch.no_grad():
         logprobs = torch.log_softmax(model(input_ids=ids).logits[0, -1], dim=-1)
-    for letter, value in got.items():
+    reported = {letter: value for letter, value in got.items() if value != float("-inf")}
+    assert LETTER_ANSWER in reported
+    for letter, value in reported.items():
         token_ids = [i for i in range(len(tokenizer)) if tokenizer.decode([i]).strip() == letter]
         expected = torch.logsumexp(logprobs[token_ids], dim=0).item()
         assert abs(value - expected) < 1e-3, (letter, value, expected)
@@ -345,3 +361,44 @@ def test_option_logprobs_match_an_independent_forward_pass(proxy, endpoint_model
     proxy.reset(*[Fault("status", 500)] * 2)
     with pytest.raises(EndpointError, match="http_500"):
         make_policy(proxy.base_url, max_retries=1).option_logprobs(messages, letters)
+
+
+def test_runner_turns_endpoint_failures_into_episodes_without_loss_or_double_counting(proxy, tmp_path):
+    """The harness end to end (in-process envs): every failure is one episode row with its error
+    kind, the rows' tokens add up to what the endpoint reported, and a re-run asks nothing again."""
+    from envs import registry
+    from evals.conditions import ConditionSettings
+    from evals.runner import EvalOptions, run_eval
+    from evals.types import EvalItem, read_results
+
+    items = [EvalItem(benchmark="ward-endpoint", domain="ward", task_id=t.id) for t in registry.get_tasks("ward", None)]
+    assert len(items) == 3
+    policy = make_policy(proxy.base_url, max_retries=1)
+
+    def evaluate(condition: str):
+        options = EvalOptions(condition=condition, use_ray=False, progress=False, concurrency=1,
+                              settings=ConditionSettings(max_tokens=16, max_turns=2))
+        run_eval(policy, items, tmp_path / condition, options, suite="ward-endpoint")
+        return read_results(tmp_path / condition)
+
+    # text: the first episode fails for good (500 twice), the next one is retried through a 429.
+    proxy.reset(Fault("status", 500), Fault("status", 500), Fault("status", 429, {"Retry-After": "0"}))
+    rows = evaluate("text")
+    assert len(rows) == 3 and len({r.key() for r in rows}) == 3
+    failed = [r for r in rows if r.end_reason == "endpoint_error"]
+    assert [(r.error_kind, r.prompt_tokens, r.correct) for r in failed] == [("http_500", 0, False)]
+    assert all(r.prompt_tokens > 0 and r.completion_tokens > 0 for r in rows if r not in failed)
+    assert len(proxy.received) == 3 + 1 + 1  # one per episode, plus one retry each for the 500 and the 429
+    assert sum(r.prompt_tokens for r in rows) == policy.stats.prompt_tokens
+    assert sum(r.completion_tokens for r in rows) == policy.stats.completion_tokens
+
+    # A finished folder is never recomputed: no request reaches the endpoint.
+    proxy.reset()
+    assert len(evaluate("text")) == 3 and proxy.received == []
+
+    # agent: the ward system prompt with its tools is longer than the server's 1024-token window,
+    # so each episode ends at its first turn as a context overflow, asked once (not retried).
+    rows = evaluate("agent")
+    assert sorted(r.end_reason for r in rows) == ["context_overflow"] * 3
+    assert {r.error_kind for r in rows} == {"context_overflow"} and all(r.turns == 0 for r in rows)
+    assert len(proxy.received) == 3 and all("tools" in body for body in proxy.received)
