@@ -67,17 +67,14 @@ def normalise_row(row: dict[str, Any]) -> dict[str, Any]:
 
 
 def read_results(results_dir: str | Path) -> list[dict[str, Any]]:
-    """The rows of `results_dir/results.parquet`, with map fields as dicts."""
-    import pyarrow.parquet as pq
+    """The rows of `results_dir/results.parquet` as dicts (validated by `evals.types.read_results`)."""
+    from evals.types import RESULTS_FILE
+    from evals.types import read_results as read_rows
 
-    path = Path(results_dir) / "results.parquet"
+    path = Path(results_dir) / RESULTS_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no results.parquet in this results folder")
-    rows = [normalise_row(r) for r in pq.read_table(path).to_pylist()]
-    missing = {"policy_id", "benchmark", "task_id", "condition", "seed"} - set(rows[0] if rows else {})
-    if rows and missing:
-        raise ValueError(f"{path}: result rows lack column(s) {sorted(missing)}")
-    return rows
+    return [normalise_row(row.model_dump()) for row in read_rows(path)]
 
 
 # -- long-form graders -----------------------------------------------------------------------------
@@ -158,8 +155,12 @@ def answer_text(row: dict[str, Any]) -> str:
 
 
 # -- per-row values --------------------------------------------------------------------------------
-def _correct(row: dict[str, Any]) -> float:
-    return 1.0 if row.get("correct") else 0.0
+def _correct(row: dict[str, Any]) -> float | None:
+    """1/0; an episode that ended without an answer is wrong, an answered one without a gold to
+    grade against (correct is None) is left out rather than counted wrong."""
+    if row.get("correct") is None:
+        return None if row.get("end_reason") == "answer" else 0.0
+    return 1.0 if row["correct"] else 0.0
 
 
 def row_values(row: dict[str, Any], metric: str, task: Any = None) -> dict[str, float | None]:
@@ -251,7 +252,11 @@ def load_tasks_for(rows: list[dict[str, Any]], metric_of: dict[str, str]) -> dic
     for domain, ids in wanted.items():
         if domain not in registry.list_domains():
             continue
-        for task in registry.get_tasks(domain):
+        try:
+            domain_tasks = registry.get_tasks(domain)
+        except (OSError, ValueError):  # data not built here (DataFileError is a ValueError): leave them out
+            continue
+        for task in domain_tasks:
             if task.id in ids:
                 found[task.id] = task
     return found

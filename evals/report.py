@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from evals.metrics import PRIMARY, episode_stats, group_rows, load_tasks_for, read_results, summarise
-from evals.suites import BenchmarkSpec, benchmark_specs
+from evals.suites import BenchmarkSpec, benchmark_specs, import_commands
 
 PERCENT_METRICS = {"accuracy", "closed_accuracy", "open_accuracy", "action_score", "reward", "rouge_l",
                    "hallucination", "comprehensiveness"}
@@ -91,7 +91,7 @@ def summarise_results(results_dir: str | Path, *, seed: int = 0, n_resamples: in
             out.append({field: value, "metrics": [m.as_dict() for m in metrics]})
         return out
 
-    missing = [{"benchmark": name, "title": s.title, "commands": s.import_commands}
+    missing = [{"benchmark": name, "title": s.title, "commands": import_commands(s)}
                for name, s in specs.items() if name not in kinds]
     return {"label": label_of(results_dir, rows), "spec": spec, "episodes": len(rows), "benchmarks": benchmarks,
             "domains": by("domain"), "task_types": by("task_type"), "episode_stats": episode_stats(rows),
@@ -118,7 +118,8 @@ def _group_table(entries: list[dict[str, Any]], field: str) -> list[str]:
     lines = [f"| {field.replace('_', ' ').title()} | Accuracy [95% CI] | Reward [95% CI] | n |", "|---|---|---|---:|"]
     for entry in entries:
         acc, reward = _metric(entry, "accuracy"), _metric(entry, "reward")
-        lines.append(f"| {entry[field]} | {fmt_interval(acc)} | {fmt_interval(reward)} | {acc['n']} |")
+        n = max(m["n"] for m in entry["metrics"])
+        lines.append(f"| {entry[field]} | {fmt_interval(acc) if acc else '-'} | {fmt_interval(reward)} | {n} |")
     return lines
 
 

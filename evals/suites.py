@@ -199,7 +199,8 @@ def _sample(task_ids: list[str], limit: int | None, seed: int) -> list[str]:
     return [ordered[i] for i in sorted(chosen)]
 
 
-def _import_commands(spec: BenchmarkSpec) -> list[str]:
+def import_commands(spec: BenchmarkSpec) -> list[str]:
+    """The spec's import commands with `{imported}` replaced by the domain's imported-task folder."""
     from envs.core.domain import imported_tasks_dir
 
     folder = str(imported_tasks_dir(spec.select.domain))
@@ -218,7 +219,7 @@ def resolve_spec(suite: SuiteSpec) -> ResolvedSuite:
                 cache[key] = _domain_tasks(sel.domain, sel.split)
         except KeyError as exc:  # the domain has no such split
             missing.append(MissingBenchmark(name=spec.name, title=spec.title, reason=str(exc).strip("'\""),
-                                            commands=_import_commands(spec)))
+                                            commands=import_commands(spec)))
             continue
         ids = [t.id for t in cache[key] if _matches(t, sel)]
         if not ids:
@@ -228,7 +229,7 @@ def resolve_spec(suite: SuiteSpec) -> ResolvedSuite:
                 what += f" with metadata {sel.metadata}"
             reason = f"no {what} in {where}" + (f" (the paper uses {spec.paper_samples})" if spec.paper_samples else "")
             missing.append(MissingBenchmark(name=spec.name, title=spec.title, reason=reason,
-                                            commands=_import_commands(spec)))
+                                            commands=import_commands(spec)))
             continue
         items = [EvalItem(benchmark=spec.name, domain=sel.domain, task_id=task_id, split=sel.split)
                  for task_id in _sample(ids, sel.limit, sel.seed)]
@@ -254,4 +255,4 @@ def benchmark_specs(suite_name: str | None) -> dict[str, BenchmarkSpec]:
 
 __all__ = ["BenchmarkSpec", "SuiteSpec", "TaskSelection", "ResolvedSuite", "ResolvedBenchmark", "MissingBenchmark",
            "SuiteError", "available_suites", "load_suite", "load_suite_file", "resolve", "resolve_spec",
-           "benchmark_specs", "SUITES_DIR"]
+           "benchmark_specs", "import_commands", "SUITES_DIR"]
