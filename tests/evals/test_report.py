@@ -6,6 +6,7 @@ same item values, for the CI bounds).
 """
 
 import json
+from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -17,6 +18,8 @@ from evals.metrics import read_results, rouge_l
 from evals.report import write_report
 from evals.stats import bootstrap_ci
 from evals.types import EvalSpec, ResultRow, row_to_record
+
+FIX_BENCHMARKS = Path(__file__).parents[1] / "fixtures" / "benchmarks"
 
 
 def _row(policy, benchmark, domain, task_id, correct, *, seed=0, task_type="multiple_choice", **extra):
@@ -166,3 +169,29 @@ def test_compare_paired_differences_and_exact_mcnemar(folders, tmp_path, capsys)
 def test_compare_rejects_a_folder_without_results(folders, tmp_path, capsys):
     assert compare.main([str(folders[0]), str(tmp_path)]) == 2
     assert f"{tmp_path}: not a results folder" in capsys.readouterr().err
+
+
+def test_long_form_hallucination_and_comprehensiveness_from_the_task_statements():
+    from envs.converters import convert
+    from evals.metrics import summarise
+
+    # must-have: "Face drooping is a warning sign", "Call emergency services immediately"; nice: the FAST acronym
+    task = convert("medlfqa", FIX_BENCHMARKS / "medlfqa.jsonl").tasks[0]
+
+    def row(text, seed=0):
+        return {"benchmark": "liveqa", "task_id": task.id, "seed": seed, "answer": None, "gold": task.correct_answer,
+                "end_reason": "answer", "extra": {"long_form_text": text}}
+
+    complete = row("Face drooping is a warning sign of stroke. Call emergency services immediately.")
+    contradicting = row("Face drooping is not a warning sign. Wait and see.", seed=1)
+    by_metric = {m.name: m for m in summarise([complete], "long_form", {task.id: task}, n_resamples=100)}
+    assert by_metric["comprehensiveness"].interval.estimate == 1.0  # both must-haves stated
+    assert by_metric["hallucination"].interval.estimate == 0.0
+    by_metric = {m.name: m for m in summarise([contradicting], "long_form", {task.id: task}, n_resamples=100)}
+    assert by_metric["comprehensiveness"].interval.estimate == 0.0
+    assert by_metric["hallucination"].interval.estimate == pytest.approx(1 / 3)  # 1 of 3 statements negated
+    # two seeds of one item are one item: the mean of 0 and 1/3
+    both = {m.name: m for m in summarise([complete, contradicting], "long_form", {task.id: task}, n_resamples=100)}
+    assert both["hallucination"].interval.n == 1 and both["hallucination"].interval.estimate == pytest.approx(1 / 6)
+    # without the task there are no statements: only ROUGE-L is reported
+    assert [m.name for m in summarise([complete], "long_form", {}, n_resamples=100)] == ["rouge_l"]
