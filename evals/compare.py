@@ -99,8 +99,8 @@ def _signed_pct(value: float) -> str:
 
 def to_markdown(comparison: dict[str, Any], label_a: str, label_b: str) -> str:
     lines = [f"# Paired comparison: A = {label_a}, B = {label_b}", "",
-             "Items paired on (benchmark, task, seed); differences A - B in percentage points with paired-bootstrap "
-             "95% CIs; McNemar: exact two-sided test on discordant episodes (A-only / B-only correct).", "",
+             ("Items paired on (benchmark, task, seed); differences A - B in percentage points with paired-bootstrap "
+              "95% CIs; McNemar: exact two-sided test on discordant episodes (A-only / B-only correct)."), "",
              "| Benchmark | Metric | Items | A | B | A - B [95% CI] | A-only / B-only | McNemar p |",
              "|---|---|---:|---:|---:|---|---|---:|"]
     rows = list(comparison["benchmarks"])
@@ -156,4 +156,4 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-__all__ = ["main", "compare_dirs", "compare_rows", "to_markdown"]
+__all__ = ["compare_dirs", "compare_rows", "main", "to_markdown"]

@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import json
 from collections import Counter, defaultdict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -298,6 +299,22 @@ def episode_stats(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-__all__ = ["read_results", "normalise_row", "rouge_l", "lcs_length", "statement_supported", "statement_contradicted",
-           "long_form_statements", "answer_text", "row_values", "summarise", "MetricSummary", "item_means",
-           "group_rows", "load_tasks_for", "episode_stats", "PRIMARY", "SECONDARY"]
+__all__ = [
+    "PRIMARY",
+    "SECONDARY",
+    "MetricSummary",
+    "answer_text",
+    "episode_stats",
+    "group_rows",
+    "item_means",
+    "lcs_length",
+    "load_tasks_for",
+    "long_form_statements",
+    "normalise_row",
+    "read_results",
+    "rouge_l",
+    "row_values",
+    "statement_contradicted",
+    "statement_supported",
+    "summarise",
+]

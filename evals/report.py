@@ -198,8 +198,8 @@ def write_report(results_dir: str | Path, others: list[str | Path] | None = None
                      f"`{spec.get('condition', '?')}`, seeds {spec.get('seeds', '?')}, {summary['episodes']} episodes.")
     else:
         lines.append(f"{summary['episodes']} episodes (no eval.json in this folder).")
-    lines += ["", "Values are percentages with percentile-bootstrap 95% confidence intervals (10,000 resamples of "
-              "items; an item's value is its mean over seeds); n counts items.", "",
+    lines += ["", (f"Values are percentages with percentile-bootstrap 95% confidence intervals ({n_resamples:,} "
+                   "resamples of items; an item's value is its mean over seeds); n counts items."), "",
               "## Benchmark results", "", *_benchmark_table(summary), "",
               "![benchmarks](benchmarks.png)", "",
               "## By domain", "", *_group_table(summary["domains"], "domain"), "",
@@ -224,4 +224,4 @@ def write_report(results_dir: str | Path, others: list[str | Path] | None = None
     return report
 
 
-__all__ = ["write_report", "summarise_results", "plot_benchmarks", "fmt_interval", "read_spec"]
+__all__ = ["fmt_interval", "plot_benchmarks", "read_spec", "summarise_results", "write_report"]

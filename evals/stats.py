@@ -17,8 +17,8 @@ Plain functions over numpy arrays; nothing here knows about result rows (see `ev
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -142,5 +142,13 @@ def mcnemar_exact(a_correct: Sequence[bool] | np.ndarray, b_correct: Sequence[bo
                          neither=int(np.sum(~left & ~right)), p_value=p_value)
 
 
-__all__ = ["Interval", "McNemarResult", "bootstrap_ci", "bootstrap_means", "paired_bootstrap_ci", "mcnemar_exact",
-           "binomial_cdf_half", "DEFAULT_RESAMPLES"]
+__all__ = [
+    "DEFAULT_RESAMPLES",
+    "Interval",
+    "McNemarResult",
+    "binomial_cdf_half",
+    "bootstrap_ci",
+    "bootstrap_means",
+    "mcnemar_exact",
+    "paired_bootstrap_ci",
+]

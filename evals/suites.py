@@ -71,7 +71,7 @@ class SuiteSpec(BaseModel):
     benchmarks: list[BenchmarkSpec] = Field(min_length=1)
 
     @model_validator(mode="after")
-    def _unique_names(self) -> "SuiteSpec":
+    def _unique_names(self) -> SuiteSpec:
         names = [b.name for b in self.benchmarks]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
@@ -111,8 +111,9 @@ class ResolvedSuite(BaseModel):
         """Markdown: which benchmarks have no tasks yet, and the command(s) that bring each."""
         if not self.missing:
             return f"All {len(self.benchmarks)} benchmarks of suite `{self.name}` resolved.\n"
-        lines = [f"{len(self.missing)} of {len(self.missing) + len(self.benchmarks)} benchmarks of suite "
-                 f"`{self.name}` have no tasks yet (they are skipped):", ""]
+        total = len(self.missing) + len(self.benchmarks)
+        lines = [f"{len(self.missing)} of {total} benchmarks of suite `{self.name}` have no tasks yet (they are skipped):",
+                 ""]
         for miss in self.missing:
             lines.append(f"- **{miss.title}** (`{miss.name}`): {miss.reason}")
             lines.extend(f"    `{command}`" for command in miss.commands)
@@ -253,6 +254,20 @@ def benchmark_specs(suite_name: str | None) -> dict[str, BenchmarkSpec]:
         return {}
 
 
-__all__ = ["BenchmarkSpec", "SuiteSpec", "TaskSelection", "ResolvedSuite", "ResolvedBenchmark", "MissingBenchmark",
-           "SuiteError", "available_suites", "load_suite", "load_suite_file", "resolve", "resolve_spec",
-           "benchmark_specs", "import_commands", "SUITES_DIR"]
+__all__ = [
+    "SUITES_DIR",
+    "BenchmarkSpec",
+    "MissingBenchmark",
+    "ResolvedBenchmark",
+    "ResolvedSuite",
+    "SuiteError",
+    "SuiteSpec",
+    "TaskSelection",
+    "available_suites",
+    "benchmark_specs",
+    "import_commands",
+    "load_suite",
+    "load_suite_file",
+    "resolve",
+    "resolve_spec",
+]

@@ -23,8 +23,9 @@ import csv
 import hashlib
 import re
 import string
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from pydantic import ValidationError
 

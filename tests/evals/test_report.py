@@ -23,10 +23,10 @@ FIX_BENCHMARKS = Path(__file__).parents[1] / "fixtures" / "benchmarks"
 
 
 def _row(policy, benchmark, domain, task_id, correct, *, seed=0, task_type="multiple_choice", **extra):
-    fields = dict(policy_id=policy, benchmark=benchmark, domain=domain, task_id=task_id, task_type=task_type,
-                  condition="agent", seed=seed, end_reason="answer", correct=correct, reward=1.0 if correct else 0.0,
-                  turns=3, tool_calls=2, prompt_tokens=100, completion_tokens=20, latency_s=0.5,
-                  trajectory_ref=f"trajectories.parquet#{task_id}-{seed}")
+    fields = {"policy_id": policy, "benchmark": benchmark, "domain": domain, "task_id": task_id,
+              "task_type": task_type, "condition": "agent", "seed": seed, "end_reason": "answer", "correct": correct,
+              "reward": 1.0 if correct else 0.0, "turns": 3, "tool_calls": 2, "prompt_tokens": 100,
+              "completion_tokens": 20, "latency_s": 0.5, "trajectory_ref": f"trajectories.parquet#{task_id}-{seed}"}
     fields.update(extra)
     return ResultRow(**fields)
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats as scipy_stats
 
-from evals.stats import (binomial_cdf_half, bootstrap_ci, bootstrap_means, mcnemar_exact, paired_bootstrap_ci)
+from evals.stats import binomial_cdf_half, bootstrap_ci, bootstrap_means, mcnemar_exact, paired_bootstrap_ci
 
 
 def test_bootstrap_ci_contains_the_mean_and_is_seeded():
