@@ -46,8 +46,14 @@ def _paired(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kind: st
 
 
 def compare_rows(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kinds: dict[str, str],
-                 tasks: dict[str, Any] | None = None, *, seed: int = 0, n_resamples: int = 10_000) -> dict[str, Any]:
-    """Per-benchmark paired comparison (see module doc); benchmarks with no shared items are listed apart."""
+                 tasks: dict[str, Any] | None = None, *, seed: int = 0, n_resamples: int = 10_000,
+                 order: list[str] | None = None) -> dict[str, Any]:
+    """Per-benchmark paired comparison (see module doc); benchmarks with no shared items are listed apart.
+
+    `order`: benchmark names in the order to report them (the suite's); the rest follow sorted. The
+    pooled "all shared items" line covers the accuracy-type benchmarks only: averaging accuracy with
+    ROUGE-L or an action score would mean nothing.
+    """
     tasks = tasks or {}
     by_a, by_b = defaultdict(list), defaultdict(list)
     for r in rows_a:
@@ -56,7 +62,8 @@ def compare_rows(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kin
         by_b[r["benchmark"]].append(r)
     results, unshared = [], []
     pooled_a, pooled_b, pooled_ca, pooled_cb = [], [], [], []
-    for bench in sorted(set(by_a) | set(by_b)):
+    names = set(by_a) | set(by_b)
+    for bench in [b for b in order or [] if b in names] + sorted(names - set(order or [])):
         kind = kinds.get(bench, "accuracy")
         shared, a, b = _paired(by_a.get(bench, []), by_b.get(bench, []), kind, tasks)
         if not shared:
@@ -78,8 +85,8 @@ def compare_rows(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kin
                                 "neither": test.neither, "p_value": test.p_value}
             pooled_ca.extend(ca)
             pooled_cb.extend(cb)
-        pooled_a.extend(item_a)
-        pooled_b.extend(item_b)
+            pooled_a.extend(item_a)
+            pooled_b.extend(item_b)
         results.append(entry)
     overall = None
     if pooled_a:
@@ -105,7 +112,7 @@ def to_markdown(comparison: dict[str, Any], label_a: str, label_b: str) -> str:
              "|---|---|---:|---:|---:|---|---|---:|"]
     rows = list(comparison["benchmarks"])
     if comparison["overall"]:
-        rows.append({"benchmark": "**all shared items**", "metric": "mean", **comparison["overall"]})
+        rows.append({"benchmark": "**all shared items**", "metric": "accuracy", **comparison["overall"]})
     for e in rows:
         d = e["difference"]
         mc = e.get("mcnemar")
@@ -124,7 +131,7 @@ def compare_dirs(dir_a: str | Path, dir_b: str | Path, *, seed: int = 0, n_resam
     specs = benchmark_specs(read_spec(dir_a).get("suite")) or benchmark_specs(read_spec(dir_b).get("suite"))
     kinds = metric_kinds(rows_a + rows_b, specs)
     tasks = load_tasks_for(rows_a + rows_b, kinds) if "long_form" in kinds.values() else {}
-    comparison = compare_rows(rows_a, rows_b, kinds, tasks, seed=seed, n_resamples=n_resamples)
+    comparison = compare_rows(rows_a, rows_b, kinds, tasks, seed=seed, n_resamples=n_resamples, order=list(specs))
     label_a, label_b = label_of(dir_a, rows_a), label_of(dir_b, rows_b)
     comparison.update(a=str(dir_a), b=str(dir_b), label_a=label_a, label_b=label_b)
     return comparison, to_markdown(comparison, label_a, label_b)
