@@ -141,6 +141,7 @@ def evaluate(args: argparse.Namespace) -> int:
         max_tokens=args.max_tokens or rollout.get("max_new_tokens_per_turn", 512),
         max_response_tokens=args.max_response_tokens or rollout.get("max_response_tokens", 4096),
         prompt_style=notes.get("prompt_style", "env"),
+        max_observation_chars=rollout.get("max_observation_chars"),
     )
     env_vars = {k: os.environ[k] for k in ("HCGYM_EMBEDDINGS", "HCGYM_DATA_DIR") if k in os.environ}
     env_vars.update(rollout.get("env_vars") or {})
@@ -159,7 +160,7 @@ def evaluate(args: argparse.Namespace) -> int:
         if isinstance(policy, LocalModelPolicy) and args.condition != "logprob":
             policy.start_generators(0 if args.no_ray else args.generators, backend=args.generator_backend)
         counts = run_eval(policy, items, args.output, options, policy_text=args.policy, suite=args.suite,
-                          limit=args.limit)
+                          limit=args.limit, policy_source=notes)
     finally:
         if isinstance(policy, LocalModelPolicy) and policy._handles:
             policy.stop_generators()

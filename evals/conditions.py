@@ -36,6 +36,9 @@ class ConditionSettings:
     max_tokens: int = 512            # new tokens per turn
     max_response_tokens: int = 4096  # agent condition: completion tokens over the episode
     prompt_style: str = "env"        # agent condition: "env" or "compact" (a run's tiny-model prompt)
+    # Agent condition: tool results longer than this are cut as in training (a run's
+    # rollout.max_observation_chars); None keeps them whole.
+    max_observation_chars: int | None = None
 
 
 @dataclass
@@ -228,6 +231,9 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
             final = step_info.get("final") or {"reward": reward}
             outcome.end_reason = "answer" if terminated else ("parse_failure" if last_unparsed else "turn_limit")
             break
+        cap = settings.max_observation_chars
+        if cap is not None and len(observation) > cap:  # the agent loop's cut, marker included
+            observation = observation[:cap] + f" ...[{len(observation) - cap} more characters]"
         messages.extend(_observation_messages(reply, observation, bool(calls)))
         if outcome.turns >= settings.max_turns:  # the env enforces it too
             outcome.end_reason = "turn_limit"

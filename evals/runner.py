@@ -114,6 +114,9 @@ class EvalOptions:
     max_episode_attempts: int = 3
     progress: bool = True
     flush_every_s: float = 2.0
+    # An already started `EnvPool` to run on (kept open afterwards: several evaluations, or a
+    # benchmark that excludes actor start-up); None creates one per run when use_ray.
+    env_pool: Any = None
 
 
 def episode_keys(policy_id: str, items: list[EvalItem], condition: str, seeds) -> list[tuple[EvalItem, int]]:
@@ -145,9 +148,11 @@ class _EnvSource:
 
     def __init__(self, options: EvalOptions) -> None:
         self.options = options
-        self.pool = None
+        self.pool = options.env_pool
+        self._owns_pool = False
         self._idle: list = []
-        if options.use_ray:
+        if options.use_ray and self.pool is None:
+            self._owns_pool = True
             from actors.env_actor import EnvPool
 
             self.pool = EnvPool(options.num_env_actors, options.slots_per_env_actor, options.settings.max_turns,
@@ -158,7 +163,7 @@ class _EnvSource:
         from actors.agent_loop import LocalEnv
         from actors.env_actor import EnvActorLost
 
-        if self.pool is None:
+        if not self.options.use_ray:
             # One LocalEnv per episode in flight, reused afterwards (it caches its envs per domain).
             env = self._idle.pop() if self._idle else LocalEnv(self.options.settings.max_turns)
             try:
@@ -186,7 +191,7 @@ class _EnvSource:
                            f"{self.options.max_episode_attempts} times; last: {last}")
 
     def close(self) -> None:
-        if self.pool is not None:
+        if self.pool is not None and self._owns_pool:
             import ray
 
             for actor in self.pool.actors:
@@ -296,7 +301,8 @@ def package_versions() -> dict[str, str]:
 
 
 def run_eval(policy, items: list[EvalItem], output_dir: str | os.PathLike, options: EvalOptions, *,
-             policy_text: str | None = None, suite: str = "custom", limit: int | None = None) -> dict[str, Any]:
+             policy_text: str | None = None, suite: str = "custom", limit: int | None = None,
+             policy_source: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write eval.json, run the missing episodes, return the run's counts (see `run_episodes`)."""
     from datetime import datetime, timezone
 
@@ -305,6 +311,6 @@ def run_eval(policy, items: list[EvalItem], output_dir: str | os.PathLike, optio
     spec = EvalSpec(policy=policy_text or policy.policy_id, policy_id=policy.policy_id, suite=suite,
                     condition=options.condition, seeds=list(options.seeds), limit=limit,
                     max_turns=options.settings.max_turns, max_tokens=options.settings.max_tokens,
-                    versions=package_versions(), created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+                    versions=package_versions(), policy_source=dict(policy_source or {}), created_at=datetime.now(timezone.utc).isoformat(timespec="seconds"))
     write_spec(out, spec)
     return asyncio.run(run_episodes(policy, items, out, options))

@@ -111,6 +111,7 @@ class EvalSpec(BaseModel):
     max_turns: int = Field(default=5, ge=1)
     max_tokens: int = Field(default=512, ge=1)
     versions: dict[str, str] = Field(default_factory=dict)
+    policy_source: dict[str, Any] = Field(default_factory=dict)  # where the weights came from, prompt style
     created_at: str | None = None
 
 

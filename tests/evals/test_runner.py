@@ -133,6 +133,7 @@ def test_hcgym_eval_on_a_run_folder_end_to_end(tmp_path, ray_session, ward_polic
         assert 0 < row.completion_tokens <= 3 * 16 and row.prompt_tokens > 0
     spec = json.loads((out / "eval.json").read_text())
     assert spec["max_turns"] == 3 and spec["policy"] == str(run)
+    assert spec["policy_source"]["source"] == "checkpoint step_000002"
     assert "4 episodes run" in capsys.readouterr().out
     assert hcgym(argv) == 0  # resumed: nothing left to run
     assert "0 episodes run, 4 already done" in capsys.readouterr().out
