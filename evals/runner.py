@@ -27,7 +27,15 @@ from typing import Any, Callable
 
 from evals.conditions import CONDITION_RUNNERS, ConditionSettings, EpisodeOutcome, is_multiple_choice
 from evals.types import (CONDITIONS, RESULTS_FILE, SPEC_FILE, TRAJECTORIES_FILE, EvalItem, EvalSpec, ResultRow,
-                         read_results, row_to_record)
+                         read_results, results_schema, row_to_record)
+
+
+def trajectory_schema():
+    import pyarrow as pa
+
+    return pa.schema([("row_id", pa.string()), ("policy_id", pa.string()), ("benchmark", pa.string()),
+                      ("task_id", pa.string()), ("condition", pa.string()), ("seed", pa.int64()),
+                      ("messages", pa.string())])
 
 
 def row_id(key: tuple) -> str:
@@ -91,10 +99,10 @@ class ResultsStore:
 
         if not self._dirty:
             return
-        for name, records in ((TRAJECTORIES_FILE, self.trajectories),
-                              (RESULTS_FILE, [row_to_record(r) for r in self.rows])):
+        for name, records, schema in ((TRAJECTORIES_FILE, self.trajectories, trajectory_schema()),
+                                      (RESULTS_FILE, [row_to_record(r) for r in self.rows], results_schema())):
             tmp = self.dir / f".{name}.tmp"
-            pq.write_table(pa.Table.from_pylist(records), tmp)
+            pq.write_table(pa.Table.from_pylist(records, schema=schema), tmp)
             os.replace(tmp, self.dir / name)  # readers never see half a file
         self._dirty = False
         self._last_flush = time.monotonic()

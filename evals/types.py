@@ -126,6 +126,17 @@ TRAJECTORIES_FILE = "trajectories.parquet"
 SPEC_FILE = "eval.json"
 
 
+def results_schema():
+    """The Arrow schema of results.parquet: fixed, so a column that is null in every row so far
+    (e.g. `cost_usd` of a local model) still has its type, and folders concatenate cleanly."""
+    import pyarrow as pa
+
+    text, integer, real = pa.string(), pa.int64(), pa.float64()
+    types = {"seed": integer, "correct": pa.bool_(), "reward": real, "turns": integer, "tool_calls": integer,
+             "prompt_tokens": integer, "completion_tokens": integer, "cost_usd": real, "latency_s": real}
+    return pa.schema([(name, types.get(name, text)) for name in ResultRow.model_fields])
+
+
 def row_to_record(row: ResultRow) -> dict[str, Any]:
     import json
 

@@ -103,6 +103,7 @@ def test_results_file_round_trips_dict_columns(tmp_path):
     run_eval(ScriptedPolicy("random"), ITEMS, out, options(seeds=(3,)), suite="ward")
     table = pq.read_table(out / RESULTS_FILE)
     assert table.num_rows == 3 and table.schema.field("options").type == "string"  # JSON text
+    assert table.schema.field("cost_usd").type == "double"  # typed although null in every row
     rows = read_results(out)
     assert [row_to_record(r) for r in rows] == table.to_pylist()
     choice = next(r for r in rows if r.task_id == "ward_choice")
