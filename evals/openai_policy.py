@@ -64,6 +64,10 @@ _POLICY_STRING = re.compile(r"^openai:(?P<base>https?://[^/\s]+(?:/[^:\s]*)?):(?
 _CONTEXT_OVERFLOW = re.compile(
     r"maximum context length|context_length_exceeded|max_model_len|maximum model length|context window"
     r"|exceeds the context|longer than the model|too many tokens|prompt is too long", re.IGNORECASE)
+# How servers word "this model takes no images" (vLLM, OpenAI).
+_IMAGE_UNSUPPORTED = re.compile(
+    r"not a multimodal model|does not support (image|vision|multimodal)|image input is not supported"
+    r"|image_url is only supported", re.IGNORECASE)
 
 
 class EndpointConfig(BaseModel):
@@ -329,6 +333,7 @@ class OpenAIChatPolicy:
         self._stats_lock = threading.Lock()
         self._semaphores: dict[int, asyncio.Semaphore] = {}  # per event loop (a semaphore is loop-bound)
         self._logprobs_supported: bool | None = None
+        self._warned_kinds: set[str] = set()
         self._check_api_key()
 
     def __repr__(self) -> str:  # no key in here, ever
@@ -453,7 +458,14 @@ class OpenAIChatPolicy:
                 logger.info("%s: attempt %d failed (%s: %s)", self.policy_id, number + 1, attempt.error_kind,
                             attempt.detail[:200])
         if attempt.data is None:
-            self._count_error(attempt.error_kind or "endpoint_error")
+            kind = attempt.error_kind or "endpoint_error"
+            self._count_error(kind)
+            # The first failure of each kind is shown with the server's words (the rows keep only
+            # the kind); later ones would flood a long evaluation's output.
+            first = kind not in self._warned_kinds
+            self._warned_kinds.add(kind)
+            logger.log(logging.WARNING if first else logging.DEBUG, "%s: request failed for good after %d attempt(s): "
+                       "%s: %s", self.policy_id, number + 1, kind, attempt.detail[:500])
         return attempt
 
     def _backoff_s(self, retry_index: int, retry_after_s: float | None) -> float:
@@ -491,6 +503,8 @@ class OpenAIChatPolicy:
             return _Attempt(error_kind=f"http_{status}", detail=message, retryable=True, retry_after_s=retry_after)
         if status in (400, 413, 422) and _CONTEXT_OVERFLOW.search(message):
             return _Attempt(error_kind="context_overflow", detail=message)
+        if status in (400, 422) and _IMAGE_UNSUPPORTED.search(message):
+            return _Attempt(error_kind="image_unsupported", detail=message)
         return _Attempt(error_kind=f"http_{status}", detail=message)
 
     def _reply_from(self, data: dict[str, Any]) -> PolicyReply:
