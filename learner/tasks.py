@@ -51,21 +51,19 @@ def load_task_refs(domains: list[str], split: str | None, limit: int | None = No
 def prompt_lengths(refs: list[TaskRef], loop: AgentLoop) -> list[int]:
     """Token length of each task's rendered prompt (system prompt + ticket), as the agent loop renders it."""
     from envs import registry
-    from envs.core.env import build_system_prompt, render_ticket
+    from envs.core.env import prompt_parts
 
-    systems: dict[str, tuple[str, list]] = {}
+    domain_envs: dict[str, Any] = {}
     tasks: dict[tuple[str, str | None], dict[str, Any]] = {}
     out = []
     for ref in refs:
-        if ref.domain not in systems:
-            domain_env = registry.get_environment(ref.domain)
-            systems[ref.domain] = (build_system_prompt(domain_env), domain_env.toolkit.schemas())
+        if ref.domain not in domain_envs:
+            domain_envs[ref.domain] = registry.get_environment(ref.domain)
         key = (ref.domain, ref.split)
         if key not in tasks:
             tasks[key] = {t.id: t for t in registry.get_tasks(ref.domain, ref.split)}
-        info = {"system_prompt": systems[ref.domain][0], "tools": systems[ref.domain][1],
-                "ticket": render_ticket(tasks[key][ref.task_id])}
-        out.append(len(loop.render_prompt(info)))
+        parts = prompt_parts(domain_envs[ref.domain], tasks[key][ref.task_id])
+        out.append(len(loop.render_prompt(parts)))
     return out
 
 

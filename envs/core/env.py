@@ -61,6 +61,14 @@ def build_system_prompt(domain: DomainEnvironment) -> str:
     return prompt
 
 
+def prompt_parts(domain: DomainEnvironment, task: Task) -> dict[str, Any]:
+    """What an episode's prompt is made of, exactly as `reset` returns it in `info`: the system
+    prompt, the tool schemas and the ticket. Agent runners render their chat prompt from these;
+    code that needs a prompt without running an episode (length filters, corpora) calls this."""
+    return {"system_prompt": build_system_prompt(domain), "tools": domain.toolkit.schemas(),
+            "ticket": render_ticket(task)}
+
+
 class HealthcareGymEnv(gym.Env[str, str]):
     """A Gymnasium environment over one clinical domain.
 
@@ -119,8 +127,8 @@ class HealthcareGymEnv(gym.Env[str, str]):
         self.domain_env = self._registry.get_environment(self.domain_name)
         if self.domain_env.on_reset is not None:
             self.domain_env.on_reset(self.domain_env, task)
-        system_prompt = build_system_prompt(self.domain_env)
-        ticket = render_ticket(task)
+        parts = prompt_parts(self.domain_env, task)
+        system_prompt, ticket = parts["system_prompt"], parts["ticket"]
         observation = f"{system_prompt}\n\n# Task\n{ticket}"
         user_content: str | list[dict[str, str]] = ticket
         if task.image_path:
@@ -137,7 +145,7 @@ class HealthcareGymEnv(gym.Env[str, str]):
         )
         self._done = False
         info = {
-            "task_id": task.id, "domain": self.domain_name, "tools": self.domain_env.toolkit.schemas(),
+            "task_id": task.id, "domain": self.domain_name, "tools": parts["tools"],
             "policy": self.domain_env.policy, "max_turns": self.max_turns, "system_prompt": system_prompt,
             "ticket": ticket, "image_path": task.image_path,
         }
