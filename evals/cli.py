@@ -77,6 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--temperature", type=float, default=None,
                         help="sample at this temperature with the episode seeds (default: greedy)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
+    parser.add_argument("--endpoint-config", default=None,
+                        help="openai: policies: a YAML file of evals.openai_policy.EndpointConfig fields "
+                             "(tool_mode, api_key_env, price_input_per_1m, timeout_s, max_retries, ...)")
     parser.add_argument("words", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
 
 
@@ -125,7 +128,7 @@ def evaluate(args: argparse.Namespace) -> int:
 
     greedy = args.temperature is None
     policy, notes = resolve_policy(args.policy, greedy=greedy, temperature=args.temperature or 1.0,
-                                   concurrency=args.concurrency)
+                                   concurrency=args.concurrency, endpoint_config=args.endpoint_config)
     if notes.get("domain_modules"):  # a run trained on extra domains: the suite may name them
         from actors.env_actor import register_domains
 

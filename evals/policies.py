@@ -332,11 +332,12 @@ class LocalModelPolicy:
 
 
 def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, max_context_tokens: int = 8192,
-                   concurrency: int = 8):
+                   concurrency: int = 8, endpoint_config: str | None = None):
     """The policy a `--policy` string names.
 
     * `scripted:gold|random|majority`
-    * `openai:BASE_URL:MODEL` (evals.openai_policy; the key from `OPENAI_API_KEY`)
+    * `openai:BASE_URL:MODEL` (evals.openai_policy; the key from `OPENAI_API_KEY`; further
+      `EndpointConfig` fields from the YAML file `endpoint_config`, `--endpoint-config`)
     * a run folder of `hcgym train` (its latest checkpoint, else its warm start; its prompt style)
     * a local HF model folder, or a hub id in the local Hugging Face cache
 
@@ -354,7 +355,11 @@ def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, 
     if text.startswith("openai:"):
         from evals import openai_policy
 
-        return openai_policy.policy_from_string(text, concurrency=concurrency), {"kind": "openai"}
+        options = openai_policy.load_endpoint_options(endpoint_config) if endpoint_config else {}
+        options.setdefault("concurrency", concurrency)
+        return openai_policy.policy_from_string(text, **options), {"kind": "openai"}
+    if endpoint_config:
+        raise ValueError(f"--endpoint-config applies to openai:BASE_URL:MODEL policies, not --policy {text!r}")
     path = Path(text).expanduser()
     if path.is_dir() and is_run_dir(path):
         run = run_policy(path)
