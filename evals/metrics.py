@@ -240,26 +240,35 @@ def group_rows(rows: Iterable[dict[str, Any]], key: Callable[[dict[str, Any]], A
     return dict(groups)
 
 
-def load_tasks_for(rows: list[dict[str, Any]], metric_of: dict[str, str]) -> dict[str, Any]:
-    """Tasks of the long-form rows (their statements live in the task, not the row); {} for the rest.
-    A task that no longer exists leaves hallucination/comprehensiveness out for its rows."""
+def load_tasks_for(rows: list[dict[str, Any]], metric_of: dict[str, str],
+                   also: Iterable[str] = ()) -> dict[str, Any]:
+    """Tasks of the long-form rows (their statements live in the task, not the row) and of the
+    benchmarks in `also` (e.g. for a breakdown by a task's metadata); {} for the rest. A task that
+    no longer exists leaves hallucination/comprehensiveness (or its breakdown) out for its rows."""
     from envs import registry
+    from envs.core.domain import imported_tasks_dir
+    from envs.core.task import load_tasks
 
+    also = set(also)
     wanted: dict[str, set[str]] = defaultdict(set)
     for row in rows:
-        if metric_of.get(row["benchmark"]) == "long_form":
+        if metric_of.get(row["benchmark"]) == "long_form" or row["benchmark"] in also:
             wanted[row["domain"]].add(row["task_id"])
     found: dict[str, Any] = {}
     for domain, ids in wanted.items():
         if domain not in registry.list_domains():
             continue
+        # benchmark tasks are imported ones: read their folder first (it needs no data build, and
+        # the registry's task store is loaded once per process, before later imports)
+        for path in sorted(imported_tasks_dir(domain).glob("*.json")):
+            found.update({t.id: t for t in load_tasks(path, domain=domain) if t.id in ids})
+        if ids <= found.keys():
+            continue
         try:
             domain_tasks = registry.get_tasks(domain)
         except (OSError, ValueError):  # data not built here (DataFileError is a ValueError): leave them out
             continue
-        for task in domain_tasks:
-            if task.id in ids:
-                found[task.id] = task
+        found.update({t.id: t for t in domain_tasks if t.id in ids})
     return found
 
 

@@ -4,7 +4,8 @@
 condition) and writes, into the same folder:
 
 * `report.md`: per benchmark (the paper's Table "Benchmark results" layout: category, benchmark,
-  metric in % with its bootstrap 95% CI, n items), per domain and per task type (accuracy and mean
+  metric in % with its bootstrap 95% CI, n items; a benchmark selected by a metadata filter, such as
+  MMLU-Med's six subjects, also per value of it), per domain and per task type (accuracy and mean
   reward with CIs), episode statistics (end reasons, safety-violation rates by severity, turns,
   tool calls, tokens, error kinds), and the suite's benchmarks that have no rows with the import
   command that brings each;
@@ -71,17 +72,28 @@ def summarise_results(results_dir: str | Path, *, seed: int = 0, n_resamples: in
     spec = read_spec(results_dir)
     specs = benchmark_specs(spec.get("suite"))
     kinds = metric_kinds(rows, specs)
-    tasks = load_tasks_for(rows, kinds) if "long_form" in kinds.values() else {}
+    # a benchmark selected by a metadata filter (MMLU-Med's six subjects) is also broken down by it
+    breakdown = {name: next(iter(s.select.metadata)) for name, s in specs.items() if name in kinds and s.select.metadata
+                 and kinds[name] != "long_form"}
+    needs_tasks = "long_form" in kinds.values() or breakdown
+    tasks = load_tasks_for(rows, kinds, also=breakdown) if needs_tasks else {}
     order = [name for name in specs if name in kinds] + sorted(b for b in kinds if b not in specs)
     by_bench = group_rows(rows, lambda r: r["benchmark"])
     benchmarks = []
     for name in order:
         bench_spec = specs.get(name)
         metrics = summarise(by_bench[name], kinds[name], tasks, seed=seed, n_resamples=n_resamples)
+        parts = []
+        if name in breakdown:
+            key = breakdown[name]
+            found = [r for r in by_bench[name] if r["task_id"] in tasks]
+            for value, group in sorted(group_rows(found, lambda r: str(tasks[r["task_id"]].metadata.get(key))).items()):
+                part = summarise(group, kinds[name], tasks, seed=seed, n_resamples=n_resamples)
+                parts.append({"by": key, "value": value, "metrics": [m.as_dict() for m in part]})
         benchmarks.append({
             "benchmark": name, "title": bench_spec.title if bench_spec else name,
             "category": bench_spec.category if bench_spec else "", "metric_kind": kinds[name],
-            "primary": PRIMARY[kinds[name]], "metrics": [m.as_dict() for m in metrics],
+            "primary": PRIMARY[kinds[name]], "metrics": [m.as_dict() for m in metrics], "parts": parts,
         })
 
     def by(field: str) -> list[dict[str, Any]]:
@@ -111,6 +123,10 @@ def _benchmark_table(summary: dict[str, Any]) -> list[str]:
                            if m["metric"] != bench["primary"])
         lines.append(f"| {bench['category']} | {bench['title']} | {bench['primary']} | {fmt_interval(primary)} | "
                      f"{primary['n']} | {others or '-'} |")
+        for part in bench.get("parts", []):
+            value = _metric(part, bench["primary"])
+            lines.append(f"| | &nbsp;&nbsp;{part['by']}: {part['value']} | {bench['primary']} | {fmt_interval(value)} | "
+                         f"{value['n']} | |")
     return lines
 
 

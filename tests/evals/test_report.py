@@ -195,3 +195,31 @@ def test_long_form_hallucination_and_comprehensiveness_from_the_task_statements(
     assert both["hallucination"].interval.n == 1 and both["hallucination"].interval.estimate == pytest.approx(1 / 6)
     # without the task there are no statements: only ROUGE-L is reported
     assert [m.name for m in summarise([complete], "long_form", {}, n_resamples=100)] == ["rouge_l"]
+
+
+def test_mmlu_med_is_broken_down_by_subject(tmp_path, monkeypatch):
+    from envs.converters import convert
+    from envs.core.task import dump_tasks, load_tasks
+    from evals.suites import resolve
+
+    monkeypatch.setenv("HCGYM_DATA_DIR", str(tmp_path / "data"))
+    imported = tmp_path / "data" / "imported" / "medical_qa"
+    medicine = tmp_path / "college_medicine_test.csv"
+    medicine.write_text((FIX_BENCHMARKS / "anatomy_test.csv").read_text(encoding="utf-8"), encoding="utf-8")
+    for source, name in ((FIX_BENCHMARKS / "anatomy_test.csv", "mmlu_anatomy"), (medicine, "mmlu_college_medicine")):
+        dump_tasks(convert("mmlu", source).tasks, imported / f"{name}.json")
+    items = resolve("mmlu_med").items
+    assert len(items) == 4
+    subject = {t.id: t.metadata["subject"] for p in imported.glob("*.json") for t in load_tasks(p, domain="medical_qa")}
+    # anatomy: both right; college medicine: the first of its two right -> 100.0, 50.0, overall 75.0
+    medicine_ids = sorted(i.task_id for i in items if subject[i.task_id] == "college_medicine")
+    rows = [_row("sft", "mmlu_med", "medical_qa", i.task_id, i.task_id != medicine_ids[1]) for i in items]
+    folder = tmp_path / "mmlu"
+    folder.mkdir()
+    pq.write_table(pa.Table.from_pylist([row_to_record(r) for r in rows]), folder / "results.parquet")
+    spec = EvalSpec(policy="scripted:gold", policy_id="sft", suite="mmlu_med", condition="text", seeds=[0])
+    (folder / "eval.json").write_text(spec.model_dump_json(), encoding="utf-8")
+    text = write_report(folder, n_resamples=200).read_text()
+    assert "| MC QA | MMLU-Med (6 sub.) | accuracy | 75.0 [" in text
+    assert "| | &nbsp;&nbsp;subject: anatomy | accuracy | 100.0 [100.0, 100.0] | 2 | |" in text
+    assert "| | &nbsp;&nbsp;subject: college_medicine | accuracy | 50.0 [0.0, 100.0] | 2 | |" in text
