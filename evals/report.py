@@ -87,7 +87,8 @@ def summarise_results(results_dir: str | Path, *, seed: int = 0, n_resamples: in
         if name in breakdown:
             key = breakdown[name]
             found = [r for r in by_bench[name] if r["task_id"] in tasks]
-            for value, group in sorted(group_rows(found, lambda r: str(tasks[r["task_id"]].metadata.get(key))).items()):
+            by_value = group_rows(found, lambda r, key=key: str(tasks[r["task_id"]].metadata.get(key)))
+            for value, group in sorted(by_value.items()):
                 part = summarise(group, kinds[name], tasks, seed=seed, n_resamples=n_resamples)
                 parts.append({"by": key, "value": value, "metrics": [m.as_dict() for m in part]})
         benchmarks.append({
