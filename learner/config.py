@@ -27,10 +27,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
+from envs.core.models import StrictModel
 from learner.config_models import OFFPOLICY_TIS_CAP, LearnerConfig, TeacherConfig, WeightSyncConfig
 
 
@@ -38,11 +39,7 @@ class ConfigError(ValueError):
     """A config file is unreadable or invalid; the message names the file and each key path."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class TinyModelConfig(_Strict):
+class TinyModelConfig(StrictModel):
     """A Qwen-architecture model built from a config, with a BPE tokenizer trained on the task corpus."""
 
     architecture: Literal["qwen3", "qwen2"] = "qwen3"
@@ -53,7 +50,7 @@ class TinyModelConfig(_Strict):
     overrides: dict[str, int | float | bool] = Field(default_factory=dict)
 
 
-class ModelConfig(_Strict):
+class ModelConfig(StrictModel):
     """Where the initial policy comes from: `tiny` builds one, `pretrained` loads a checkpoint.
 
     `path` (kind: pretrained) is a local checkpoint folder or a hub id (`Qwen/Qwen3.5-9B`) resolved
@@ -77,7 +74,7 @@ class ModelConfig(_Strict):
         return self
 
 
-class SFTConfig(_Strict):
+class SFTConfig(StrictModel):
     """Warm start: supervised fine-tuning on gold-replay trajectories before RL."""
 
     enabled: bool = False
@@ -94,7 +91,7 @@ class SFTConfig(_Strict):
     hint_fraction: float = Field(default=0.0, ge=0, le=1)
 
 
-class DataConfig(_Strict):
+class DataConfig(StrictModel):
     domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
     # Domains outside envs/domains to register first (name -> module with get_environment/get_tasks),
     # in the driver and in every env actor.
@@ -137,7 +134,7 @@ class RolloutConfig(RolloutLimits):
     env_vars: dict[str, str] = Field(default_factory=dict)
 
 
-class GeneratorConfig(_Strict):
+class GeneratorConfig(StrictModel):
     backend: Literal["hf", "vllm"] = "hf"
     num_generators: int = Field(default=1, ge=1)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
@@ -166,7 +163,7 @@ class GeneratorConfig(_Strict):
         return {"py_executable": python} if python else None
 
 
-class RewardConfig(_Strict):
+class RewardConfig(StrictModel):
     """The RL reward and the correctness rule (dynamic sampling and teacher hints read `correct`)."""
 
     kind: Literal["total", "cosine"] = "total"
@@ -186,7 +183,7 @@ class RewardConfig(_Strict):
     total_threshold: float = 0.5
 
 
-class DynamicSamplingConfig(_Strict):
+class DynamicSamplingConfig(StrictModel):
     enabled: bool = True
     criterion: Literal["correct", "reward"] = Field(
         default="correct", description="mixed outcome = both correct and incorrect members / reward std > eps")
@@ -196,7 +193,7 @@ class DynamicSamplingConfig(_Strict):
     max_admissions_factor: float = Field(default=4.0, ge=1)
 
 
-class TrainerConfig(_Strict):
+class TrainerConfig(StrictModel):
     batch_size: int = Field(default=8, ge=1, description="prompts (groups) per learner step")
     max_steps: int = Field(default=60, ge=0)
     max_staleness: int = Field(default=0, ge=0, description="max policy-version lag of admitted work; 0 = on-policy")
@@ -213,7 +210,7 @@ class TrainerConfig(_Strict):
     drain_timeout_s: float = Field(default=120.0, ge=0, description="at the end, wait this long for admitted groups")
 
 
-class RayConfig(_Strict):
+class RayConfig(StrictModel):
     address: str | None = Field(default=None, description="None = the cluster in RAY_ADDRESS (set for `ray job submit` jobs), else a new local one")
     num_cpus: int | None = Field(default=2, ge=1)
     include_dashboard: bool = False
@@ -237,7 +234,7 @@ class RayConfig(_Strict):
     check_resources: bool = Field(default=True, description="fail at start when the cluster lacks resources")
 
 
-class KBConfig(_Strict):
+class KBConfig(StrictModel):
     """The knowledge-base service env actors share (kb_service.service); off = each process opens
     the KB itself when a tool needs it."""
 
@@ -248,13 +245,13 @@ class KBConfig(_Strict):
     name: str = "hcgym-kb"
 
 
-class MetricsConfig(_Strict):
+class MetricsConfig(StrictModel):
     tensorboard: bool = True
     ray_metrics: bool = True
     progress: bool = True  # one line per step on stdout
 
 
-class RunConfig(_Strict):
+class RunConfig(StrictModel):
     name: str = "run"
     seed: int = 0
     output_dir: str = "runs/run"

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from envs.core.models import StrictModel
 
 KLEstimator = Literal["k1", "k3"]
 
@@ -19,11 +21,7 @@ KLEstimator = Literal["k1", "k3"]
 OFFPOLICY_TIS_CAP = 2.0
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class GRPOConfig(_Strict):
+class GRPOConfig(StrictModel):
     """Eq. 1: clipped group-relative policy gradient plus a KL penalty to a frozen reference."""
 
     clip_eps_low: float = Field(default=0.2, ge=0, description="lower clip range: ratio >= 1 - eps")
@@ -54,7 +52,7 @@ class GRPOConfig(_Strict):
     tis_cap: float | None = Field(default=None, gt=0)
 
 
-class DistillConfig(_Strict):
+class DistillConfig(StrictModel):
     """Eq. 2-3: turn-level truncated on-policy distillation toward the (EMA) teacher."""
 
     enabled: bool = False
@@ -75,7 +73,7 @@ class DistillConfig(_Strict):
     turn_reduction: Literal["sum", "mean"] = "sum"
 
 
-class KLGradConfig(_Strict):
+class KLGradConfig(StrictModel):
     """How sampled-token KL estimates are differentiated (applies to KL_ref and the distillation KL).
 
     "unbiased": value of the estimator plus a score-function term, so the gradient is the gradient
@@ -86,14 +84,14 @@ class KLGradConfig(_Strict):
     mode: Literal["unbiased", "pathwise"] = "unbiased"
 
 
-class LossConfig(_Strict):
+class LossConfig(StrictModel):
     grpo: GRPOConfig = Field(default_factory=GRPOConfig)
     distill: DistillConfig = Field(default_factory=DistillConfig)
     kl_grad: KLGradConfig = Field(default_factory=KLGradConfig)
     entropy_coef: float = Field(default=0.0, ge=0, description="entropy bonus (0 = only logged)")
 
 
-class OptimConfig(_Strict):
+class OptimConfig(StrictModel):
     lr: float = Field(default=5e-7, gt=0)
     weight_decay: float = Field(default=0.0, ge=0)
     betas: tuple[float, float] = (0.9, 0.999)
@@ -103,7 +101,7 @@ class OptimConfig(_Strict):
     updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
 
 
-class DeepSpeedConfig(_Strict):
+class DeepSpeedConfig(StrictModel):
     """DeepSpeed ZeRO-3. On CPU it runs with gloo; `world_size` ranks are separate Ray actors."""
 
     zero_stage: Literal[1, 2, 3] = 3
@@ -119,7 +117,7 @@ class DeepSpeedConfig(_Strict):
     timeout_s: float = Field(default=600.0, gt=0, description="torch.distributed collective timeout")
 
 
-class LearnerConfig(_Strict):
+class LearnerConfig(StrictModel):
     backend: Literal["torch", "deepspeed"] = "torch"
     dtype: Literal["float32", "bfloat16"] = "float32"
     device: Literal["cpu", "cuda"] = "cpu"
@@ -144,7 +142,7 @@ class LearnerConfig(_Strict):
         return self
 
 
-class HintConfig(_Strict):
+class HintConfig(StrictModel):
     """Outcome-conditioned privileged hints (Sec. 4.2)."""
 
     enabled: bool = True
@@ -169,7 +167,7 @@ class HintConfig(_Strict):
         return self
 
 
-class TeacherConfig(_Strict):
+class TeacherConfig(StrictModel):
     """The EMA teacher actor (Sec. 4.2 "Stability mechanisms", Algorithm 1)."""
 
     enabled: bool = False
@@ -201,7 +199,7 @@ def teacher_update_action(step: int, config: TeacherConfig) -> Literal["hard_cop
     return "none"
 
 
-class WeightSyncConfig(_Strict):
+class WeightSyncConfig(StrictModel):
     """Learner -> generators / teacher weight transfer."""
 
     transport: Literal["object_store", "collective"] = "object_store"

@@ -6,28 +6,25 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import DB
+from envs.core.models import StrictRecord
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
-
-
-class Allergy(_Strict):
+class Allergy(StrictRecord):
     substance: str
     reaction: str = ""
     severity: Literal["mild", "moderate", "severe"] = "moderate"
 
 
-class Medication(_Strict):
+class Medication(StrictRecord):
     name: str
     dose: str = ""
     frequency: str = ""
 
 
-class VitalSigns(_Strict):
+class VitalSigns(StrictRecord):
     time: str
     heart_rate: float | None = None
     systolic_bp: float | None = None
@@ -39,7 +36,7 @@ class VitalSigns(_Strict):
     pain_score: int | None = None
 
 
-class Finding(_Strict):
+class Finding(StrictRecord):
     """A clinical finding coded to HPO so the differential engine can use it."""
 
     hpo_id: str
@@ -49,7 +46,7 @@ class Finding(_Strict):
     requires_test: str | None = None
 
 
-class LabResult(_Strict):
+class LabResult(StrictRecord):
     test: str
     value: float | str
     unit: str
@@ -57,7 +54,7 @@ class LabResult(_Strict):
     order_id: str | None = None
 
 
-class HiddenResult(_Strict):
+class HiddenResult(StrictRecord):
     """A result the case holds back until the test is ordered (then it is 'resulted')."""
 
     value: float | str
@@ -65,7 +62,7 @@ class HiddenResult(_Strict):
     turnaround_min: int = 60
 
 
-class LabOrder(_Strict):
+class LabOrder(StrictRecord):
     order_id: str
     test: str
     priority: Literal["routine", "urgent", "stat"] = "routine"
@@ -73,13 +70,13 @@ class LabOrder(_Strict):
     indication: str = ""
 
 
-class DiagnosisRecord(_Strict):
+class DiagnosisRecord(StrictRecord):
     icd10_code: str
     description: str
     certainty: Literal["confirmed", "provisional", "differential"] = "provisional"
 
 
-class Prescription(_Strict):
+class Prescription(StrictRecord):
     prescription_id: str
     drug: str
     dose: str
@@ -89,20 +86,20 @@ class Prescription(_Strict):
     indication: str = ""
 
 
-class ClinicalNote(_Strict):
+class ClinicalNote(StrictRecord):
     note_id: str
     note_type: str
     content: str
 
 
-class FollowUp(_Strict):
+class FollowUp(StrictRecord):
     appointment_id: str
     service: str
     within_days: int
     reason: str
 
 
-class Patient(_Strict):
+class Patient(StrictRecord):
     patient_id: str
     name: str
     age: int = Field(ge=0, le=120)
@@ -130,7 +127,7 @@ class Patient(_Strict):
     provenance: str = "authored"
 
 
-class FormularyDrug(_Strict):
+class FormularyDrug(StrictRecord):
     """A prescribable drug: its class, the allergy groups it belongs to, and the usual dose bounds."""
 
     name: str

@@ -6,16 +6,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import DB
+from envs.core.models import StrictRecord
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
-
-
-class LabEvent(_Strict):
+class LabEvent(StrictRecord):
     time: str
     test: str
     value: float
@@ -23,7 +20,7 @@ class LabEvent(_Strict):
     source_id: str | None = None       # provenance of an imported row, e.g. "LABEVENTS.csv:ROW_ID=281"
 
 
-class VitalEvent(_Strict):
+class VitalEvent(StrictRecord):
     time: str
     heart_rate: float | None = None
     systolic_bp: float | None = None
@@ -37,7 +34,7 @@ class VitalEvent(_Strict):
     urine_output_ml: float | None = None  # since the previous charted event
 
 
-class MedicationOrder(_Strict):
+class MedicationOrder(StrictRecord):
     order_id: str
     drug: str
     dose: float
@@ -50,7 +47,7 @@ class MedicationOrder(_Strict):
     indication: str = ""
 
 
-class Order(_Strict):
+class Order(StrictRecord):
     order_id: str
     kind: Literal["lab", "imaging", "consult", "nursing", "diet", "procedure"]
     description: str
@@ -59,14 +56,14 @@ class Order(_Strict):
     priority: Literal["routine", "urgent", "stat"] = "routine"
 
 
-class ICUStay(_Strict):
+class ICUStay(StrictRecord):
     stay_id: str
     unit: str
     intime: str
     outtime: str | None = None
 
 
-class CodedDiagnosis(_Strict):
+class CodedDiagnosis(StrictRecord):
     """A coded discharge diagnosis of an admission (e.g. MIMIC-III DIAGNOSES_ICD, eICU diagnosis)."""
 
     seq: int                           # 1 = primary / principal
@@ -77,13 +74,13 @@ class CodedDiagnosis(_Strict):
     source_id: str | None = None
 
 
-class Ventilation(_Strict):
+class Ventilation(StrictRecord):
     start: str
     end: str | None = None
     mode: str = "invasive"
 
 
-class Note(_Strict):
+class Note(StrictRecord):
     note_id: str
     time: str
     note_type: str
@@ -91,7 +88,7 @@ class Note(_Strict):
     author: str = "agent"
 
 
-class Escalation(_Strict):
+class Escalation(StrictRecord):
     """A call for senior or specialist help now (recorded with the record clock)."""
 
     time: str
@@ -99,7 +96,7 @@ class Escalation(_Strict):
     reason: str
 
 
-class Admission(_Strict):
+class Admission(StrictRecord):
     hadm_id: str
     admit_time: str
     discharge_time: str | None = None
@@ -118,7 +115,7 @@ class Admission(_Strict):
     comorbidities: dict[str, bool] = Field(default_factory=dict)
 
 
-class Condition(_Strict):
+class Condition(StrictRecord):
     """A coded condition of the longitudinal record (authored, or a Synthea/OMOP condition occurrence)."""
 
     start: str
@@ -131,7 +128,7 @@ class Condition(_Strict):
     source_id: str | None = None       # provenance of the record: "<OMOP table>/<row id>"
 
 
-class DrugExposure(_Strict):
+class DrugExposure(StrictRecord):
     """A drug exposure (dispensing, administration or vaccination) of the longitudinal record."""
 
     start: str
@@ -147,7 +144,7 @@ class DrugExposure(_Strict):
     source_id: str | None = None
 
 
-class ProcedureRecord(_Strict):
+class ProcedureRecord(StrictRecord):
     date: str
     name: str
     code: str | None = None
@@ -157,7 +154,7 @@ class ProcedureRecord(_Strict):
     source_id: str | None = None
 
 
-class Visit(_Strict):
+class Visit(StrictRecord):
     visit_id: str
     start: str
     end: str | None = None
@@ -165,7 +162,7 @@ class Visit(_Strict):
     source_id: str | None = None
 
 
-class MeasurementRecord(_Strict):
+class MeasurementRecord(StrictRecord):
     """That a measurement was taken, and when. The Synthea/Eunomia source records no result values,
     so there is no value field: nothing is invented."""
 
@@ -177,7 +174,7 @@ class MeasurementRecord(_Strict):
     source_id: str | None = None
 
 
-class ObservationRecord(_Strict):
+class ObservationRecord(StrictRecord):
     """An observation of the record: allergies, history items (e.g. "History of appendectomy")."""
 
     date: str
@@ -188,7 +185,7 @@ class ObservationRecord(_Strict):
     source_id: str | None = None
 
 
-class EHRPatient(_Strict):
+class EHRPatient(StrictRecord):
     patient_id: str
     name: str
     age: int = Field(ge=0, le=120)

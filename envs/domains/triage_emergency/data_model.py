@@ -6,16 +6,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import DB
+from envs.core.models import StrictRecord
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
-
-
-class EDVitals(_Strict):
+class EDVitals(StrictRecord):
     time: str
     heart_rate: float | None = None
     systolic_bp: float | None = None
@@ -31,19 +28,19 @@ class EDVitals(_Strict):
     pain_score: int | None = Field(default=None, ge=0, le=10)
 
 
-class HeldResult(_Strict):
+class HeldResult(StrictRecord):
     value: float | str
     unit: str
 
 
-class EDResult(_Strict):
+class EDResult(StrictRecord):
     test: str
     value: float | str
     unit: str
     order_id: str
 
 
-class GivenMedication(_Strict):
+class GivenMedication(StrictRecord):
     """A medication given at triage under a standing order (time from the department clock)."""
 
     drug: str
@@ -53,17 +50,17 @@ class GivenMedication(_Strict):
     indication: str = ""
 
 
-class TriageAssignment(_Strict):
+class TriageAssignment(StrictRecord):
     esi_level: int = Field(ge=1, le=5)
     rationale: str = ""
 
 
-class Alert(_Strict):
+class Alert(StrictRecord):
     kind: Literal["stemi", "stroke", "escalation"]
     detail: str
 
 
-class EDPatient(_Strict):
+class EDPatient(StrictRecord):
     patient_id: str
     age: int = Field(ge=0, le=120)
     age_months: int | None = None
