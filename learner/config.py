@@ -8,7 +8,7 @@ default:
       trainer.batch_sise: unknown key
       rollout.group_size: Input should be a valid integer (got 'three')
 
-The learner-side sections (`learner`, `teacher`, `weight_sync`) are T1's models from
+The learner-side sections (`learner`, `teacher`, `weight_sync`) are the models of
 `learner/config_models.py`; this module composes them with the rollout side and the driver.
 
 A config may start from another with `extends: other.yaml` (path relative to the file); mappings

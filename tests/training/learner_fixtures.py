@@ -1,4 +1,4 @@
-"""Shared helpers of the learner-side tests (T1): a tiny model and synthetic multi-turn samples.
+"""Shared helpers of the learner-side tests: a tiny model and synthetic multi-turn samples.
 
 The tiny model and tokenizer are built once per test process (cached in a temp directory).
 Samples are multi-turn episodes in token space: prompt, then per turn the generated tokens
