@@ -6,7 +6,8 @@ benchmark (and over all shared items):
     (items resampled jointly; an item's value is its mean over the shared seeds),
   * for accuracy-type metrics, the exact McNemar test on the per-episode correctness pairs
     (discordant counts and the two-sided p-value).
-Written as markdown (`comparison.md`) and JSON (`comparison.json`) into --output, and printed.
+Written as markdown (`comparison.md`, which with --output also holds each side's metrics with
+their own CIs side by side, plotted in `conditions.png`) and JSON (`comparison.json`), and printed.
 """
 
 from __future__ import annotations
@@ -21,7 +22,15 @@ from typing import Any
 import numpy as np
 
 from evals.metrics import PRIMARY, load_tasks_for, read_results, row_values
-from evals.report import fmt_pct, label_of, metric_kinds, read_spec
+from evals.report import (
+    comparison_table,
+    fmt_pct,
+    label_of,
+    metric_kinds,
+    plot_benchmarks,
+    read_spec,
+    summarise_results,
+)
 from evals.stats import mcnemar_exact, paired_bootstrap_ci
 from evals.suites import benchmark_specs
 
@@ -154,6 +163,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.output:
         out = Path(args.output)
         out.mkdir(parents=True, exist_ok=True)
+        # each side's own metric with its (unpaired) CI, side by side, as a table and grouped bars
+        summaries = [summarise_results(d, seed=args.seed, n_resamples=args.resamples) for d in (args.dir_a, args.dir_b)]
+        plot_benchmarks(summaries, out / "conditions.png", "condition by condition")
+        markdown += ("\n## Condition by condition\n\n" + "\n".join(comparison_table(summaries))
+                     + "\n\n![conditions](conditions.png)\n")
         (out / "comparison.md").write_text(markdown, encoding="utf-8")
         (out / "comparison.json").write_text(json.dumps(comparison, indent=2), encoding="utf-8")
     print(markdown, end="")

@@ -190,7 +190,7 @@ def plot_benchmarks(summaries: list[dict[str, Any]], path: Path, title: str) -> 
     return path
 
 
-def _comparison_table(summaries: list[dict[str, Any]]) -> list[str]:
+def comparison_table(summaries: list[dict[str, Any]]) -> list[str]:
     names = list(dict.fromkeys(b["benchmark"] for s in summaries for b in s["benchmarks"]))
     lines = ["| Benchmark | " + " | ".join(s["label"] for s in summaries) + " |",
              "|---|" + "---|" * len(summaries)]
@@ -231,7 +231,7 @@ def write_report(results_dir: str | Path, others: list[str | Path] | None = None
     plot_benchmarks([summary], results_dir / "benchmarks.png", summary["label"])
     extra = [summarise_results(o, seed=seed, n_resamples=n_resamples) for o in others or []]
     if extra:
-        lines += ["## Condition by condition", "", *_comparison_table([summary, *extra]), "",
+        lines += ["## Condition by condition", "", *comparison_table([summary, *extra]), "",
                   "![conditions](conditions.png)", ""]
         plot_benchmarks([summary, *extra], results_dir / "conditions.png", "condition by condition")
     (results_dir / "summary.json").write_text(json.dumps({"report": summary, "others": extra}, indent=2),
@@ -241,4 +241,4 @@ def write_report(results_dir: str | Path, others: list[str | Path] | None = None
     return report
 
 
-__all__ = ["fmt_interval", "plot_benchmarks", "read_spec", "summarise_results", "write_report"]
+__all__ = ["comparison_table", "fmt_interval", "plot_benchmarks", "read_spec", "summarise_results", "write_report"]

@@ -163,7 +163,9 @@ def test_compare_paired_differences_and_exact_mcnemar(folders, tmp_path, capsys)
     assert data["unshared"] == ["vqa_rad", "slake", "mimic3", "liveqa"]  # in paper18 order
     markdown = (out / "comparison.md").read_text()
     assert f"| medqa | accuracy | 10 | 75.0 | 90.0 | -15.0 [{100 * ci.low:+.1f}, {100 * ci.high:+.1f}] | 2 / 5 | 0.4531 |" in markdown
-    assert markdown in capsys.readouterr().out
+    assert "## Condition by condition" in markdown and "| medqa | 75.0 [" in markdown
+    assert (out / "conditions.png").stat().st_size > 1000
+    assert markdown.split("\n## Condition by condition")[0] in capsys.readouterr().out
 
 
 def test_compare_rejects_a_folder_without_results(folders, tmp_path, capsys):
