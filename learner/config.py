@@ -205,7 +205,6 @@ class TrainerConfig(StrictModel):
     val_group_size: int = Field(default=1, ge=1)
     val_greedy: bool = Field(default=True, description="argmax decoding for validation (less noise than sampling)")
     save_trajectories: bool = True
-    weight_sync_timeout_s: float = Field(default=120.0, gt=0)
     teacher_timeout_s: float = Field(default=600.0, gt=0)
     drain_timeout_s: float = Field(default=120.0, ge=0, description="at the end, wait this long for admitted groups")
 

@@ -205,6 +205,8 @@ class WeightSyncConfig(StrictModel):
     transport: Literal["object_store", "collective"] = "object_store"
     backend: Literal["nccl", "gloo"] = "nccl"
     bucket_mb: float = Field(default=512.0, gt=0, description="size cap of one broadcast bucket")
-    timeout_s: float = Field(default=120.0, gt=0)
+    # One limit for a weight sync, whichever transport: a collective broadcast, or a generator loading a
+    # pushed state dict from the object store.
+    timeout_s: float = Field(default=120.0, gt=0, description="seconds a weight sync may take")
     master_addr: str = "127.0.0.1"
     master_port: int | None = None

@@ -132,7 +132,7 @@ class Trainer:
                             max_restarts=r.env_actor_max_restarts, domain_modules=d.domain_modules, env_vars=r.env_vars,
                             kb_service=cfg.kb.name if self.kb_client is not None else None)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
-                                          cfg.trainer.weight_sync_timeout_s,
+                                          cfg.weight_sync.timeout_s,
                                           weights_provider=lambda: self.learner.get_weights.remote())
         self.scheduler = BatchScheduler(cfg.trainer, TaskSampler(train_refs, cfg.seed), self.log, self.counters)
         self.rollouts = Rollouts(cfg, loop, self.pool, self.gen_client, self.run_dir, self.log)
