@@ -104,6 +104,8 @@ def run_command(args: argparse.Namespace) -> int:
 
         return int(compare.main(args.words[1:]) or 0)
     _require(args, "policy", "suite", "output")
+    if args.no_ray and args.generator_backend != "hf":
+        raise ValueError(f"--generator-backend {args.generator_backend} runs in Ray generator actors; drop --no-ray")
     for name in ("limit", "seeds", "max_turns", "max_tokens", "max_response_tokens", "concurrency", "env_actors"):
         value = getattr(args, name)
         if value is not None and value < 1:
@@ -124,7 +126,7 @@ def _run_limits(notes: dict) -> dict:
 def evaluate(args: argparse.Namespace) -> int:
     from evals.conditions import ConditionSettings
     from evals.policies import LocalModelPolicy, resolve_policy
-    from evals.runner import EvalOptions, run_eval
+    from evals.runner import EvalOptions, pending_episodes, run_eval
 
     greedy = args.temperature is None
     policy, notes = resolve_policy(args.policy, greedy=greedy, temperature=args.temperature or 1.0,
@@ -152,6 +154,8 @@ def evaluate(args: argparse.Namespace) -> int:
                           concurrency=args.concurrency, use_ray=not args.no_ray, num_env_actors=args.env_actors,
                           domain_modules=notes.get("domain_modules") or None, env_vars=env_vars or None)
     started_ray = False
+    if pending_episodes(policy.policy_id, items, args.output, args.condition, options.seeds) == 0:
+        options.use_ray = False  # nothing to run: no cluster, no generators
     if options.use_ray:
         import ray
 
@@ -160,8 +164,8 @@ def evaluate(args: argparse.Namespace) -> int:
                      log_to_driver=False, runtime_env={"env_vars": env_vars} if env_vars else None)
             started_ray = True
     try:
-        if isinstance(policy, LocalModelPolicy) and args.condition != "logprob":
-            policy.start_generators(0 if args.no_ray else args.generators, backend=args.generator_backend)
+        if isinstance(policy, LocalModelPolicy) and args.condition != "logprob" and options.use_ray:
+            policy.start_generators(args.generators, backend=args.generator_backend)
         counts = run_eval(policy, items, args.output, options, policy_text=args.policy, suite=args.suite,
                           limit=args.limit, policy_source=notes)
     finally:

@@ -206,6 +206,19 @@ class _EnvSource:
                 ray.kill(actor)
 
 
+def pending_episodes(policy_id: str, items: list[EvalItem], output_dir: str | os.PathLike, condition: str,
+                     seeds) -> int:
+    """How many (item, seed) episodes the folder lacks (the CLI starts no Ray cluster for none)."""
+    done = {row.key() for row in read_results(Path(output_dir))}
+    tasks = load_tasks_for(items) if condition == "logprob" else None
+    count = 0
+    for item in items:
+        if tasks is not None and not is_multiple_choice(tasks[(item.domain, item.split)][item.task_id]):
+            continue
+        count += sum((policy_id, item.benchmark, item.task_id, condition, seed) not in done for seed in seeds)
+    return count
+
+
 async def run_episodes(policy, items: list[EvalItem], output_dir: str | os.PathLike,
                        options: EvalOptions) -> dict[str, Any]:
     """Run every (item, seed) not yet in `output_dir`; returns counts and timing."""

@@ -138,6 +138,9 @@ def test_hcgym_eval_on_a_run_folder_end_to_end(tmp_path, ray_session, ward_polic
     assert "4 episodes run" in capsys.readouterr().out
     assert hcgym(argv) == 0  # resumed: nothing left to run
     assert "0 episodes run, 4 already done" in capsys.readouterr().out
+    import ray
+
+    assert ray.is_initialized()  # the session cluster is still up: nothing to run starts or stops nothing
 
 
 def test_cli_errors_name_the_argument(tmp_path, capsys):
@@ -146,3 +149,6 @@ def test_cli_errors_name_the_argument(tmp_path, capsys):
     assert hcgym(["eval", "--policy", "scripted:gold", "--suite", "gym-test:ward", "--output", str(tmp_path),
                   "--seeds", "0"]) == 2
     assert "--seeds must be >= 1" in capsys.readouterr().err
+    assert hcgym(["eval", "--policy", "scripted:gold", "--suite", "gym-test:ward", "--output", str(tmp_path),
+                  "--no-ray", "--generator-backend", "vllm"]) == 2
+    assert "--generator-backend vllm" in capsys.readouterr().err
