@@ -152,3 +152,28 @@ def test_cli_errors_name_the_argument(tmp_path, capsys):
     assert hcgym(["eval", "--policy", "scripted:gold", "--suite", "gym-test:ward", "--output", str(tmp_path),
                   "--no-ray", "--generator-backend", "vllm"]) == 2
     assert "--generator-backend vllm" in capsys.readouterr().err
+
+
+def test_hcgym_eval_against_a_real_endpoint(tmp_path, openai_server, capsys):
+    """`hcgym eval --policy openai:URL:MODEL` as a user runs it, on vLLM's CPU server (tests/evals/conftest.py):
+    text condition answers, and the agent condition's prompt (the env's full system prompt with every tool
+    schema) is over the tiny server's 1,024-token context: each episode ends as context_overflow, none lost."""
+    from tests.evals.conftest import SERVED_MODEL_NAME
+
+    policy = f"openai:{openai_server}:{SERVED_MODEL_NAME}"
+    text_out, agent_out = tmp_path / "text", tmp_path / "agent"
+    common = ["--policy", policy, "--suite", "gym-test:ward", "--seeds", "3", "--no-ray", "--concurrency", "3",
+              "--no-report"]
+    assert hcgym(["eval", *common, "--condition", "text", "--output", str(text_out)]) == 0
+    rows = read_results(text_out)
+    assert [(r.task_id, r.seed) for r in sorted(rows, key=lambda r: r.seed)] == [("ward_choice", s) for s in range(3)]
+    for row in rows:
+        assert (row.end_reason, row.answer, row.correct) == ("answer", "B", True)  # "The answer is B."
+        assert row.policy_id == policy and row.prompt_tokens > 0 and row.completion_tokens > 0
+    assert hcgym(["eval", *common, "--condition", "agent", "--output", str(agent_out)]) == 0
+    rows = read_results(agent_out)
+    assert len(rows) == 3 and len({r.key() for r in rows}) == 3
+    for row in rows:
+        assert (row.end_reason, row.error_kind, row.turns) == ("context_overflow", "context_overflow", 0)
+        assert row.reward is not None and row.correct is False  # scored by the env all the same
+    capsys.readouterr()
