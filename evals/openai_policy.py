@@ -47,6 +47,7 @@ import random
 import re
 import threading
 import time
+import weakref
 from pathlib import Path
 from typing import Any, Literal
 
@@ -331,7 +332,10 @@ class OpenAIChatPolicy:
         self.policy_id = policy_id or f"openai:{config.base_url}:{config.model}"
         self.stats = EndpointStats()
         self._stats_lock = threading.Lock()
-        self._semaphores: dict[int, asyncio.Semaphore] = {}  # per event loop (a semaphore is loop-bound)
+        # One semaphore per event loop (an asyncio semaphore is bound to the loop it first waits in);
+        # weak keys, so the loops of finished `asyncio.run` calls do not pile up or alias.
+        self._semaphores: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Semaphore] = (
+            weakref.WeakKeyDictionary())
         self._logprobs_supported: bool | None = None
         self._warned_kinds: set[str] = set()
         self._check_api_key()
@@ -363,6 +367,11 @@ class OpenAIChatPolicy:
         return self._reply_from(attempt.data)
 
     def option_logprobs(self, messages: list[dict[str, Any]], letters: list[str]) -> dict[str, float] | None:
+        """The Policy protocol's synchronous form of `aoption_logprobs` (blocks the calling thread;
+        from a running event loop the request runs on a helper thread with its own loop)."""
+        return _run_coroutine(self.aoption_logprobs(messages, letters))
+
+    async def aoption_logprobs(self, messages: list[dict[str, Any]], letters: list[str]) -> dict[str, float] | None:
         """Log-probability of each option letter as the first token of the answer, from the
         endpoint's `top_logprobs` (one token, greedy).
 
@@ -385,7 +394,7 @@ class OpenAIChatPolicy:
             "logprobs": True, "top_logprobs": self.config.top_logprobs,
             **self.config.extra_body,
         }
-        attempt = _run_coroutine(self._post(body))
+        attempt = await self._post(body)
         if attempt.data is None:
             if attempt.error_kind == "http_400" and "logprob" in attempt.detail.lower():
                 self._logprobs_supported = False
@@ -411,9 +420,9 @@ class OpenAIChatPolicy:
     # -- transport -------------------------------------------------------------------------------
     def _semaphore(self) -> asyncio.Semaphore:
         loop = asyncio.get_running_loop()
-        semaphore = self._semaphores.get(id(loop))
+        semaphore = self._semaphores.get(loop)
         if semaphore is None:
-            semaphore = self._semaphores[id(loop)] = asyncio.Semaphore(self.config.concurrency)
+            semaphore = self._semaphores[loop] = asyncio.Semaphore(self.config.concurrency)
         return semaphore
 
     def _headers(self) -> dict[str, str]:

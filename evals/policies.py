@@ -350,6 +350,8 @@ def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, 
     """
     if not text:
         raise ValueError("--policy is empty")
+    if endpoint_config and not text.startswith("openai:"):
+        raise ValueError(f"--endpoint-config applies to openai:BASE_URL:MODEL policies, not --policy {text!r}")
     if text.startswith("scripted:"):
         return ScriptedPolicy(text.split(":", 1)[1]), {"kind": "scripted"}
     if text.startswith("openai:"):
@@ -358,8 +360,6 @@ def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, 
         options = openai_policy.load_endpoint_options(endpoint_config) if endpoint_config else {}
         options.setdefault("concurrency", concurrency)
         return openai_policy.policy_from_string(text, **options), {"kind": "openai"}
-    if endpoint_config:
-        raise ValueError(f"--endpoint-config applies to openai:BASE_URL:MODEL policies, not --policy {text!r}")
     path = Path(text).expanduser()
     if path.is_dir() and is_run_dir(path):
         run = run_policy(path)

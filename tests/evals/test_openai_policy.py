@@ -360,6 +360,7 @@ def test_option_logprobs_match_an_independent_forward_pass(proxy, endpoint_model
         return policy.option_logprobs(messages, letters)
 
     assert asyncio.run(inside_loop()) == pytest.approx(got, abs=1e-4)
+    assert asyncio.run(policy.aoption_logprobs(messages, letters)) == pytest.approx(got, abs=1e-4)
     assert make_policy(proxy.base_url, logprobs=False).option_logprobs(messages, letters) is None
     proxy.reset(*[Fault("status", 500)] * 2)
     with pytest.raises(EndpointError, match="http_500"):
@@ -405,3 +406,30 @@ def test_runner_turns_endpoint_failures_into_episodes_without_loss_or_double_cou
     assert sorted(r.end_reason for r in rows) == ["context_overflow"] * 3
     assert {r.error_kind for r in rows} == {"context_overflow"} and all(r.turns == 0 for r in rows)
     assert len(proxy.received) == 3 and all("tools" in body for body in proxy.received)
+
+
+def test_hcgym_eval_cli_with_an_endpoint_config(proxy, tmp_path, monkeypatch):
+    """`hcgym eval --policy openai:URL:MODEL --endpoint-config FILE` as a user runs it: the file's key
+    variable and prices reach every request and row."""
+    from envs.cli import main
+    from evals.policies import resolve_policy
+    from evals.types import read_results
+
+    monkeypatch.setenv("HCGYM_TEST_ENDPOINT_KEY", "sk-cli-456")
+    config = tmp_path / "endpoint.yaml"
+    config.write_text("api_key_env: HCGYM_TEST_ENDPOINT_KEY\nprice_input_per_1m: 1.0\nprice_output_per_1m: 4.0\n"
+                      "max_retries: 0\ntool_mode: text\n")
+    proxy.reset()
+    out = tmp_path / "out"
+    code = main(["eval", "--policy", f"openai:{proxy.base_url}:{SERVED_MODEL_NAME}", "--suite",
+                 "gym-test:triage_emergency", "--condition", "text", "--limit", "2", "--max-tokens", "16",
+                 "--output", str(out), "--no-ray", "--no-report", "--endpoint-config", str(config)])
+    assert code == 0
+    rows = read_results(out)
+    assert len(rows) == 2 and len(proxy.received) == 2
+    assert set(proxy.authorizations) == {"Bearer sk-cli-456"}
+    for row in rows:
+        assert row.policy_id == f"openai:{proxy.base_url}:{SERVED_MODEL_NAME}" and row.prompt_tokens > 0
+        assert row.cost_usd == pytest.approx((row.prompt_tokens * 1.0 + row.completion_tokens * 4.0) / 1e6)
+    with pytest.raises(ValueError, match="--endpoint-config applies to openai"):
+        resolve_policy("scripted:gold", endpoint_config=str(config))
