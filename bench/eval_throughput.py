@@ -11,6 +11,11 @@ be identical apart from its latency, else the script fails.
 
     python bench/eval_throughput.py [--domain triage_emergency] [--split test] [--seeds 2]
         [--policy scripted:gold] [--condition agent] [--actors 2] [--slots 8] [--json out.json]
+
+With `--endpoint openai:BASE_URL:MODEL` (a running OpenAI-compatible server, e.g. vLLM's CPU build
+serving a model) it measures the harness against the endpoint instead: the same episodes with one
+request in flight vs `--concurrency` in flight (in-process envs), and counts the episodes whose
+answers differ (a server may batch differently; the rows' keys must match exactly).
 """
 
 from __future__ import annotations
@@ -47,6 +52,58 @@ async def pooled(policy, items, out, options, actors: int, slots: int, env_vars)
     return time.perf_counter() - t0
 
 
+def bench_items(args):
+    from envs import registry
+    from evals.types import EvalItem
+
+    tasks = registry.get_tasks(args.domain, args.split)[: args.limit]
+    return [EvalItem(benchmark=f"{args.domain}_{args.split}", domain=args.domain, task_id=t.id, split=args.split)
+            for t in tasks]
+
+
+def endpoint_main(args) -> int:
+    """Episodes/s against a live endpoint: 1 request in flight vs `--concurrency`."""
+    from evals.conditions import ConditionSettings
+    from evals.policies import resolve_policy
+    from evals.runner import EvalOptions, run_eval
+    from evals.types import read_results
+
+    items = bench_items(args)
+    root = Path(tempfile.mkdtemp(prefix="bench_eval_endpoint_"))
+    rates, rows = {}, {}
+    # Warm-up over the same episodes: the server's first-request costs and its prefix cache then
+    # favour neither measured pass.
+    warm, _ = resolve_policy(args.endpoint, concurrency=args.concurrency)
+    run_eval(warm, items, root / "warmup", EvalOptions(condition=args.condition, seeds=tuple(range(args.seeds)),
+                                                       use_ray=False, concurrency=args.concurrency, progress=False,
+                                                       settings=ConditionSettings(max_turns=5)))
+    for concurrency in (1, args.concurrency):
+        policy, _ = resolve_policy(args.endpoint, concurrency=concurrency)
+        options = EvalOptions(condition=args.condition, seeds=tuple(range(args.seeds)), use_ray=False,
+                              concurrency=concurrency, progress=False, settings=ConditionSettings(max_turns=5))
+        t0 = time.perf_counter()
+        run_eval(policy, items, root / f"c{concurrency}", options)
+        rates[concurrency] = len(items) * args.seeds / (time.perf_counter() - t0)
+        rows[concurrency] = {r.key(): r for r in read_results(root / f"c{concurrency}")}
+    one, many = rows[1], rows[args.concurrency]
+    if set(one) != set(many):
+        print("FAIL: the two runs hold different episodes", file=sys.stderr)
+        return 1
+    differ = sum(one[k].answer != many[k].answer for k in one)
+    errors = sum(r.end_reason in ("endpoint_error", "context_overflow") for r in many.values())
+    result = {"endpoint": args.endpoint, "domain": args.domain, "condition": args.condition, "episodes": len(one),
+              "episodes_per_s_concurrency_1": rates[1], f"episodes_per_s_concurrency_{args.concurrency}":
+              rates[args.concurrency], "speedup": rates[args.concurrency] / rates[1], "answers_differ": differ,
+              "endpoint_or_context_errors": errors}
+    print(f"{len(one)} episodes ({args.domain}/{args.split}, {args.condition}) against {args.endpoint}")
+    print(f"  1 request in flight : {rates[1]:8.2f} episodes/s")
+    print(f"  {args.concurrency} requests in flight: {rates[args.concurrency]:8.2f} episodes/s "
+          f"({result['speedup']:.2f}x); answers differing: {differ}; errors: {errors}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--domain", default="triage_emergency")
@@ -57,18 +114,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--actors", type=int, default=2)
     parser.add_argument("--slots", type=int, default=8)
     parser.add_argument("--json", default=None)
+    parser.add_argument("--endpoint", default=None, help="openai:BASE_URL:MODEL of a running server")
+    parser.add_argument("--concurrency", type=int, default=8, help="endpoint mode: requests in flight")
+    parser.add_argument("--limit", type=int, default=None, help="at most N tasks")
     args = parser.parse_args(argv)
+    if args.endpoint:
+        return endpoint_main(args)
 
     import ray
 
-    from envs import registry
     from evals.conditions import ConditionSettings
     from evals.policies import resolve_policy
     from evals.runner import EvalOptions, run_eval
-    from evals.types import EvalItem, read_results
+    from evals.types import read_results
 
-    items = [EvalItem(benchmark=f"{args.domain}_{args.split}", domain=args.domain, task_id=t.id, split=args.split)
-             for t in registry.get_tasks(args.domain, args.split)]
+    items = bench_items(args)
     policy, _ = resolve_policy(args.policy)
     env_vars = {"HCGYM_EMBEDDINGS": os.environ.get("HCGYM_EMBEDDINGS", "0")}
     os.environ.update(env_vars)
