@@ -177,3 +177,35 @@ def test_hcgym_eval_against_a_real_endpoint(tmp_path, openai_server, capsys):
         assert (row.end_reason, row.error_kind, row.turns) == ("context_overflow", "context_overflow", 0)
         assert row.reward is not None and row.correct is False  # scored by the env all the same
     capsys.readouterr()
+
+
+def test_ctrl_c_keeps_finished_episodes_and_the_rerun_completes(tmp_path):
+    """A real interruption: SIGINT to a running `hcgym eval`, then the same command again."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "interrupted"
+    command = [sys.executable, "-m", "envs.cli", "eval", "--policy", "scripted:gold", "--suite",
+               "gym-test:triage_emergency", "--condition", "agent", "--output", str(out), "--seeds", "40",
+               "--no-ray", "--concurrency", "1", "--no-report"]
+    env = dict(os.environ, HCGYM_EMBEDDINGS="0")
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / RESULTS_FILE).exists() and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.2)
+    assert process.poll() is None, f"finished before it could be interrupted: {process.communicate()}"
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    kept = read_results(out)
+    from envs import registry
+
+    total = len(registry.get_tasks("triage_emergency", "test")) * 40
+    assert 0 < len(kept) < total
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f"{total - len(kept)} episodes run, {len(kept)} already done" in done.stdout
+    rows = read_results(out)
+    assert len(rows) == len({r.key() for r in rows}) == total and all(r.correct for r in rows)
