@@ -314,6 +314,45 @@ def _error_message(body: str) -> str:
     return str(error)[:500]
 
 
+def read_completion(data: Any) -> tuple[str, list[dict[str, Any]] | None, int, int, str | None]:
+    """(text, tool_calls in OpenAI shape or None, prompt_tokens, completion_tokens, finish_reason)
+    of a chat-completions body.
+
+    Raises:
+        ValueError: naming what is missing or of the wrong type (the caller's `malformed_json`).
+    """
+    if not isinstance(data, dict) or not isinstance(data.get("choices"), list) or not data["choices"]:
+        raise ValueError("no choices")
+    choice = data["choices"][0]
+    if not isinstance(choice, dict) or not isinstance(choice.get("message"), dict):
+        raise ValueError("choices[0].message is missing")
+    message = choice["message"]
+    content = message.get("content")
+    if isinstance(content, list):  # some servers answer in content parts
+        content = "".join(part.get("text", "") for part in content if isinstance(part, dict))
+    if content is not None and not isinstance(content, str):
+        raise ValueError(f"choices[0].message.content is a {type(content).__name__}")
+    tool_calls = None
+    if message.get("tool_calls"):
+        if not isinstance(message["tool_calls"], list):
+            raise ValueError("choices[0].message.tool_calls is not a list")
+        tool_calls = []
+        for number, call in enumerate(message["tool_calls"]):
+            function = call.get("function") if isinstance(call, dict) else None
+            if not isinstance(function, dict) or not isinstance(function.get("name"), str):
+                raise ValueError(f"choices[0].message.tool_calls[{number}].function.name is missing")
+            tool_calls.append({"id": call.get("id") or f"call_{number}", "type": call.get("type") or "function",
+                               "function": {"name": function["name"],
+                                            "arguments": _arguments_json(function.get("arguments") or {})}})
+    usage = data.get("usage") or {}
+    try:
+        prompt_tokens = int(usage.get("prompt_tokens") or 0)
+        completion_tokens = int(usage.get("completion_tokens") or 0)
+    except (AttributeError, TypeError, ValueError):
+        raise ValueError(f"usage is not token counts: {usage!r}"[:200]) from None
+    return content or "", tool_calls, prompt_tokens, completion_tokens, choice.get("finish_reason")
+
+
 class _Attempt(BaseModel):
     """The outcome of one HTTP attempt."""
 
@@ -502,8 +541,10 @@ class OpenAIChatPolicy:
                 data = json.loads(text)
             except json.JSONDecodeError as error:
                 return _Attempt(error_kind="malformed_json", detail=f"{error}: {text[:200]!r}", retryable=True)
-            if not isinstance(data, dict) or not isinstance(data.get("choices"), list) or not data["choices"]:
-                return _Attempt(error_kind="malformed_json", detail=f"no choices in {text[:200]!r}", retryable=True)
+            try:
+                read_completion(data)
+            except ValueError as error:
+                return _Attempt(error_kind="malformed_json", detail=f"{error}: {text[:200]!r}", retryable=True)
             return _Attempt(data=data)
         message = _error_message(text)
         if status == 429:
@@ -517,22 +558,11 @@ class OpenAIChatPolicy:
         return _Attempt(error_kind=f"http_{status}", detail=message)
 
     def _reply_from(self, data: dict[str, Any]) -> PolicyReply:
-        choice = data["choices"][0]
-        message = choice.get("message") or {}
-        usage = data.get("usage") or {}
-        prompt_tokens = int(usage.get("prompt_tokens") or 0)
-        completion_tokens = int(usage.get("completion_tokens") or 0)
+        text, tool_calls, prompt_tokens, completion_tokens, finish_reason = read_completion(data)
         self._count(prompt_tokens=prompt_tokens, completion_tokens=completion_tokens)
-        tool_calls = None
-        if message.get("tool_calls"):
-            tool_calls = [{"id": call.get("id"), "type": call.get("type", "function"),
-                           "function": {"name": call["function"]["name"],
-                                        "arguments": _arguments_json(call["function"].get("arguments", {}))}}
-                          for call in message["tool_calls"] if isinstance(call, dict) and call.get("function")]
-        return PolicyReply(text=message.get("content") or "", tool_calls=tool_calls or None,
-                           prompt_tokens=prompt_tokens, completion_tokens=completion_tokens,
-                           cost_usd=self.cost_usd(prompt_tokens, completion_tokens),
-                           finish_reason=choice.get("finish_reason"))
+        return PolicyReply(text=text, tool_calls=tool_calls, prompt_tokens=prompt_tokens,
+                           completion_tokens=completion_tokens,
+                           cost_usd=self.cost_usd(prompt_tokens, completion_tokens), finish_reason=finish_reason)
 
     def cost_usd(self, prompt_tokens: int, completion_tokens: int) -> float | None:
         """USD for this usage at the configured prices; None when no price is configured."""

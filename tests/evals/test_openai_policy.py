@@ -37,10 +37,11 @@ TEXT_TOOLS_SYSTEM = TOOLS_SYSTEM + "\n\n# Tools\n<tools>\n" + json.dumps(LOOKUP_
 class Fault:
     """What the proxy does to one request instead of (or before) forwarding it."""
 
-    kind: str  # "status" | "malformed" | "delay"
+    kind: str  # "status" | "malformed" (a 200 with `body`) | "delay"
     status: int = 500
     headers: dict[str, str] = field(default_factory=dict)
     delay_s: float = 0.0
+    body: str = '{"id": "x", "choices": [{"message": {"content": "The ans'
 
 
 class FaultProxy:
@@ -83,8 +84,7 @@ class FaultProxy:
                     return web.json_response({"error": {"message": f"injected {fault.status}", "code": fault.status}},
                                              status=fault.status, headers=fault.headers)
                 if fault is not None and fault.kind == "malformed":
-                    return web.Response(text='{"id": "x", "choices": [{"message": {"content": "The ans',
-                                        content_type="application/json")
+                    return web.Response(text=fault.body, content_type="application/json")
                 await asyncio.sleep(fault.delay_s if fault is not None else self.forward_delay_s)
                 async with ClientSession() as session:
                     async with session.post(self.upstream + request.path, data=raw,
@@ -277,7 +277,12 @@ def test_timeouts_and_malformed_bodies(proxy):
     proxy.reset(Fault("malformed"), Fault("malformed"))
     malformed = reply(policy)
     assert malformed.error_kind == "malformed_json" and len(proxy.received) == 2
-    assert policy.stats.errors == {"timeout": 1, "malformed_json": 1}
+    # Valid JSON of the wrong shape is malformed too (a tool call without a name, no message).
+    proxy.reset(Fault("malformed", body='{"choices": [{"message": {"tool_calls": [{"function": {}}]}}]}'),
+                Fault("malformed", body='{"choices": [{"finish_reason": "stop"}], "usage": {"prompt_tokens": 9}}'))
+    assert reply(policy).error_kind == "malformed_json" and len(proxy.received) == 2
+    assert policy.stats.errors == {"timeout": 1, "malformed_json": 2}
+    assert policy.stats.prompt_tokens == 2 * recovered.prompt_tokens  # nothing from the failed bodies
     time.sleep(1.2)  # let the proxy finish the slow requests it is still forwarding
 
 
