@@ -124,7 +124,7 @@ def parse_policy_string(policy: str) -> tuple[str, str]:
     return match["base"].rstrip("/"), match["model"]
 
 
-def policy_from_string(policy: str, **options: Any) -> "OpenAIChatPolicy":
+def policy_from_string(policy: str, **options: Any) -> OpenAIChatPolicy:
     """An endpoint policy from `openai:BASE_URL:MODEL`, with further `EndpointConfig` fields as keywords."""
     base_url, model = parse_policy_string(policy)
     return OpenAIChatPolicy(EndpointConfig(base_url=base_url, model=model, **options))
@@ -145,7 +145,8 @@ def load_endpoint_options(path: str | os.PathLike) -> dict[str, Any]:
         raise FileNotFoundError(f"endpoint config {path} does not exist")
     data = yaml.safe_load(path.read_text()) or {}
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping of EndpointConfig fields, got {type(data).__name__}")
+        raise ValueError(  # noqa: TRY004 (bad input is a ValueError naming the file, as everywhere here)
+            f"{path}: expected a mapping of EndpointConfig fields, got {type(data).__name__}")
     for name in ("base_url", "model"):
         if name in data:
             raise ValueError(f"{path}: {name!r} comes from the policy string openai:BASE_URL:MODEL, not the file")
@@ -325,7 +326,7 @@ def read_completion(data: Any) -> tuple[str, list[dict[str, Any]] | None, int, i
         raise ValueError("no choices")
     choice = data["choices"][0]
     if not isinstance(choice, dict) or not isinstance(choice.get("message"), dict):
-        raise ValueError("choices[0].message is missing")
+        raise ValueError("choices[0].message is missing")  # noqa: TRY004 (malformed body, see Raises)
     message = choice["message"]
     content = message.get("content")
     if isinstance(content, list):  # some servers answer in content parts
@@ -340,7 +341,8 @@ def read_completion(data: Any) -> tuple[str, list[dict[str, Any]] | None, int, i
         for number, call in enumerate(message["tool_calls"]):
             function = call.get("function") if isinstance(call, dict) else None
             if not isinstance(function, dict) or not isinstance(function.get("name"), str):
-                raise ValueError(f"choices[0].message.tool_calls[{number}].function.name is missing")
+                raise ValueError(  # noqa: TRY004 (malformed body, see Raises)
+                    f"choices[0].message.tool_calls[{number}].function.name is missing")
             tool_calls.append({"id": call.get("id") or f"call_{number}", "type": call.get("type") or "function",
                                "function": {"name": function["name"],
                                             "arguments": _arguments_json(function.get("arguments") or {})}})
@@ -531,7 +533,7 @@ class OpenAIChatPolicy:
                 text = await response.text(errors="replace")
                 status = response.status
                 retry_after = _retry_after_s(response.headers.get("Retry-After"))
-        except (asyncio.TimeoutError, TimeoutError):
+        except TimeoutError:
             return _Attempt(error_kind="timeout", detail=f"no answer within {self.config.timeout_s} s",
                             retryable=True)
         except aiohttp.ClientError as error:
@@ -589,7 +591,7 @@ def _run_coroutine(coroutine):
     def target() -> None:
         try:
             result["value"] = asyncio.run(coroutine)
-        except BaseException as error:  # re-raised in the caller's thread
+        except BaseException as error:  # noqa: BLE001 (re-raised in the caller's thread)
             result["error"] = error
 
     thread = threading.Thread(target=target, name="openai-policy-sync", daemon=True)

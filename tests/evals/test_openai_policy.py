@@ -22,11 +22,27 @@ from typing import Any
 import pytest
 
 from evals.conditions import action_text
-from evals.openai_policy import (EndpointConfig, EndpointError, OpenAIChatPolicy, load_endpoint_options,
-                                 parse_policy_string, policy_from_string, to_endpoint_messages)
+from evals.openai_policy import (
+    EndpointConfig,
+    EndpointError,
+    OpenAIChatPolicy,
+    load_endpoint_options,
+    parse_policy_string,
+    policy_from_string,
+    to_endpoint_messages,
+)
 from evals.types import Policy
-from tests.evals.conftest import (ANSWER_TEXT, LETTER_ANSWER, LETTER_ONLY, LOOKUP_TOOL, SERVED_MODEL_NAME,
-                                  TOOL_ARGUMENTS, TOOL_NAME, TOOLS_SYSTEM, TRAIN_QUESTIONS)
+from tests.evals.conftest import (
+    ANSWER_TEXT,
+    LETTER_ANSWER,
+    LETTER_ONLY,
+    LOOKUP_TOOL,
+    SERVED_MODEL_NAME,
+    TOOL_ARGUMENTS,
+    TOOL_NAME,
+    TOOLS_SYSTEM,
+    TRAIN_QUESTIONS,
+)
 
 QUESTION = [{"role": "system", "content": TOOLS_SYSTEM}, {"role": "user", "content": TRAIN_QUESTIONS[0]}]
 # The gym's own text-format prompt: the tools are listed in the system prompt, no `tools=`.
@@ -86,11 +102,10 @@ class FaultProxy:
                 if fault is not None and fault.kind == "malformed":
                     return web.Response(text=fault.body, content_type="application/json")
                 await asyncio.sleep(fault.delay_s if fault is not None else self.forward_delay_s)
-                async with ClientSession() as session:
-                    async with session.post(self.upstream + request.path, data=raw,
-                                            headers={"Content-Type": "application/json"}) as upstream:
-                        return web.Response(body=await upstream.read(), status=upstream.status,
-                                            content_type="application/json")
+                async with ClientSession() as session, session.post(
+                        self.upstream + request.path, data=raw, headers={"Content-Type": "application/json"}) as upstream:
+                    return web.Response(body=await upstream.read(), status=upstream.status,
+                                        content_type="application/json")
             finally:
                 self.in_flight -= 1
 
