@@ -17,6 +17,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from datetime import UTC
 from typing import Any
 
 import pytest
@@ -185,6 +186,20 @@ def test_policy_strings_config_errors_and_key_handling(monkeypatch, tmp_path):
     config.write_text("model: other\n")
     with pytest.raises(ValueError, match="'model' comes from the policy string"):
         load_endpoint_options(config)
+    # Backoff: full jitter under base * 2**k (capped); a Retry-After (seconds or HTTP date) wins, capped.
+    from datetime import datetime, timedelta
+    from email.utils import format_datetime
+
+    from evals.openai_policy import _retry_after_s
+
+    jittered = OpenAIChatPolicy(EndpointConfig(base_url="http://h/v1", model="m", backoff_base_s=0.5,
+                                               backoff_max_s=3.0))
+    waits = [jittered._backoff_s(k, None) for k in range(6) for _ in range(50)]
+    assert all(0 <= w <= min(3.0, 0.5 * 2 ** (i // 50)) for i, w in enumerate(waits))
+    assert len({round(w, 6) for w in waits}) > 200  # jittered, not a fixed schedule
+    assert jittered._backoff_s(0, 2.0) == 2.0 and jittered._backoff_s(0, 100.0) == 3.0
+    in_ten = format_datetime(datetime.now(UTC) + timedelta(seconds=10), usegmt=True)
+    assert 8.0 < _retry_after_s(in_ten) <= 10.0 and _retry_after_s("7") == 7.0 and _retry_after_s("soon") is None
     with pytest.raises(ValueError, match=r"messages\[1\].role"):
         to_endpoint_messages([{"role": "user", "content": "x"}, {"role": "robot", "content": "y"}])
 
