@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import envs  # noqa: E402,F401  (CPU runtime defaults)
+import envs  # noqa: F401  (CPU runtime defaults)
 
 
 def comparable(rows) -> list[str]:

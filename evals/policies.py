@@ -22,6 +22,7 @@ import json
 import math
 import os
 import random
+import uuid
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -68,9 +69,8 @@ class ScriptedPolicy:
         self.kind = kind
         self.policy_id = f"scripted:{kind}"
         self.majority = dict(majority_letters or {})
-        self.max_turns = 5
 
-    def for_episode(self, task, seed: int, benchmark: str | None = None, max_turns: int = 5) -> "ScriptedEpisode":
+    def for_episode(self, task, seed: int, benchmark: str | None = None, max_turns: int = 5) -> ScriptedEpisode:
         answer = self.answer_for(task, seed, benchmark)
         return ScriptedEpisode(self.policy_id, self.kind, task, answer, max_turns)
 
@@ -281,7 +281,8 @@ class LocalModelPolicy:
         if len(ids) + 1 > self.max_context_tokens:
             return PolicyReply(prompt_tokens=len(ids), error_kind="context_overflow", finish_reason="length")
         budget = max(1, min(max_tokens, self.max_context_tokens - len(ids)))
-        request = GenerationRequest(request_id=f"eval:{seed}:{len(messages)}", prompt_ids=ids, max_new_tokens=budget,
+        request = GenerationRequest(request_id=f"eval:{uuid.uuid4().hex[:8]}:s{seed}", prompt_ids=ids,
+                                    max_new_tokens=budget,
                                     seed=seed, greedy=self.greedy)
         result = await self.generate(request)
         token_ids = list(result.token_ids)

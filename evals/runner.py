@@ -21,7 +21,7 @@ import hashlib
 import json
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -112,7 +112,7 @@ class ResultsStore:
 class EvalOptions:
     condition: str = "agent"
     seeds: tuple[int, ...] = (0,)
-    settings: ConditionSettings = None  # type: ignore[assignment]
+    settings: ConditionSettings = field(default_factory=ConditionSettings)
     concurrency: int = 8
     use_ray: bool = True
     num_env_actors: int = 2
@@ -125,10 +125,6 @@ class EvalOptions:
     # An already started `EnvPool` to run on (kept open afterwards: several evaluations, or a
     # benchmark that excludes actor start-up); None creates one per run when use_ray.
     env_pool: Any = None
-
-
-def episode_keys(policy_id: str, items: list[EvalItem], condition: str, seeds) -> list[tuple[EvalItem, int]]:
-    return [(item, seed) for item in items for seed in seeds]
 
 
 def make_row(policy_id: str, item: EvalItem, task, condition: str, seed: int, outcome: EpisodeOutcome,
@@ -224,7 +220,6 @@ async def run_episodes(policy, items: list[EvalItem], output_dir: str | os.PathL
     """Run every (item, seed) not yet in `output_dir`; returns counts and timing."""
     if options.condition not in CONDITIONS:
         raise ValueError(f"--condition {options.condition!r}: choose one of {', '.join(CONDITIONS)}")
-    options.settings = options.settings or ConditionSettings()
     if options.domain_modules:
         from actors.env_actor import register_domains
 
@@ -243,8 +238,9 @@ async def run_episodes(policy, items: list[EvalItem], output_dir: str | os.PathL
             if (policy_id, item.benchmark, item.task_id, options.condition, seed) not in store.keys:
                 todo.append((item, seed))
     total = len(todo) + sum(1 for r in store.rows if r.policy_id == policy_id and r.condition == options.condition)
-    if hasattr(policy, "kind") and policy.kind == "majority":
-        from evals.policies import majority_letters
+    from evals.policies import ScriptedPolicy, majority_letters
+
+    if isinstance(policy, ScriptedPolicy) and policy.kind == "majority":
 
         by_benchmark: dict[str, list] = {}
         for item in items:
@@ -327,7 +323,6 @@ def run_eval(policy, items: list[EvalItem], output_dir: str | os.PathLike, optio
     """Write eval.json, run the missing episodes, return the run's counts (see `run_episodes`)."""
     from datetime import datetime, timezone
 
-    options.settings = options.settings or ConditionSettings()
     out = Path(output_dir)
     spec = EvalSpec(policy=policy_text or policy.policy_id, policy_id=policy.policy_id, suite=suite,
                     condition=options.condition, seeds=list(options.seeds), limit=limit,
