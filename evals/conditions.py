@@ -222,8 +222,9 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
         observation, reward, terminated, truncated, step_info = await env.step(action)
         calls = step_info.get("tool_calls") or []
         outcome.tool_calls += len(calls)
-        for _ in step_info.get("parse_errors") or []:
-            outcome.error_kinds["parse_error"] = outcome.error_kinds.get("parse_error", 0) + 1
+        kinds = ["parse_error"] * len(step_info.get("parse_errors") or []) + list(step_info.get("tool_errors") or [])
+        for kind in kinds:  # per failed call: parse errors and the tools' error kinds
+            outcome.error_kinds[kind] = outcome.error_kinds.get(kind, 0) + 1
         last_unparsed = not calls
         if not calls:
             outcome.error_kinds["no_tool_call"] = outcome.error_kinds.get("no_tool_call", 0) + 1

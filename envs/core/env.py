@@ -206,7 +206,9 @@ class HealthcareGymEnv(gym.Env[str, str]):
         truncated = not terminated and len(self._record.turns) >= self.max_turns
         reward = 0.0
         info: dict[str, Any] = {"turn": turn_index, "tool_calls": [r.name for r in records],
-                                "action_format": parsed.format, "parse_errors": parsed.errors}
+                                "action_format": parsed.format, "parse_errors": parsed.errors,
+                                # kinds of the calls that failed (unknown_tool, invalid_arguments, ...)
+                                "tool_errors": [r.error_kind for r in records if r.error_kind]}
         if terminated or truncated:
             self._record.submitted_answer = submitted
             self._record.terminated, self._record.truncated = terminated, truncated

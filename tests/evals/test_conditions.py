@@ -95,6 +95,12 @@ def test_agent_condition_end_reasons():
     looping = FixedTextPolicy('<tool_call>{"name": "get_patient", "arguments": {"patient_id": "P2"}}</tool_call>')
     out = run(run_agent(looping, LocalEnv(3), task, "ward", None, 0, settings))
     assert (out.end_reason, out.turns, out.tool_calls) == ("turn_limit", 3, 3)
+    assert out.error_kinds == {}  # every call succeeded
+
+    wrong = FixedTextPolicy('<tool_call>{"name": "get_patients", "arguments": {}}</tool_call>\n'
+                            '<tool_call>{"name": "get_patient", "arguments": {"patient": 2}}</tool_call>\n<tool_call>{')
+    out = run(run_agent(wrong, LocalEnv(3), task, "ward", None, 0, ConditionSettings(max_turns=1)))
+    assert out.error_kinds == {"unknown_tool": 1, "invalid_arguments": 1, "parse_error": 1}
     assert looping.calls[1]["messages"][-1]["role"] == "tool"  # a tool result, rendered as <tool_response>
 
     chatty = FixedTextPolicy("thinking...", completion_tokens=400)
