@@ -135,13 +135,25 @@ async def run_logprob(policy, env, task, domain: str, split: str | None, seed: i
         raise ValueError(f"task {task.id!r} is not multiple-choice; the logprob condition needs options")
     _, info = await env.reset(episode_spec(task.id, domain, split, seed))
     messages = [{"role": "system", "content": LOGPROB_SYSTEM_PROMPT}, {"role": "user", "content": info["ticket"]}]
+    from evals.openai_policy import EndpointError
+
     letters = sorted(task.options)
-    scores = policy.option_logprobs(messages, letters)
     outcome = EpisodeOutcome(end_reason="answer", turns=1, messages=messages)
-    if scores is None:
-        outcome.end_reason, outcome.error_kind = "endpoint_error", "logprobs_unavailable"
-        outcome.error_kinds["logprobs_unavailable"] = 1
-        _apply_final(outcome, await env.finish("endpoint_error"))
+    failure: str | None = None
+    try:
+        if hasattr(policy, "aoption_logprobs"):  # the async form keeps other episodes' requests in flight
+            scores = await policy.aoption_logprobs(messages, letters)
+        else:
+            scores = policy.option_logprobs(messages, letters)
+        if scores is None:
+            failure = "logprobs_unavailable"
+    except EndpointError as exc:  # a request that failed for good: an episode outcome, not a crash
+        scores, failure = None, exc.kind
+    if failure is not None:
+        outcome.end_reason = _error_end_reason(failure)
+        outcome.error_kind = failure
+        outcome.error_kinds[failure] = 1
+        _apply_final(outcome, await env.finish(outcome.end_reason))
         outcome.correct = False
         return outcome
     outcome.answer = max(letters, key=lambda letter: (scores[letter], -ord(letter[0])))

@@ -163,3 +163,19 @@ def test_logprob_condition_refuses_a_question_without_options():
     with pytest.raises(ValueError, match="ward_dose.*not multiple-choice"):
         run(run_logprob(ScriptedPolicy("gold"), LocalEnv(3), ward_task("ward_dose"), "ward", None, 0,
                         ConditionSettings()))
+
+
+def test_logprob_condition_turns_a_failed_endpoint_into_an_episode():
+    """Nothing listens on the port: the endpoint policy's request fails for good (connection_error);
+    the episode is recorded as endpoint_error and scored, the run goes on."""
+    import socket
+
+    from evals.openai_policy import policy_from_string
+
+    with socket.socket() as probe:  # a port that was free a moment ago, now closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    policy = policy_from_string(f"openai:http://127.0.0.1:{port}/v1:absent", max_retries=0, connect_timeout_s=2.0)
+    out = run(run_logprob(policy, LocalEnv(3), ward_task("ward_choice"), "ward", None, 0, ConditionSettings()))
+    assert (out.end_reason, out.error_kind, out.correct) == ("endpoint_error", "connection_error", False)
+    assert out.error_kinds == {"connection_error": 1} and out.reward is not None

@@ -170,6 +170,14 @@ def test_hcgym_eval_against_a_real_endpoint(tmp_path, openai_server, capsys):
     for row in rows:
         assert (row.end_reason, row.answer, row.correct) == ("answer", "B", True)  # "The answer is B."
         assert row.policy_id == policy and row.prompt_tokens > 0 and row.completion_tokens > 0
+    logprob_out = tmp_path / "logprob"
+    assert hcgym(["eval", *common, "--condition", "logprob", "--output", str(logprob_out)]) == 0
+    rows = read_results(logprob_out)
+    assert len(rows) == 3
+    for row in rows:  # vLLM serves top_logprobs: every letter gets a log-probability, the argmax is the answer
+        scores = row.extra["option_logprobs"]
+        assert row.end_reason == "answer" and set(scores) == {"A", "B", "C", "D"}
+        assert row.answer == max(scores, key=scores.get) and row.correct == (row.answer == "B")
     assert hcgym(["eval", *common, "--condition", "agent", "--output", str(agent_out)]) == 0
     rows = read_results(agent_out)
     assert len(rows) == 3 and len({r.key() for r in rows}) == 3
