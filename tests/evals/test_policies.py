@@ -109,6 +109,7 @@ def test_local_model_reply_is_deterministic_and_counts_tokens(ward_policy_dir): 
     assert first == second and first.error_kind is None
     assert first.prompt_tokens == len(render_messages(policy.tokenizer, messages))
     assert 1 <= first.completion_tokens <= 12 and first.finish_reason in ("stop", "length")
+    assert policy.max_context_tokens == 20480  # the model's max_position_embeddings (TINY_MODEL_DEFAULTS)
     tight = LocalModelPolicy(ward_policy_dir, max_context_tokens=8)
     overflow = asyncio.run(tight.reply(messages, None, max_tokens=4, seed=0))
     assert overflow.error_kind == "context_overflow" and overflow.completion_tokens == 0
