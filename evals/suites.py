@@ -32,7 +32,7 @@ from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from evals.types import EvalItem
 
@@ -49,7 +49,18 @@ class TaskSelection(BaseModel):
     split: str = "imported"
     formats: list[str] = Field(default_factory=list)
     metadata: dict[str, list[str]] = Field(default_factory=dict)
+    task_id_pattern: str | None = Field(default=None, description="keep task ids this regex finds (re.search)")
     limit: int | None = Field(default=None, ge=1)
+
+    @field_validator("task_id_pattern")
+    @classmethod
+    def _compiles(cls, value: str | None) -> str | None:
+        if value is not None:
+            try:
+                re.compile(value)
+            except re.error as exc:
+                raise ValueError(f"task_id_pattern {value!r} is not a regular expression: {exc}") from exc
+        return value
     seed: int = 0
 
 
@@ -168,6 +179,8 @@ def _normalise(value: object) -> str:
 def _matches(task, selection: TaskSelection) -> bool:
     if selection.formats and (task.description.source or "") not in selection.formats:
         return False
+    if selection.task_id_pattern is not None and not re.search(selection.task_id_pattern, task.id):
+        return False
     for key, wanted in selection.metadata.items():
         value = _normalise(task.metadata.get(key, ""))
         if not value or not any(value.startswith(_normalise(w)) for w in wanted):
@@ -228,6 +241,8 @@ def resolve_spec(suite: SuiteSpec) -> ResolvedSuite:
             what = f"formats {sel.formats}" if sel.formats else "any task"
             if sel.metadata:
                 what += f" with metadata {sel.metadata}"
+            if sel.task_id_pattern:
+                what += f" with an id matching {sel.task_id_pattern!r}"
             reason = f"no {what} in {where}" + (f" (the paper uses {spec.paper_samples})" if spec.paper_samples else "")
             missing.append(MissingBenchmark(name=spec.name, title=spec.title, reason=reason,
                                             commands=import_commands(spec)))

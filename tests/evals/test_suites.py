@@ -8,9 +8,10 @@ import shlex
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
 from envs import cli
-from evals.suites import SuiteError, available_suites, load_suite, resolve
+from evals.suites import SuiteError, TaskSelection, available_suites, load_suite, resolve
 
 FIX = Path(__file__).parents[1] / "fixtures" / "benchmarks"
 
@@ -89,7 +90,7 @@ def test_single_benchmark_names_and_errors(data_dir, tmp_path):
     single = load_suite("medqa")
     assert [b.name for b in single.benchmarks] == ["medqa"] and single.benchmarks[0].title == "MedQA (USMLE)"
     assert resolve("medqa").missing[0].name == "medqa"
-    with pytest.raises(SuiteError, match=r"unknown suite or benchmark 'nope'; suites: gym-heldout"):
+    with pytest.raises(SuiteError, match=r"unknown suite or benchmark 'nope'; suites: gym-calculators, gym-heldout"):
         load_suite("nope")
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: bad\nbenchmarks:\n  - {name: x, title: X, category: c, metric: f1, select: {domain: medical_qa}}\n")
@@ -115,3 +116,16 @@ def test_gym_suites_resolve_to_the_built_splits():
     assert {i.split for i in validation.items if i.domain == "drug_interaction"} == {"test"}
     heldout = resolve("gym-heldout")
     assert len(heldout.benchmarks) == 10 and {i.split for i in heldout.items} == {"test"}
+
+
+def test_task_id_pattern_selects_the_demo_calculator_set():
+    calculators = resolve("gym-calculators")
+    ids = [i.task_id for i in calculators.items]
+    # the demo's validation set: triage_emergency test tasks whose id starts with tr_calc_ (44 of them)
+    from envs import registry
+
+    expected = sorted(t.id for t in registry.get_tasks("triage_emergency", "test") if t.id.startswith("tr_calc_"))
+    assert ids == expected and len(ids) == 44
+    assert len(registry.get_tasks("triage_emergency", "test")) > len(ids)  # the pattern did filter
+    with pytest.raises(ValidationError, match="task_id_pattern"):
+        TaskSelection(domain="triage_emergency", split="test", task_id_pattern="(")
