@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from evals.metrics import PRIMARY, load_tasks_for, read_results, row_values
+from evals.metrics import PRIMARY, SECONDARY, load_tasks_for, read_results, row_values
 from evals.report import (
     comparison_table,
     fmt_pct,
@@ -37,14 +37,16 @@ from evals.suites import benchmark_specs
 BINARY_METRICS = {"accuracy"}
 
 
-def _paired(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kind: str, tasks: dict[str, Any]
+def _paired(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kind: str, tasks: dict[str, Any],
+            metric: str | None = None
             ) -> tuple[list[tuple[str, int]], dict[tuple[str, int], float], dict[tuple[str, int], float]]:
-    primary = PRIMARY[kind]
+    """Episode values of `metric` (default: the benchmark kind's primary metric) keyed by (task, seed)."""
+    metric = metric or PRIMARY[kind]
 
     def values(rows):
         out = {}
         for r in rows:
-            value = row_values(r, kind, tasks.get(r["task_id"])).get(primary)
+            value = row_values(r, kind, tasks.get(r["task_id"])).get(metric)
             if value is not None:
                 out[(r["task_id"], int(r["seed"]))] = value
         return out
@@ -52,6 +54,15 @@ def _paired(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kind: st
     a, b = values(rows_a), values(rows_b)
     shared = sorted(set(a) & set(b))
     return shared, a, b
+
+
+def _item_means(keys: list[tuple[str, int]], a: dict, b: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Per-item means over seeds of both sides (items are the resampling unit)."""
+    items: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    for key in keys:
+        items[key[0]].append((a[key], b[key]))
+    return (np.array([np.mean([p[0] for p in pairs]) for pairs in items.values()]),
+            np.array([np.mean([p[1] for p in pairs]) for pairs in items.values()]))
 
 
 def compare_rows(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kinds: dict[str, str],
@@ -78,14 +89,20 @@ def compare_rows(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]], kin
         if not shared:
             unshared.append(bench)
             continue
-        items: dict[str, list[tuple[float, float]]] = defaultdict(list)
-        for key in shared:
-            items[key[0]].append((a[key], b[key]))
-        item_a = np.array([np.mean([p[0] for p in pairs]) for pairs in items.values()])
-        item_b = np.array([np.mean([p[1] for p in pairs]) for pairs in items.values()])
+        item_a, item_b = _item_means(shared, a, b)
         diff = paired_bootstrap_ci(item_a, item_b, seed=seed, n_resamples=n_resamples)
-        entry = {"benchmark": bench, "metric": PRIMARY[kind], "items": len(items), "episodes": len(shared),
+        entry = {"benchmark": bench, "metric": PRIMARY[kind], "items": len(item_a), "episodes": len(shared),
                  "a": float(item_a.mean()), "b": float(item_b.mean()), "difference": diff.as_dict()}
+        # The benchmark's other metrics (e.g. the 5D reward of gym tasks), paired the same way.
+        entry["secondary"] = []
+        for metric in SECONDARY.get(kind, []):
+            keys, sa, sb = _paired(by_a.get(bench, []), by_b.get(bench, []), kind, tasks, metric)
+            if keys:
+                ma, mb = _item_means(keys, sa, sb)
+                entry["secondary"].append({
+                    "benchmark": bench, "metric": metric, "items": len(ma), "episodes": len(keys),
+                    "a": float(ma.mean()), "b": float(mb.mean()),
+                    "difference": paired_bootstrap_ci(ma, mb, seed=seed, n_resamples=n_resamples).as_dict()})
         if PRIMARY[kind] in BINARY_METRICS:
             ca = np.array([a[k] >= 0.5 for k in shared])
             cb = np.array([b[k] >= 0.5 for k in shared])
@@ -119,7 +136,7 @@ def to_markdown(comparison: dict[str, Any], label_a: str, label_b: str) -> str:
               "95% CIs; McNemar: exact two-sided test on discordant episodes (A-only / B-only correct)."), "",
              "| Benchmark | Metric | Items | A | B | A - B [95% CI] | A-only / B-only | McNemar p |",
              "|---|---|---:|---:|---:|---|---|---:|"]
-    rows = list(comparison["benchmarks"])
+    rows = [row for e in comparison["benchmarks"] for row in (e, *e.get("secondary", []))]
     if comparison["overall"]:
         rows.append({"benchmark": "**all shared items**", "metric": "accuracy", **comparison["overall"]})
     for e in rows:

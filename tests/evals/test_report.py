@@ -225,3 +225,26 @@ def test_mmlu_med_is_broken_down_by_subject(tmp_path, monkeypatch):
     assert "| MC QA | MMLU-Med (6 sub.) | accuracy | 75.0 [" in text
     assert "| | &nbsp;&nbsp;subject: anatomy | accuracy | 100.0 [100.0, 100.0] | 2 | |" in text
     assert "| | &nbsp;&nbsp;subject: college_medicine | accuracy | 50.0 [0.0, 100.0] | 2 | |" in text
+
+
+def test_compare_pairs_secondary_metrics_like_the_gym_reward():
+    """A gym benchmark is compared on accuracy (with McNemar) and on its 5D reward (paired bootstrap)."""
+    from evals.compare import compare_rows
+    from evals.metrics import normalise_row
+
+    def rows(policy, rewards):
+        return [normalise_row(_row(policy, "gym_triage", "triage_emergency", f"t{i}", r >= 0.5, reward=r).model_dump())
+                for i, r in enumerate(rewards)]
+
+    a = rows("rl", [0.6, 0.4, 0.5, 0.3])
+    b = rows("sft", [0.5, 0.4, 0.2, 0.3])
+    result = compare_rows(a, b, {"gym_triage": "gym"}, n_resamples=500)
+    (entry,) = result["benchmarks"]
+    assert entry["metric"] == "accuracy" and entry["a"] == pytest.approx(0.5) and entry["b"] == pytest.approx(0.25)
+    (reward,) = entry["secondary"]
+    assert reward["metric"] == "reward" and reward["items"] == 4
+    assert reward["a"] == pytest.approx(0.45) and reward["b"] == pytest.approx(0.35)
+    assert reward["difference"]["estimate"] == pytest.approx(0.1)
+    assert "mcnemar" not in reward
+    markdown = compare.to_markdown(result, "rl", "sft")
+    assert "| gym_triage | reward | 4 | 45.0 | 35.0 | +10.0 [" in markdown
