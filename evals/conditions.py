@@ -98,12 +98,20 @@ async def _submit(env, answer: str) -> tuple[dict[str, Any], bool]:
     return await env.finish("parse_failure"), False
 
 
+def user_content(info: dict[str, Any]) -> Any:
+    """The task's user turn as the env renders it: the ticket, with the image first as a content part
+    for vision tasks (endpoints send it as an image; text-only local models see its path)."""
+    if info.get("image_path"):
+        return [{"type": "image", "image": info["image_path"]}, {"type": "text", "text": info["ticket"]}]
+    return info["ticket"]
+
+
 async def run_text(policy, env, task, domain: str, split: str | None, seed: int,
                    settings: ConditionSettings) -> EpisodeOutcome:
     from envs.rewards.choice import extract_choice
 
     _, info = await env.reset(episode_spec(task.id, domain, split, seed))
-    messages = [{"role": "system", "content": TEXT_SYSTEM_PROMPT}, {"role": "user", "content": info["ticket"]}]
+    messages = [{"role": "system", "content": TEXT_SYSTEM_PROMPT}, {"role": "user", "content": user_content(info)}]
     reply = await policy.reply(messages, None, max_tokens=settings.max_tokens, seed=seed)
     outcome = EpisodeOutcome(end_reason="answer", turns=1)
     _account(outcome, reply)
@@ -206,10 +214,8 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
 
     _, info = await env.reset(episode_spec(task.id, domain, split, seed))
     system = info["system_prompt"] if settings.prompt_style == "env" else compact_system_prompt(info["tools"])
-    user: Any = info["ticket"]
-    if info.get("image_path"):
-        user = [{"type": "image", "image": info["image_path"]}, {"type": "text", "text": info["ticket"]}]
-    messages: list[dict[str, Any]] = [{"role": "system", "content": system}, {"role": "user", "content": user}]
+    messages: list[dict[str, Any]] = [{"role": "system", "content": system},
+                                      {"role": "user", "content": user_content(info)}]
     outcome = EpisodeOutcome(end_reason="turn_limit")
     final: dict[str, Any] | None = None
     last_unparsed = False

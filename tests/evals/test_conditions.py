@@ -179,3 +179,14 @@ def test_logprob_condition_turns_a_failed_endpoint_into_an_episode():
     out = run(run_logprob(policy, LocalEnv(3), ward_task("ward_choice"), "ward", None, 0, ConditionSettings()))
     assert (out.end_reason, out.error_kind, out.correct) == ("endpoint_error", "connection_error", False)
     assert out.error_kinds == {"connection_error": 1} and out.reward is not None
+
+
+def test_text_condition_sends_a_vision_tasks_image_as_a_content_part():
+    from envs import registry
+
+    task = next(t for t in registry.get_tasks("visual_diagnosis", "test") if t.image_path)
+    policy = FixedTextPolicy("The answer is A.")
+    run(run_text(policy, LocalEnv(3), task, "visual_diagnosis", "test", 0, ConditionSettings()))
+    content = policy.calls[0]["messages"][1]["content"]
+    assert isinstance(content, list) and content[0] == {"type": "image", "image": task.image_path}
+    assert content[1]["type"] == "text" and content[1]["text"].strip()
