@@ -34,7 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-PEAK_BF16_TFLOPS = {"H200": 989.0, "H100": 989.0, "A100": 312.0, "L40S": 362.0, "A10": 125.0}
+from gpu_step import detect_gpu  # noqa: E402  (bench/ is on sys.path when run as a script)
 VOCAB = 151_936
 QWEN3_06B = {"hidden_size": 1024, "intermediate_size": 3072, "num_hidden_layers": 28, "num_attention_heads": 16,
              "num_key_value_heads": 8, "head_dim": 128, "tie_word_embeddings": True, "max_position_embeddings": 40960,
@@ -167,17 +167,10 @@ def main() -> int:
     parser.add_argument("--vllm-python", default="auto", help="interpreter with vLLM (generator.python_executable)")
     args = parser.parse_args()
 
-    import torch
-
-    if not torch.cuda.is_available():
-        print(f"bench/gpu_smoke.py: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
-              "nothing run. Run it on a GPU node (vLLM in --vllm-python's interpreter).")
+    name = detect_gpu(parser, args, "bench/gpu_smoke.py")
+    if name is None:
         return 0
-    name = torch.cuda.get_device_name(0)
-    if args.peak_tflops is None:
-        args.peak_tflops = next((v for k, v in PEAK_BF16_TFLOPS.items() if k in name), None)
-        if args.peak_tflops is None:
-            parser.error(f"unknown GPU {name!r}: pass --peak-tflops (dense bf16) for the MFU")
+    import torch
     from learner.config import GeneratorConfig
 
     try:  # the generator's interpreter: --vllm-python, or this one if it imports vllm, or .venv-vllm

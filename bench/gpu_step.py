@@ -36,6 +36,23 @@ QWEN2_05B = {"hidden_size": 896, "intermediate_size": 4864, "num_hidden_layers":
              "rope_theta": 1_000_000.0, "rms_norm_eps": 1e-6}
 
 
+def detect_gpu(parser: argparse.ArgumentParser, args: argparse.Namespace, script: str) -> str | None:
+    """The GPU's name on a GPU node (and `args.peak_tflops` filled from it when not given); else prints
+    why nothing runs and returns None, so the script exits 0 on CPU machines."""
+    import torch
+
+    if not torch.cuda.is_available():
+        print(f"{script}: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
+              "nothing run. Run it on a GPU node (cluster.yaml installs both venvs).")
+        return None
+    name = torch.cuda.get_device_name(0)
+    if args.peak_tflops is None:
+        args.peak_tflops = next((v for k, v in PEAK_BF16_TFLOPS.items() if k in name), None)
+        if args.peak_tflops is None:
+            parser.error(f"unknown GPU {name!r}: pass --peak-tflops (dense bf16) for the MFU")
+    return name
+
+
 def build_model(root: Path) -> str:
     import torch
     from transformers import AutoModelForCausalLM, Qwen2Config
@@ -143,17 +160,10 @@ def main() -> int:
     parser.add_argument("--model-dir", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
 
-    import torch
-
-    if not torch.cuda.is_available():
-        print(f"bench/gpu_step.py: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
-              "nothing measured. Run it on a GPU node (cluster.yaml installs both venvs).")
+    name = detect_gpu(parser, args, "bench/gpu_step.py")
+    if name is None:
         return 0
-    name = torch.cuda.get_device_name(0)
-    if args.peak_tflops is None:
-        args.peak_tflops = next((v for k, v in PEAK_BF16_TFLOPS.items() if k in name), None)
-        if args.peak_tflops is None:
-            parser.error(f"unknown GPU {name!r}: pass --peak-tflops (dense bf16) for the MFU")
+    import torch
     if args.part:
         result = part_learner(args) if args.part == "learner" else part_vllm(args)
         print("RESULT " + json.dumps(result))
