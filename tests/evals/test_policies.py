@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import shutil
 from pathlib import Path
 
@@ -24,8 +23,12 @@ WARD = {"ward": "tests.fixtures.ward_domain.environment"}
 
 @pytest.fixture(scope="module", autouse=True)
 def _ward_registered():
-    os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
-    register_domains(WARD)
+    # Token-overlap grading for this module only: set with setdefault and never restored, it switched
+    # the sentence-embedding model off for every later test module (tests/rewards/test_embeddings.py).
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("HCGYM_EMBEDDINGS", "0")
+        register_domains(WARD)
+        yield
 
 
 def ward_tasks():

@@ -24,8 +24,12 @@ ITEMS = [EvalItem(benchmark="ward", domain="ward", task_id=t) for t in ("ward_ch
 
 @pytest.fixture(scope="module", autouse=True)
 def _ward_registered():
-    os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
-    register_domains(WARD)
+    # Token-overlap grading for this module only: set with setdefault and never restored, it switched
+    # the sentence-embedding model off for every later test module (tests/rewards/test_embeddings.py).
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("HCGYM_EMBEDDINGS", "0")
+        register_domains(WARD)
+        yield
 
 
 @pytest.fixture(scope="module")
