@@ -59,6 +59,9 @@ def resolve_items(suite: str, limit: int | None = None) -> tuple[list[EvalItem],
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", help="run folder, model folder, hub id (cached), openai:BASE_URL:MODEL, "
                                          "or scripted:gold|random|majority")
+    parser.add_argument("--base-url", default=None,
+                        help="an OpenAI-compatible endpoint (with --model): the same as --policy openai:BASE_URL:MODEL")
+    parser.add_argument("--model", default=None, help="the endpoint's model name (with --base-url)")
     parser.add_argument("--suite", help="suite name or file, benchmark name, or gym-<split>:<domain>")
     parser.add_argument("--condition", choices=CONDITIONS, default="agent")
     parser.add_argument("--output", help="results folder (created; re-running resumes it)")
@@ -105,6 +108,12 @@ def run_command(args: argparse.Namespace) -> int:
         from evals import compare
 
         return int(compare.main(args.words[1:]) or 0)
+    if args.base_url is not None or args.model is not None:
+        if args.policy is not None:
+            raise ValueError("give either --policy or --base-url with --model, not both")
+        if not (args.base_url and args.model):
+            raise ValueError("--base-url and --model go together (an OpenAI-compatible endpoint and its model name)")
+        args.policy = f"openai:{args.base_url}:{args.model}"
     _require(args, "policy", "suite", "output")
     if args.no_ray and args.generator_backend != "hf":
         raise ValueError(f"--generator-backend {args.generator_backend} runs in Ray generator actors; drop --no-ray")

@@ -156,6 +156,11 @@ def test_cli_errors_name_the_argument(tmp_path, capsys):
     assert hcgym(["eval", "--policy", "scripted:gold", "--suite", "gym-test:ward", "--output", str(tmp_path),
                   "--no-ray", "--generator-backend", "vllm"]) == 2
     assert "--generator-backend vllm" in capsys.readouterr().err
+    assert hcgym(["eval", "--base-url", "http://127.0.0.1:9/v1", "--suite", "gym-test:ward", "--output", str(tmp_path)]) == 2
+    assert "--base-url and --model go together" in capsys.readouterr().err
+    assert hcgym(["eval", "--policy", "scripted:gold", "--base-url", "http://127.0.0.1:9/v1", "--model", "m",
+                  "--suite", "gym-test:ward", "--output", str(tmp_path)]) == 2
+    assert "either --policy or --base-url" in capsys.readouterr().err
 
 
 def test_hcgym_eval_against_a_real_endpoint(tmp_path, openai_server, capsys):
@@ -168,7 +173,9 @@ def test_hcgym_eval_against_a_real_endpoint(tmp_path, openai_server, capsys):
     text_out, agent_out = tmp_path / "text", tmp_path / "agent"
     common = ["--policy", policy, "--suite", "gym-test:ward", "--seeds", "3", "--no-ray", "--concurrency", "3",
               "--no-report"]
-    assert hcgym(["eval", *common, "--condition", "text", "--output", str(text_out)]) == 0
+    # The text run names the endpoint as --base-url/--model: the same policy as openai:URL:MODEL.
+    assert hcgym(["eval", *common[2:], "--base-url", openai_server, "--model", SERVED_MODEL_NAME,
+                  "--condition", "text", "--output", str(text_out)]) == 0
     rows = read_results(text_out)
     assert [(r.task_id, r.seed) for r in sorted(rows, key=lambda r: r.seed)] == [("ward_choice", s) for s in range(3)]
     for row in rows:
