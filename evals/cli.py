@@ -82,6 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--temperature", type=float, default=None,
                         help="sample at this temperature with the episode seeds (default: greedy)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
+    parser.add_argument("--retry-errors", action="store_true",
+                        help="resume also re-runs episodes that ended with an endpoint error (end_reason "
+                             "endpoint_error: connection, timeout, 429/5xx after retries)")
     parser.add_argument("--endpoint-config", default=None,
                         help="openai: policies: a YAML file of evals.openai_policy.EndpointConfig fields "
                              "(tool_mode, api_key_env, price_input_per_1m, timeout_s, max_retries, ...)")
@@ -165,9 +168,11 @@ def evaluate(args: argparse.Namespace) -> int:
     env_vars.update(rollout.get("env_vars") or {})
     options = EvalOptions(condition=args.condition, seeds=tuple(range(args.seeds)), settings=settings,
                           concurrency=args.concurrency, use_ray=not args.no_ray, num_env_actors=args.env_actors,
-                          domain_modules=notes.get("domain_modules") or None, env_vars=env_vars or None)
+                          domain_modules=notes.get("domain_modules") or None, env_vars=env_vars or None,
+                          retry_errors=args.retry_errors)
     started_ray = False
-    if pending_episodes(policy.policy_id, items, args.output, args.condition, options.seeds) == 0:
+    if pending_episodes(policy.policy_id, items, args.output, args.condition, options.seeds,
+                        retry_errors=args.retry_errors) == 0:
         options.use_ray = False  # nothing to run: no cluster, no generators
     if options.use_ray:
         import ray

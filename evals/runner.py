@@ -64,17 +64,29 @@ def load_tasks_for(items: list[EvalItem]) -> dict[tuple[str, str | None], dict[s
     return tasks
 
 
+def is_retryable(row: ResultRow) -> bool:
+    """An episode that ended because the endpoint failed (connection, timeout, 429/5xx after retries,
+    malformed replies): not the policy's doing, so `--retry-errors` may run it again."""
+    return row.end_reason == "endpoint_error"
+
+
 class ResultsStore:
     """The rows of a results folder: the keys already done, and new rows written as they finish."""
 
-    def __init__(self, output_dir: Path, flush_every_s: float = 2.0) -> None:
+    def __init__(self, output_dir: Path, flush_every_s: float = 2.0, *, retry_errors: bool = False) -> None:
         self.dir = output_dir
         self.dir.mkdir(parents=True, exist_ok=True)
-        self.rows = read_results(self.dir)
+        rows = read_results(self.dir)
+        trajectories = self._read_trajectories()
+        # --retry-errors: episodes an endpoint failed (after its own retries) are dropped with their
+        # trajectories, so this run computes them again; every other row stays final.
+        retried = {row_id(row.key()) for row in rows if retry_errors and is_retryable(row)}
+        self.rows = [row for row in rows if row_id(row.key()) not in retried]
+        self.trajectories = [t for t in trajectories if t.get("row_id") not in retried]
+        self.retried = len(retried)
         self.keys = {row.key() for row in self.rows}
-        self.trajectories = self._read_trajectories()
         self.flush_every_s = flush_every_s
-        self._dirty = False
+        self._dirty = bool(retried)
         self._last_flush = time.monotonic()
 
     def _read_trajectories(self) -> list[dict[str, Any]]:
@@ -122,6 +134,7 @@ class EvalOptions:
     max_episode_attempts: int = 3
     progress: bool = True
     flush_every_s: float = 2.0
+    retry_errors: bool = False  # re-run episodes that ended with end_reason "endpoint_error"
     # An already started `EnvPool` to run on (kept open afterwards: several evaluations, or a
     # benchmark that excludes actor start-up); None creates one per run when use_ray.
     env_pool: Any = None
@@ -203,9 +216,9 @@ class _EnvSource:
 
 
 def pending_episodes(policy_id: str, items: list[EvalItem], output_dir: str | os.PathLike, condition: str,
-                     seeds) -> int:
+                     seeds, *, retry_errors: bool = False) -> int:
     """How many (item, seed) episodes the folder lacks (the CLI starts no Ray cluster for none)."""
-    done = {row.key() for row in read_results(Path(output_dir))}
+    done = {row.key() for row in read_results(Path(output_dir)) if not (retry_errors and is_retryable(row))}
     tasks = load_tasks_for(items) if condition == "logprob" else None
     count = 0
     for item in items:
@@ -224,7 +237,7 @@ async def run_episodes(policy, items: list[EvalItem], output_dir: str | os.PathL
         from actors.env_actor import register_domains
 
         register_domains(options.domain_modules)
-    store = ResultsStore(Path(output_dir), options.flush_every_s)
+    store = ResultsStore(Path(output_dir), options.flush_every_s, retry_errors=options.retry_errors)
     tasks = load_tasks_for(items)
     policy_id = policy.policy_id
     skipped_not_mc = 0

@@ -414,9 +414,9 @@ def test_runner_turns_endpoint_failures_into_episodes_without_loss_or_double_cou
     assert len(items) == 3
     policy = make_policy(proxy.base_url, max_retries=1)
 
-    def evaluate(condition: str):
+    def evaluate(condition: str, retry_errors: bool = False):
         options = EvalOptions(condition=condition, use_ray=False, progress=False, concurrency=1,
-                              settings=ConditionSettings(max_tokens=16, max_turns=2))
+                              settings=ConditionSettings(max_tokens=16, max_turns=2), retry_errors=retry_errors)
         run_eval(policy, items, tmp_path / condition, options, suite="ward-endpoint")
         return read_results(tmp_path / condition)
 
@@ -434,6 +434,20 @@ def test_runner_turns_endpoint_failures_into_episodes_without_loss_or_double_cou
     # A finished folder is never recomputed: no request reaches the endpoint.
     proxy.reset()
     assert len(evaluate("text")) == 3 and proxy.received == []
+    # --retry-errors: only the failed episode is asked again; it now succeeds and replaces its row.
+    from evals.runner import pending_episodes
+
+    assert pending_episodes(policy.policy_id, items, tmp_path / "text", "text", (0,), retry_errors=True) == 1
+    kept = {r.key(): r for r in rows if r.end_reason != "endpoint_error"}
+    rows = evaluate("text", retry_errors=True)
+    assert len(proxy.received) == 1 and len(rows) == 3 and len({r.key() for r in rows}) == 3
+    assert all(r.end_reason != "endpoint_error" and r.prompt_tokens > 0 for r in rows)
+    assert all(r == kept[r.key()] for r in rows if r.key() in kept)  # the others untouched
+    import pyarrow.parquet as pq
+
+    trajectories = pq.read_table(tmp_path / "text" / "trajectories.parquet").to_pylist()
+    assert sorted(t["row_id"] for t in trajectories) == sorted(r.trajectory_ref.split("#")[1] for r in rows)
+    proxy.reset()
 
     # agent: the ward system prompt with its tools is longer than the server's 1024-token window,
     # so each episode ends at its first turn as a context overflow, asked once (not retried).
