@@ -12,6 +12,21 @@ def errors(result):
     return [(Path(e.path).name, e.line, e.message) for e in result.errors]
 
 
+def test_medqa_us_4_option_layout_imports_every_row():
+    """Our 12-question sample in MedQA's US 4-option layout (question, answer text, options A-D,
+    meta_info, answer_idx, metamap_phrases): every row becomes a task whose letter names the answer
+    text (docs/benchmarks.md evaluates the demo policies on it)."""
+    import json
+
+    path = FIX / "medqa_us_4options_sample.jsonl"
+    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
+    result = convert("medqa", path)
+    assert result.errors == [] and len(result.tasks) == len(rows) == 12
+    for task, row in zip(result.tasks, rows):
+        assert task.correct_answer == row["answer_idx"] and task.options[task.correct_answer] == row["answer"]
+    assert len({t.id for t in result.tasks}) == 12
+
+
 def test_medqa_rows_and_errors_with_line_numbers():
     result = convert("medqa", FIX / "medqa.jsonl")
     assert len(result.tasks) == 1
