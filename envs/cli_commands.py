@@ -41,10 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "mimic3 | eicu (PATH is the CSV folder) | reference")
     imp.add_argument("--max-stays", type=int, default=None, help="mimic3/eicu: convert at most this many ICU stays")
     imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA)")
-    imp.add_argument("--output", help="tasks JSON to write (default: the domain's imported-task folder, "
-                     "loaded as split 'imported')")
+    imp.add_argument("--output", help="tasks JSON to write (default: <domain's imported-task folder>/"
+                     "<format>-<source file name>.json, loaded as split 'imported')")
     imp.add_argument("--image-dir", help="image folder for VQA formats")
-    imp.add_argument("--cop-base", type=int, default=None, help="MedMCQA: 1 for the original release (default), 0 for 0-3")
+    imp.add_argument("--cop-base", type=int, choices=(0, 1), default=None,
+                     help="MedMCQA: 1 for the original release (cop 1-4), 0 for the Hugging Face layout (cop 0-3); "
+                          "default: detected per file (any 0 means 0-based), the assumption printed when ambiguous")
     imp.add_argument("path")
     imp.set_defaults(func=cmd_tasks_import)
 
@@ -140,12 +142,43 @@ def cmd_tasks_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _source_stem(path: str) -> str:
+    """`mmlu/anatomy_test.csv` -> `anatomy_test`, `x.jsonl.gz` -> `x`, a MIMIC folder -> its name."""
+    from pathlib import Path
+
+    name = Path(path).resolve().name
+    for suffix in (".gz", ".csv", ".jsonl", ".json", ".txt", ".parquet", ".pkl", ".pickle"):
+        name = name.removesuffix(suffix)
+    return name or "source"
+
+
+def _existing_ids(domain_dir, output) -> dict[str, str]:
+    """id -> file for every task already imported into the domain (the file being rewritten excluded)."""
+    from pathlib import Path
+
+    found: dict[str, str] = {}
+    if not Path(domain_dir).is_dir():
+        return found
+    for other in sorted(Path(domain_dir).glob("*.json")):
+        if other.resolve() == Path(output).resolve():
+            continue
+        try:
+            items = json.loads(other.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{other}: cannot read an already imported task file to check ids: {exc}") from None
+        for item in items if isinstance(items, list) else []:
+            if isinstance(item, dict) and isinstance(item.get("id"), str):
+                found.setdefault(item["id"], str(other))
+    return found
+
+
 def cmd_tasks_import(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from envs.core.domain import imported_tasks_dir
     from envs.core.task import dump_tasks
 
+    notes: list[str] = []
     if args.format == "reference":
         from envs.core.importers import import_reference_tasks
 
@@ -161,12 +194,40 @@ def cmd_tasks_import(args: argparse.Namespace) -> int:
                                  else "ehr_management" if args.format in ("mimic3", "eicu") else "medical_qa")
         result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base,
                          max_stays=args.max_stays)
-        tasks, issues = result.tasks, [str(e) for e in result.errors]
-    output = Path(args.output) if args.output else imported_tasks_dir(domain) / f"{args.format}.json"
-    dump_tasks(tasks, output)
-    print(f"imported {len(tasks)} tasks into {output}; {len(issues)} rows reported")
-    for issue in issues:
-        print(f"  {issue}")
+        tasks, issues, notes = result.tasks, [str(e) for e in result.errors], list(result.notes)
+    # named after the source so a second MMLU subject (or MedQA's 5-option set) lands beside the first
+    output = Path(args.output) if args.output else \
+        imported_tasks_dir(domain) / f"{args.format}-{_source_stem(args.path)}.json"
+
+    # one duplicate id would stop the whole domain from loading: drop it here and say which and where
+    # (only where the output is loaded with the domain: an --output elsewhere is the caller's own file)
+    domain_dir = imported_tasks_dir(domain)
+    inside = output.resolve().parent == domain_dir.resolve()
+    existing = _existing_ids(domain_dir, output) if inside else {}
+    seen: set[str] = set()
+    kept = []
+    collisions: list[str] = []
+    for task in tasks:
+        if task.id in existing:
+            collisions.append(f"id {task.id} already imported in {existing[task.id]}: not imported again")
+        elif task.id in seen:
+            collisions.append(f"id {task.id} occurs more than once in {args.path}: kept the first")
+        else:
+            seen.add(task.id)
+            kept.append(task)
+
+    for note in notes:
+        print(f"note: {note}")
+    if not kept:
+        print(f"error: {args.path}: no task could be imported ({len(issues)} rows reported, "
+              f"{len(collisions)} duplicate ids); nothing was written to {output}", file=sys.stderr)
+        for line in issues + collisions:
+            print(f"  {line}", file=sys.stderr)
+        return 1
+    dump_tasks(kept, output)
+    print(f"imported {len(kept)} tasks into {output}; {len(issues)} rows reported; {len(collisions)} duplicate ids")
+    for line in issues + collisions:
+        print(f"  {line}")
     return 0
 
 

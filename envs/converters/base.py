@@ -25,6 +25,8 @@ class RowError:
 class ConversionResult:
     tasks: list[Task] = field(default_factory=list)
     errors: list[RowError] = field(default_factory=list)
+    # file-level facts the user must see in the import summary (e.g. which MedMCQA `cop` base was assumed)
+    notes: list[str] = field(default_factory=list)
 
     def add_error(self, path: Path, line: int, message: str) -> None:
         self.errors.append(RowError(str(path), line, message))

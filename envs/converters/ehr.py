@@ -117,15 +117,20 @@ def _table(folder: Path, name: str) -> Path:
 
 def _rows(path: Path, needed: list[str], result: ConversionResult) -> Iterator[tuple[int, dict[str, str]]]:
     """(line, row) for each data row; a missing column stops with SourceFileError, a bad row is reported."""
-    raw = gzip.open(path, "rt", encoding="utf-8", newline="") if path.name.endswith(".gz") else \
-        path.open(encoding="utf-8", newline="")
+    # utf-8-sig: a BOM (files re-saved on Windows) would otherwise become part of the first column name
+    raw = gzip.open(path, "rt", encoding="utf-8-sig", newline="") if path.name.endswith(".gz") else \
+        path.open(encoding="utf-8-sig", newline="")
     with raw as handle:
         reader = csv.reader(handle)
         try:
             header = next(reader)
         except StopIteration:
             raise SourceFileError(f"{path}: empty file (no header)") from None
-        header = [h.strip() for h in header]
+        # column names match case-insensitively: the MIMIC-III demo v1.4 writes `row_id,subject_id,...`
+        # where the full release writes `ROW_ID,SUBJECT_ID,...`; rows are keyed by the names in `needed`
+        spelling = {c.lower(): c for c in needed}
+        header = [h.strip().lstrip("\ufeff") for h in header]
+        header = [spelling.get(h.lower(), h) for h in header]
         missing = [c for c in needed if c not in header]
         if missing:
             raise SourceFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header[:12])})")

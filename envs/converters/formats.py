@@ -3,7 +3,7 @@
 | format | file | domain | gold |
 |---|---|---|---|
 | medqa | JSONL: question, options {A..}, answer_idx | medical_qa | option letter |
-| medmcqa | JSON lines: id, question, opa..opd, cop (1-4 as released; `cop_base=0` for the 0-3 re-release) | medical_qa | option letter |
+| medmcqa | JSON lines: id, question, opa..opd, cop (1-4 as released, 0-3 in the HF layout: detected per file, `cop_base` overrides) | medical_qa | option letter |
 | mmlu | CSV without header: question, A, B, C, D, answer letter | medical_qa | option letter |
 | pubmedqa | JSON {pmid: {QUESTION, CONTEXTS, final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
 | medlfqa | JSONL: Question, Free_form_answer, Must_have [..], Nice_to_have [..] | medical_qa | free text + rubric |
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import json
 import re
 import string
 from collections.abc import Callable
@@ -66,6 +67,11 @@ def _mcq(fmt: str, key: str, question: str, options: dict[str, str], answer: str
     }
 
 
+def _options_key(options: dict[str, str]) -> str:
+    """The options as part of an id: MedQA's 4- and 5-option test sets share question and answer letter."""
+    return json.dumps(options, sort_keys=True, ensure_ascii=False)
+
+
 def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
     result = ConversionResult()
     for line, row in iter_jsonl(path, result):
@@ -81,31 +87,63 @@ def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conversio
         if answer not in options:
             result.add_error(path, line, f"answer_idx {answer!r} is not one of the options {sorted(options)}")
             continue
-        _add(result, path, line, _mcq("medqa", row["question"] + answer, row["question"],
-                                      {str(k): str(v) for k, v in options.items()}, answer, domain,
+        options = {str(k): str(v) for k, v in options.items()}
+        _add(result, path, line, _mcq("medqa", row["question"] + answer + _options_key(options), row["question"],
+                                      options, answer, domain,
                                       {"meta_info": row.get("meta_info")}))
     return result
 
 
-def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int = 1, **_: Any) -> ConversionResult:
+MEDMCQA_OPTION_FIELDS = ("opa", "opb", "opc", "opd")
+
+
+def _medmcqa_base(cops: list[int], path: Path, cop_base: int | None, result: ConversionResult) -> int:
+    """The file's `cop` numbering: the original release counts 1-4, the Hugging Face layout 0-3.
+
+    Nothing in a row says which; the file does (a 0 only occurs 0-based, a 4 only 1-based). An explicit
+    `cop_base` wins. A file with neither is ambiguous: we assume the original 1-4 and say so in the notes.
+    """
+    if cop_base is not None:
+        if cop_base not in (0, 1):
+            raise ValueError(f"--cop-base must be 0 or 1, got {cop_base!r}")
+        result.notes.append(f"{path}: MedMCQA 'cop' read as {cop_base}-based (set by --cop-base)")
+        return cop_base
+    if 0 in cops:
+        result.notes.append(f"{path}: MedMCQA 'cop' read as 0-based (0-3, Hugging Face layout): the file has a cop of 0")
+        return 0
+    if 4 in cops:
+        result.notes.append(f"{path}: MedMCQA 'cop' read as 1-based (1-4, original release): the file has a cop of 4")
+        return 1
+    result.notes.append(f"{path}: MedMCQA 'cop' base cannot be told from the file (no 0 and no 4): ASSUMED 1-based "
+                        "(1-4, original release); pass --cop-base 0 if it is the Hugging Face 0-3 layout")
+    return 1
+
+
+def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int | None = None, **_: Any) -> ConversionResult:
     result = ConversionResult()
+    rows: list[tuple[int, dict[str, Any], int]] = []
     for line, row in iter_jsonl(path, result):
-        missing = require(row, ["question", "opa", "opb", "opc", "opd"])
+        missing = require(row, ["question", *MEDMCQA_OPTION_FIELDS, "cop"])
         if missing:
             result.add_error(path, line, f"missing field {missing!r}")
             continue
-        try:
-            index = int(row.get("cop")) - cop_base
-        except (TypeError, ValueError):
-            result.add_error(path, line, f"field 'cop' must be an integer, got {row.get('cop')!r}")
+        cop = row["cop"]
+        # strictly a JSON integer: 2.5, true or "2" mean the file is not what we think it is
+        if isinstance(cop, bool) or not isinstance(cop, int):
+            result.add_error(path, line, f"field 'cop' must be an integer, got {cop!r} ({type(cop).__name__})")
             continue
+        rows.append((line, row, cop))
+    base = _medmcqa_base([cop for _, _, cop in rows], path, cop_base, result)
+    for line, row, cop in rows:
+        index = cop - base
         if not 0 <= index <= 3:
-            result.add_error(path, line, f"field 'cop' {row.get('cop')!r} out of range {cop_base}..{cop_base + 3}")
+            result.add_error(path, line, f"field 'cop' {cop!r} out of range {base}..{base + 3}")
             continue
-        options = {LETTERS[i]: str(row[k]) for i, k in enumerate(("opa", "opb", "opc", "opd"))}
-        key = str(row.get("id") or row["question"])
+        options = {LETTERS[i]: str(row[k]) for i, k in enumerate(MEDMCQA_OPTION_FIELDS)}
+        key = str(row.get("id") or row["question"]) + _options_key(options)
         _add(result, path, line, _mcq("medmcqa", key, row["question"], options, LETTERS[index], domain,
-                                      {"subject": row.get("subject_name"), "topic": row.get("topic_name")}))
+                                      {"subject": row.get("subject_name"), "topic": row.get("topic_name"),
+                                       "cop_base": base}))
     return result
 
 
@@ -119,7 +157,7 @@ def convert_mmlu(path: Path, domain: str = "medical_qa", subject: str | None = N
             result.add_error(path, line, f"answer column must be A-D, got {answer!r}")
             continue
         options = dict(zip("ABCD", choices))
-        _add(result, path, line, _mcq("mmlu", subject + question + answer, question, options, answer, domain,
+        _add(result, path, line, _mcq("mmlu", subject + question + answer + _options_key(options), question, options, answer, domain,
                                       {"subject": subject}))
     return result
 
