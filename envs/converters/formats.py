@@ -109,7 +109,9 @@ def _medmcqa_base(cops: list[int], path: Path, cop_base: int | None, result: Con
         result.notes.append(f"{path}: MedMCQA 'cop' read as {cop_base}-based (set by --cop-base)")
         return cop_base
     if 0 in cops:
-        result.notes.append(f"{path}: MedMCQA 'cop' read as 0-based (0-3, Hugging Face layout): the file has a cop of 0")
+        clash = " (it also has a 4: those rows are reported out of range)" if 4 in cops else ""
+        result.notes.append(f"{path}: MedMCQA 'cop' read as 0-based (0-3, Hugging Face layout): the file has a cop of 0"
+                            + clash)
         return 0
     if 4 in cops:
         result.notes.append(f"{path}: MedMCQA 'cop' read as 1-based (1-4, original release): the file has a cop of 4")

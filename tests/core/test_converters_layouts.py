@@ -67,6 +67,16 @@ def test_medmcqa_non_integer_cop_is_rejected_with_file_line_and_field():
     assert "2.5" in errs[0][2] and "True" in errs[1][2] and "'2'" in errs[2][2]
 
 
+def test_medmcqa_file_with_both_a_zero_and_a_four_reports_the_four(tmp_path):
+    path = tmp_path / "mixed.json"
+    row = {"id": "m", "question": "q", "opa": "a", "opb": "b", "opc": "c", "opd": "d"}
+    path.write_text(json.dumps(row | {"cop": 0}) + "\n" + json.dumps(row | {"id": "n", "cop": 4}) + "\n")
+    result = convert("medmcqa", path)
+    assert [t.correct_answer for t in result.tasks] == ["A"]
+    assert errors(result) == [("mixed.json", 2, "field 'cop' 4 out of range 0..3")]
+    assert any("also has a 4" in n for n in result.notes)
+
+
 def test_medmcqa_test_split_without_cop_is_reported(tmp_path):
     path = tmp_path / "test.json"
     path.write_text(json.dumps({"id": "t", "question": "q", "opa": "a", "opb": "b", "opc": "c", "opd": "d"}) + "\n")
