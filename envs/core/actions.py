@@ -11,7 +11,11 @@ Accepted, in this order of precedence:
 Anything else is a plain message. Several calls in one action are executed in order.
 
 Parsing never raises: a structure that looks like a call but cannot be read is reported in
-`ParsedAction.errors`, which the environment shows to the agent.
+`ParsedAction.errors`, which the environment shows to the agent. Hostile input is bounded here, so
+nothing downstream (argument validation, turn records, the reward) sees values Python cannot
+print or recurse through: JSON and call arguments may nest at most `MAX_NESTING_DEPTH` levels,
+integers may have at most `MAX_INTEGER_DIGITS` digits, and function syntax accepts only JSON-typed
+literals (strings, numbers, true/false/null, lists, objects with string keys).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ import json
 import re
 from dataclasses import dataclass, field
 from typing import Any, Container
+
+from envs.core.tools import safe_repr
 
 _HERMES = re.compile(r"<tool_call>\s*(.*?)\s*(?:</tool_call>|$)", re.DOTALL)
 _FENCE = re.compile(r"```[ \t]*(json|JSON|tool_call|)[ \t]*\n?(.*?)```", re.DOTALL)
@@ -42,8 +48,49 @@ class ParsedAction:
     errors: list[str] = field(default_factory=list)
 
 
+MAX_NESTING_DEPTH = 64  # far beyond any tool's arguments; stops RecursionError in json/pydantic/rewards
+MAX_INTEGER_DIGITS = 100  # int() refuses >4,300 digits and float() overflows past ~308; 100 is ample
+
+
+class ActionSyntaxError(ValueError):
+    """A call-shaped structure that cannot be read; its message is shown to the agent."""
+
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_BRACKETS = re.compile(r"[\[\]{}]")
+
+
+def _nesting_depth(text: str) -> int:
+    """Deepest bracket nesting of a JSON text, string contents ignored (cheap: one regex pass)."""
+    depth = deepest = 0
+    for match in _BRACKETS.finditer(_JSON_STRING.sub('""', text)):
+        if match.group() in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        else:
+            depth -= 1
+    return deepest
+
+
+def _bounded_int(digits: str) -> int:
+    if len(digits.lstrip("-")) > MAX_INTEGER_DIGITS:
+        raise ActionSyntaxError(f"integer of {len(digits.lstrip('-'))} digits exceeds the limit of {MAX_INTEGER_DIGITS} digits")
+    return int(digits)
+
+
 def _loads(text: str) -> Any:
-    return json.loads(text)
+    """json.loads with bounded nesting and integer size; every failure is an ActionSyntaxError."""
+    depth = _nesting_depth(text)
+    if depth > MAX_NESTING_DEPTH:
+        raise ActionSyntaxError(f"JSON nested {depth} levels deep exceeds the limit of {MAX_NESTING_DEPTH}")
+    try:
+        return json.loads(text, parse_int=_bounded_int)
+    except json.JSONDecodeError as exc:
+        raise ActionSyntaxError(f"{exc.msg} at position {exc.pos}") from None
+    except RecursionError:  # the depth check counts brackets; this is the backstop
+        raise ActionSyntaxError(f"JSON nested deeper than {MAX_NESTING_DEPTH} levels") from None
+    except ValueError as exc:  # _bounded_int, or a number Python refuses to convert
+        raise ActionSyntaxError(str(exc)) from None
 
 
 def _call_from_obj(obj: Any, fmt: str, errors: list[str]) -> list[ParsedCall]:
@@ -77,9 +124,9 @@ def _call_from_obj(obj: Any, fmt: str, errors: list[str]) -> list[ParsedCall]:
             args = {}
         else:
             try:
-                args = json.loads(stripped)
-            except json.JSONDecodeError as exc:
-                errors.append(f"arguments of {name!r} are not valid JSON: {exc.msg} at position {exc.pos}")
+                args = _loads(stripped)
+            except ActionSyntaxError as exc:
+                errors.append(f"arguments of {name[:80]!r} are not valid JSON: {exc}")
                 return []
     if args is None:
         args = {}
@@ -89,10 +136,46 @@ def _call_from_obj(obj: Any, fmt: str, errors: list[str]) -> list[ParsedCall]:
 _PY_LITERALS = {"true": True, "false": False, "null": None, "none": None}
 
 
-def _literal(node: ast.AST) -> Any:
+def _literal(node: ast.AST, depth: int = 0) -> Any:
+    """A function-syntax argument as a JSON value. Only JSON types are accepted: a complex, bytes,
+    set or Ellipsis literal would pass ast.literal_eval but break json.dumps in the turn record."""
+    if depth > MAX_NESTING_DEPTH:
+        raise ActionSyntaxError(f"argument nested deeper than {MAX_NESTING_DEPTH} levels")
     if isinstance(node, ast.Name):  # JSON-style true/false/null, or a bare word as a string
         return _PY_LITERALS.get(node.id.lower(), node.id)
-    return ast.literal_eval(node)
+    if isinstance(node, ast.Constant):
+        value = node.value
+        if isinstance(value, bool) or value is None or isinstance(value, str):
+            return value
+        if isinstance(value, int):
+            # hex/octal/binary literals are parsed without the decimal digit limit; bound by size
+            if value.bit_length() > MAX_INTEGER_DIGITS * 3.33:
+                raise ActionSyntaxError(f"integer literal exceeds the limit of {MAX_INTEGER_DIGITS} digits")
+            return value
+        if isinstance(value, float):
+            return value
+        kind = "Ellipsis (...)" if value is Ellipsis else type(value).__name__
+        raise ActionSyntaxError(f"{kind} literal is not a JSON value (use a string, number, true/false/null, list or object)")
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        operand = _literal(node.operand, depth + 1)
+        if isinstance(operand, bool) or not isinstance(operand, (int, float)):
+            raise ActionSyntaxError("a sign (+/-) applies only to a number")
+        return -operand if isinstance(node.op, ast.USub) else operand
+    if isinstance(node, (ast.List, ast.Tuple)):
+        return [_literal(item, depth + 1) for item in node.elts]
+    if isinstance(node, ast.Dict):
+        out: dict[str, Any] = {}
+        for key, value in zip(node.keys, node.values):
+            if key is None:
+                raise ActionSyntaxError("** unpacking is not allowed in an argument")
+            key_value = _literal(key, depth + 1)
+            if not isinstance(key_value, str):
+                raise ActionSyntaxError(f"object keys must be strings, got {type(key_value).__name__}")
+            out[key_value] = _literal(value, depth + 1)
+        return out
+    if isinstance(node, ast.Set):
+        raise ActionSyntaxError("set literal is not a JSON value (use a list [..])")
+    raise ActionSyntaxError(f"{type(node).__name__} expression is not a literal value")
 
 
 def _split_call(text: str, start: int) -> int | None:
@@ -138,8 +221,9 @@ def _function_calls(text: str, tool_names: Container[str], errors: list[str]) ->
             if node.args:
                 raise ValueError("use keyword arguments, e.g. tool(name=value)")
             args = {kw.arg: _literal(kw.value) for kw in node.keywords if kw.arg is not None}
-        except (SyntaxError, ValueError, TypeError) as exc:
-            errors.append(f"could not read call to {name!r}: {exc}")
+        except (SyntaxError, ValueError, TypeError, RecursionError, MemoryError, OverflowError) as exc:
+            # ValueError includes Python's own integer-digit limit when parsing a huge decimal literal
+            errors.append(f"could not read call to {name!r}: {type(exc).__name__ if isinstance(exc, (RecursionError, MemoryError)) else ''}{str(exc)[:300]}")
             rest.append(text[pos:end])
             pos = end
             continue
@@ -157,8 +241,17 @@ def parse_action(text: Any, tool_names: Container[str] = ()) -> ParsedAction:
         text: The agent's raw output for this turn.
         tool_names: Known tool names; function-call syntax is recognised only for these.
     """
+    try:
+        return _parse_action(text, tool_names)
+    except Exception as exc:  # a parser bug must become a parse error the agent sees, never a crash
+        message = text if isinstance(text, str) else f"<{type(text).__name__}>"
+        return ParsedAction(message=message, format="text",
+                            errors=[f"action could not be parsed ({type(exc).__name__}: {str(exc)[:200]})"])
+
+
+def _parse_action(text: Any, tool_names: Container[str]) -> ParsedAction:
     if not isinstance(text, str):
-        return ParsedAction(format="text", message=repr(text)[:2000],
+        return ParsedAction(format="text", message=safe_repr(text, 2000),
                             errors=[f"action must be a string, got {type(text).__name__}"])
     stripped = text.strip()
     if not stripped:
@@ -173,8 +266,8 @@ def parse_action(text: Any, tool_names: Container[str] = ()) -> ParsedAction:
                 body = body.strip("`").removeprefix("json").strip()
             try:
                 obj = _loads(body)
-            except json.JSONDecodeError as exc:
-                errors.append(f"<tool_call> block is not valid JSON: {exc.msg} at position {exc.pos}")
+            except ActionSyntaxError as exc:
+                errors.append(f"<tool_call> block is not valid JSON: {exc}")
                 continue
             found = _call_from_obj(obj, "hermes", errors)
             if not found and not errors:
@@ -193,8 +286,8 @@ def parse_action(text: Any, tool_names: Container[str] = ()) -> ParsedAction:
             fenced_any = True
             try:
                 obj = _loads(body)
-            except json.JSONDecodeError as exc:
-                errors.append(f"fenced JSON block is not valid JSON: {exc.msg} at position {exc.pos}")
+            except ActionSyntaxError as exc:
+                errors.append(f"fenced JSON block is not valid JSON: {exc}")
                 continue
             calls.extend(_call_from_obj(obj, "fenced", errors))
         if fenced_any:
@@ -204,9 +297,9 @@ def parse_action(text: Any, tool_names: Container[str] = ()) -> ParsedAction:
     if stripped[0] in "{[":
         try:
             obj = _loads(stripped)
-        except json.JSONDecodeError as exc:
-            if '"name"' in stripped or "'name'" in stripped:
-                errors.append(f"action looks like a JSON tool call but is not valid JSON: {exc.msg} at position {exc.pos}")
+        except ActionSyntaxError as exc:
+            if '"name"' in stripped or "'name'" in stripped or "nested" in str(exc) or "digits" in str(exc):
+                errors.append(f"action looks like a JSON tool call but is not valid JSON: {exc}")
             return ParsedAction(message=stripped, format="text", errors=errors)
         calls = _call_from_obj(obj, "json", errors)
         fmt = calls[0].format if calls else "json"

@@ -20,12 +20,15 @@ from envs.core.actions import parse_action
 from envs.core.domain import DomainEnvironment
 from envs.core.spaces import AnyText
 from envs.core.task import Task
-from envs.core.tools import ToolOutcome
+from envs.core.tools import ToolOutcome, safe_repr
 from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord
 
 MAX_ACTION_CHARS = 100_000
 MAX_OBSERVATION_CHARS = 1_000_000
 MAX_TOOL_RESULT_CHARS = 50_000
+# Tool calls executed per action; the rest are refused with an error observation. A real turn
+# needs a handful of calls; without a cap one 99 KB action of 3,300 unknown-drug lookups took ~40 s.
+MAX_CALLS_PER_ACTION = 32
 
 CALL_FORMAT_HELP = (
     "To call a tool, write <tool_call>{\"name\": \"<tool>\", \"arguments\": {...}}</tool_call> "
@@ -166,10 +169,15 @@ class HealthcareGymEnv(gym.Env[str, str]):
             raw = action[:MAX_ACTION_CHARS]
         else:
             parsed = parse_action(action, toolkit.definitions)
-            raw = action if isinstance(action, str) else repr(action)
+            raw = action if isinstance(action, str) else safe_repr(action, 2000)
         records: list[ToolCallRecord] = []
         parts: list[str] = []
         submitted: str | None = None
+        refusal: str | None = None
+        if len(parsed.calls) > MAX_CALLS_PER_ACTION:
+            refusal = (f"{len(parsed.calls) - MAX_CALLS_PER_ACTION} tool calls after the first {MAX_CALLS_PER_ACTION} "
+                       f"were not run: an action may make at most {MAX_CALLS_PER_ACTION} calls")
+            parsed.calls = parsed.calls[:MAX_CALLS_PER_ACTION]
         for call in parsed.calls:
             call_start = time.perf_counter()
             outcome: ToolOutcome = toolkit.call(call.name, call.arguments)
@@ -188,6 +196,9 @@ class HealthcareGymEnv(gym.Env[str, str]):
                 break
         for error in parsed.errors:
             parts.append(json.dumps({"error": f"could not parse action: {error}"}))
+        if refusal is not None:
+            parts.append(json.dumps({"error": refusal}))
+            parsed.errors.append(refusal)  # recorded with the turn's parse errors
         if not parsed.calls and not parsed.errors:
             parts.append("No tool call found in your message. " + CALL_FORMAT_HELP)
         observation = "\n".join(parts)[:MAX_OBSERVATION_CHARS]
@@ -212,7 +223,7 @@ class HealthcareGymEnv(gym.Env[str, str]):
         if terminated or truncated:
             self._record.submitted_answer = submitted
             self._record.terminated, self._record.truncated = terminated, truncated
-            reward = self._finish(info)
+            reward = self._finish_safely(info)
             self._done = True
         if self.render_mode == "human":
             print(self._render_turn(turn))
@@ -237,6 +248,22 @@ class HealthcareGymEnv(gym.Env[str, str]):
         reward = self._finish(info)
         self._done = True
         return reward, info
+
+    def _finish_safely(self, info: dict[str, Any]) -> float:
+        """`_finish` for `step`, which must never raise: a grader that fails on some hostile answer
+        scores the episode 0 with the failure recorded in `reward_details["grader_error"]` and
+        `info["grader_error"]`, instead of losing the episode to an exception."""
+        try:
+            return self._finish(info)
+        except Exception as exc:
+            record = self._record
+            assert record is not None
+            error = f"{type(exc).__name__}: {str(exc)[:500]}"
+            record.reward, record.reward_components = 0.0, {}
+            record.reward_details = {"grader_error": error}
+            info.update(reward_components={}, reward_breakdown=record.reward_details, is_correct=False,
+                        grader_error=error, trajectory=record)
+            return 0.0
 
     def _finish(self, info: dict[str, Any]) -> float:
         from envs.rewards import score_episode

@@ -132,6 +132,16 @@ def _clean_schema(schema: dict, defs: dict) -> dict:
     return out
 
 
+def safe_repr(value: Any, limit: int = 60) -> str:
+    """repr for error messages that cannot itself fail: repr of an int over 4,300 digits raises
+    ValueError, and a deeply nested value RecursionError."""
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):
+        text = f"<{type(value).__name__} too large to show>"
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _type_label(annotation: Any) -> str:
     """A short human label for an annotation, used in argument error messages."""
     origin = typing.get_origin(annotation)
@@ -235,7 +245,7 @@ class ToolDefinition:
                 problems.append(f"unknown argument {arg!r}{hint} (accepted: {', '.join(self.arg_types) or 'none'})")
             else:
                 got = err.get("input")
-                got_repr = repr(got)[:60]
+                got_repr = safe_repr(got)
                 expected = self.arg_types.get(arg, "?")
                 problems.append(f"argument {where!r} expects {expected}, got {got_repr}: {err['msg']}")
         return f"tool {self.name!r}: " + "; ".join(problems)
@@ -358,9 +368,10 @@ class Toolkit:
             raise UnknownToolError(self.unknown_tool_message(name)) from None
 
     def unknown_tool_message(self, name: str) -> str:
-        near = difflib.get_close_matches(str(name), self.tool_names, n=3, cutoff=0.5)
+        shown = name[:80] if isinstance(name, str) else safe_repr(name, 80)
+        near = difflib.get_close_matches(shown, self.tool_names, n=3, cutoff=0.5)
         hint = f" Did you mean: {', '.join(near)}?" if near else f" Available tools: {', '.join(self.tool_names)}."
-        return f"unknown tool {str(name)[:80]!r}.{hint}"
+        return f"unknown tool {shown!r}.{hint}"
 
     def schemas(self) -> list[dict]:
         """OpenAI function schemas for every tool."""
@@ -379,7 +390,8 @@ class Toolkit:
     def call(self, name: str, arguments: Any) -> ToolOutcome:
         """Call a tool for the agent: never raises; errors become the outcome's `error`."""
         if not isinstance(name, str) or not self.has_tool(name):
-            return ToolOutcome(name=str(name), arguments=arguments if isinstance(arguments, dict) else {},
+            return ToolOutcome(name=name if isinstance(name, str) else safe_repr(name, 80),
+                               arguments=arguments if isinstance(arguments, dict) else {},
                                error=self.unknown_tool_message(name), error_kind="unknown_tool")
         definition, method = self.bound(name)
         outcome = ToolOutcome(name=name, arguments=arguments if isinstance(arguments, dict) else {},

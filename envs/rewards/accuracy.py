@@ -95,17 +95,20 @@ _UNIT_DIMENSION = {u: (dim, s) for dim, table in _UNIT_SCALE.items() for u, s in
 
 
 def _to_float(number: str, exponent: str | None) -> float:
-    value = float(number.replace(",", ""))
-    return value * 10 ** int(exponent) if exponent else value
+    # float() of the whole literal: `value * 10 ** int(exponent)` overflowed (OverflowError) or ran for
+    # minutes on a hostile exponent such as 1e999999999; float() saturates to inf instead.
+    return float(number.replace(",", "") + (f"e{exponent}" if exponent else ""))
 
 
 def _numbers(text: str) -> list[tuple[float, str | None, int]]:
     out = []
     for m in _NUM_UNIT.finditer(text):
         try:
-            out.append((_to_float(m.group(1), m.group(2)), (m.group(3) or None), m.start()))
+            value = _to_float(m.group(1), m.group(2))
         except ValueError:
             continue
+        if value == value and abs(value) != float("inf"):  # an overflowed literal is no usable number
+            out.append((value, (m.group(3) or None), m.start()))
     return out
 
 

@@ -133,9 +133,22 @@ def set_embedder(embedder: Embedder | None, status: str | None = None) -> None:
         _cache.clear()
 
 
+def _encodable(text: str) -> str:
+    """The text with lone surrogates (valid in a Python str, e.g. from JSON "\\ud800") replaced,
+    since the embedding tokenizer rejects them with a TypeError."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "replace").decode("utf-8")
+    except AttributeError:  # not a string at all
+        return str(text)
+
+
 def _vectors(texts: list[str]):
     import numpy as np
 
+    texts = [_encodable(t) for t in texts]
     embedder = get_embedder()
     if embedder is None:
         return None

@@ -59,7 +59,11 @@ def as_number(value: Any) -> float | None:
     if isinstance(value, bool):
         return None
     if isinstance(value, (int, float)):
-        return float(value) if math.isfinite(float(value)) else None
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond float range (e.g. 400 digits) is no usable number
+            return None
+        return number if math.isfinite(number) else None
     if isinstance(value, str):
         text = value.strip().replace(",", "")
         if not text or len(text) > 40:
@@ -72,9 +76,14 @@ def as_number(value: Any) -> float | None:
     return None
 
 
-def norm_value(value: Any) -> Any:
+_MAX_NORM_DEPTH = 64  # deeper arguments compare by a placeholder instead of overflowing the stack
+
+
+def norm_value(value: Any, _depth: int = 0) -> Any:
     """Canonical form for comparing tool arguments: case, whitespace and number formatting
     ("500", 500, "500.0", "5e2" are equal) do not matter; lists compare as multisets."""
+    if _depth > _MAX_NORM_DEPTH:
+        return ("o", "<nested too deep>")
     number = as_number(value)
     if number is not None:
         return ("n", round(number, 9))
@@ -82,12 +91,15 @@ def norm_value(value: Any) -> Any:
         text = " ".join(unicodedata.normalize("NFKC", value).lower().split())
         return ("s", text)
     if isinstance(value, (list, tuple, set)):
-        return ("l", tuple(sorted((norm_value(v) for v in value), key=repr)))
+        return ("l", tuple(sorted((norm_value(v, _depth + 1) for v in value), key=repr)))
     if isinstance(value, dict):
-        return ("d", tuple(sorted((str(k).lower(), norm_value(v)) for k, v in value.items())))
+        return ("d", tuple(sorted((str(k).lower(), norm_value(v, _depth + 1)) for k, v in value.items())))
     if value is None:
         return ("none",)
-    return ("o", repr(value))
+    try:
+        return ("o", repr(value))
+    except ValueError:  # repr of an int over 4,300 digits raises
+        return ("o", f"<{type(value).__name__}>")
 
 
 def signature(name: str, arguments: dict[str, Any]) -> tuple:
