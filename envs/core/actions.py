@@ -223,7 +223,8 @@ def _function_calls(text: str, tool_names: Container[str], errors: list[str]) ->
             args = {kw.arg: _literal(kw.value) for kw in node.keywords if kw.arg is not None}
         except (SyntaxError, ValueError, TypeError, RecursionError, MemoryError, OverflowError) as exc:
             # ValueError includes Python's own integer-digit limit when parsing a huge decimal literal
-            errors.append(f"could not read call to {name!r}: {type(exc).__name__ if isinstance(exc, (RecursionError, MemoryError)) else ''}{str(exc)[:300]}")
+            kind = f"{type(exc).__name__}: " if isinstance(exc, (RecursionError, MemoryError)) else ""
+            errors.append(f"could not read call to {name!r}: {kind}{str(exc)[:300]}")
             rest.append(text[pos:end])
             pos = end
             continue
