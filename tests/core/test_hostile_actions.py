@@ -7,7 +7,6 @@ random test mixes these classes over the ten domains, on ordinary and on termina
 
 import json
 import random
-import time
 
 import pytest
 
@@ -187,14 +186,12 @@ def test_calls_per_action_are_capped_and_the_rest_refused():
     env = submit_env("drug_interaction")
     action = "\n".join(f'lookup_drug(name="zq{i:04d}xkv")' for i in range(3300))
     assert 95_000 < len(action) <= 100_000
-    started = time.perf_counter()
     observation, reward, terminated, truncated, info = env.step(action)
-    elapsed = time.perf_counter() - started
     assert len(info["tool_calls"]) == MAX_CALLS_PER_ACTION == 32
     refusal = f"{3300 - 32} tool calls after the first 32 were not run: an action may make at most 32 calls"
     assert refusal in info["parse_errors"] and refusal in observation
     assert len(env.trajectory().turns[-1].tool_calls) == 32
-    assert elapsed < 5.0, elapsed  # ~0.35 s measured; generous for a shared 2-core machine
+    # Its time (32.8 s uncapped -> 0.35 s) is measured by bench/hostile_step.py, not asserted here.
 
 
 def test_submit_within_the_cap_still_ends_the_episode():
