@@ -71,12 +71,10 @@ _IMAGE_UNSUPPORTED = re.compile(
     r"|image_url is only supported", re.IGNORECASE)
 
 
-class EndpointConfig(BaseModel):
-    """How to reach and use one OpenAI-compatible chat-completions endpoint."""
+class EndpointOptions(BaseModel):
+    """How to use an OpenAI-compatible chat-completions endpoint (what `--endpoint-config` files hold)."""
 
     model_config = ConfigDict(extra="forbid")
-    base_url: str  # e.g. http://127.0.0.1:8000/v1 (requests go to {base_url}/chat/completions)
-    model: str
     api_key_env: str = DEFAULT_API_KEY_ENV
     concurrency: int = Field(default=8, ge=1)
     timeout_s: float = Field(default=120.0, gt=0)  # whole request, per attempt
@@ -94,6 +92,13 @@ class EndpointConfig(BaseModel):
     price_output_per_1m: float | None = Field(default=None, ge=0)
     # Sent with every request (e.g. {"chat_template_kwargs": {"enable_thinking": False}} for vLLM).
     extra_body: dict[str, Any] = Field(default_factory=dict)
+
+
+class EndpointConfig(EndpointOptions):
+    """One endpoint: where it is (from the policy string) and how to use it."""
+
+    base_url: str  # e.g. http://127.0.0.1:8000/v1 (requests go to {base_url}/chat/completions)
+    model: str
 
     @field_validator("base_url")
     @classmethod
@@ -151,7 +156,7 @@ def load_endpoint_options(path: str | os.PathLike) -> dict[str, Any]:
         if name in data:
             raise ValueError(f"{path}: {name!r} comes from the policy string openai:BASE_URL:MODEL, not the file")
     try:
-        EndpointConfig(base_url="http://placeholder", model="placeholder", **data)
+        EndpointOptions(**data)
     except ValueError as error:
         raise ValueError(f"{path}: {error}") from None
     return data

@@ -163,7 +163,7 @@ class HintConfig(StrictModel):
     @model_validator(mode="after")
     def _template_has_slot(self) -> HintConfig:
         if "{hint}" not in self.template:
-            raise ValueError("teacher.hints.template must contain the placeholder {hint}")
+            raise ValueError("teacher.hints.template must contain {hint}, where the hint text is inserted")
         return self
 
 

@@ -76,7 +76,7 @@ def as_number(value: Any) -> float | None:
     return None
 
 
-_MAX_NORM_DEPTH = 64  # deeper arguments compare by a placeholder instead of overflowing the stack
+_MAX_NORM_DEPTH = 64  # deeper arguments all compare equal to one marker instead of overflowing the stack
 
 
 def norm_value(value: Any, _depth: int = 0) -> Any:

@@ -26,6 +26,7 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[2]
 VLLM_PYTHON = REPO_ROOT / ".venv-vllm" / "bin" / "python"
 SERVED_MODEL_NAME = "tiny-endpoint"
+WARD = {"ward": "tests.fixtures.ward_domain.environment"}
 MAX_MODEL_LEN = 1024
 SERVER_START_TIMEOUT_S = 420
 
@@ -158,3 +159,16 @@ def openai_server(endpoint_model_dir, tmp_path_factory):
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def ward_domain():
+    """The ward test domain registered, graded by token overlap for the module that asks (the
+    setting is restored afterwards: later modules such as tests/rewards/test_embeddings.py need the
+    sentence-embedding model)."""
+    from actors.env_actor import register_domains
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("HCGYM_EMBEDDINGS", "0")
+        register_domains(WARD)
+        yield

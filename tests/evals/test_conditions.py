@@ -15,24 +15,19 @@ import math
 import pytest
 
 from actors.agent_loop import LocalEnv
-from actors.env_actor import register_domains
-from evals.conditions import (LOGPROB_SYSTEM_PROMPT, ConditionSettings, action_text, run_agent, run_logprob,
-                              run_text)
+from evals.conditions import (
+    LOGPROB_SYSTEM_PROMPT,
+    ConditionSettings,
+    action_text,
+    run_agent,
+    run_logprob,
+    run_text,
+)
 from evals.policies import LocalModelPolicy, ScriptedPolicy
 from evals.types import PolicyReply
 from tests.training.conftest import ward_policy_dir  # noqa: F401  (session fixture: the tiny ward policy)
 
-WARD = {"ward": "tests.fixtures.ward_domain.environment"}
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _ward_registered():
-    # Token-overlap grading for this module only: set with setdefault and never restored, it switched
-    # the sentence-embedding model off for every later test module (tests/rewards/test_embeddings.py).
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("HCGYM_EMBEDDINGS", "0")
-        register_domains(WARD)
-        yield
+pytestmark = pytest.mark.usefixtures("ward_domain")
 
 
 def ward_task(task_id: str):

@@ -12,23 +12,19 @@ import pytest
 import yaml
 
 from actors.agent_loop import AgentLoop, LocalEnv, RolloutLimits
-from actors.env_actor import register_domains
 from evals.conditions import episode_spec
-from evals.policies import (LocalModelPolicy, ScriptedPolicy, majority_letters, render_messages, resolve_policy,
-                            run_policy)
+from evals.policies import (
+    LocalModelPolicy,
+    ScriptedPolicy,
+    majority_letters,
+    render_messages,
+    resolve_policy,
+    run_policy,
+)
+from tests.evals.conftest import WARD
 from tests.training.conftest import ward_policy_dir  # noqa: F401  (session fixture)
 
-WARD = {"ward": "tests.fixtures.ward_domain.environment"}
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _ward_registered():
-    # Token-overlap grading for this module only: set with setdefault and never restored, it switched
-    # the sentence-embedding model off for every later test module (tests/rewards/test_embeddings.py).
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("HCGYM_EMBEDDINGS", "0")
-        register_domains(WARD)
-        yield
+pytestmark = pytest.mark.usefixtures("ward_domain")
 
 
 def ward_tasks():

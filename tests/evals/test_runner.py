@@ -9,27 +9,19 @@ import os
 import pyarrow.parquet as pq
 import pytest
 
-from actors.env_actor import register_domains
 from envs.cli import main as hcgym
 from evals.conditions import ConditionSettings
 from evals.policies import ScriptedPolicy
 from evals.runner import EvalOptions, run_eval
 from evals.types import RESULTS_FILE, TRAJECTORIES_FILE, EvalItem, read_results, row_to_record
+from tests.evals.conftest import WARD
 from tests.evals.test_policies import make_run_dir
 from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT, ward_policy_dir  # noqa: F401
 
-WARD = {"ward": "tests.fixtures.ward_domain.environment"}
 ITEMS = [EvalItem(benchmark="ward", domain="ward", task_id=t) for t in ("ward_choice", "ward_dose", "ward_record")]
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _ward_registered():
-    # Token-overlap grading for this module only: set with setdefault and never restored, it switched
-    # the sentence-embedding model off for every later test module (tests/rewards/test_embeddings.py).
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("HCGYM_EMBEDDINGS", "0")
-        register_domains(WARD)
-        yield
+pytestmark = pytest.mark.usefixtures("ward_domain")
 
 
 @pytest.fixture(scope="module")

@@ -274,7 +274,7 @@ def _learner_cfg(backend: str, **extra):
                          **extra)
 
 
-def _check_component_agreement(model_dir: Path, learner, family: str):
+def assert_components_agree(model_dir: Path, learner, family: str):
     """Generator, learner and teacher agree before and after one learner step."""
     from actors.generator import HFGenerator, SamplingConfig
     from actors.teacher import Teacher
@@ -321,7 +321,7 @@ def test_generator_torch_learner_and_teacher_agree_before_and_after_a_step(twin_
     model_dir = twin_root / family
     learner = Learner(_learner_cfg("torch"), str(model_dir))
     try:
-        weights = _check_component_agreement(model_dir, learner, family)
+        weights = assert_components_agree(model_dir, learner, family)
         # The learner's checkpoint is a Hugging Face checkpoint that transformers loads unchanged.
         learner.save_checkpoint(str(tmp_path), max_shard_size="1MB")
     finally:
@@ -344,7 +344,7 @@ def test_zero3_two_ranks_agree_with_generator_and_teacher(ray_cluster, twin_root
     model_dir = twin_root / family
     learner = Learner(_learner_cfg("deepspeed"), str(model_dir))
     try:
-        _check_component_agreement(model_dir, learner, family)
+        assert_components_agree(model_dir, learner, family)
     finally:
         learner.shutdown()
 
