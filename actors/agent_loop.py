@@ -126,7 +126,21 @@ def summarize_final_info(info: dict[str, Any], reward: float) -> dict[str, Any]:
     trajectory = info.get("trajectory")
     return {"reward": float(reward), "reward_components": dict(info.get("reward_components") or {}),
             "is_correct": bool(info.get("is_correct", False)), "safety_violations": violations,
-            "submitted_answer": getattr(trajectory, "submitted_answer", None)}
+            "submitted_answer": getattr(trajectory, "submitted_answer", None),
+            "episode": episode_record(trajectory)}
+
+
+#: What `episode_record` leaves out: the system prompt (the same for every episode of a domain) and
+#: wall-clock durations (so the record of a re-run episode is identical).
+_EPISODE_EXCLUDE = {"system_prompt": True,
+                    "turns": {"__all__": {"duration_s": True, "tool_calls": {"__all__": {"duration_s"}}}}}
+
+
+def episode_record(trajectory: Any) -> dict[str, Any] | None:
+    """The env's `Trajectory` as plain JSON data for `RolloutSample.episode` (None without one)."""
+    if trajectory is None or not hasattr(trajectory, "model_dump"):
+        return None
+    return trajectory.model_dump(mode="json", exclude=_EPISODE_EXCLUDE)
 
 
 def make_env(domain: str, split: str | None, max_turns: int, env_kwargs: dict[str, Any] | None = None):
@@ -312,7 +326,7 @@ class AgentLoop:
             sampling_logprobs=logprobs, policy_versions=versions, turns=turns,
             reward=float(final["reward"]), reward_components=dict(final["reward_components"]),
             correct=bool(final["is_correct"]), truncated=bool(truncation), num_tool_calls=num_tool_calls,
-            response_tokens=response_tokens,
+            response_tokens=response_tokens, episode=final.get("episode"),
             metadata={"truncation": truncation, "env_reward": float(final["reward"]),
                       "is_correct": bool(final["is_correct"]), "num_turns": len(turns),
                       "group_index": spec.group_index, "split": spec.split, **timings},

@@ -12,6 +12,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from envs.core.trajectory import Trajectory
+
 
 class TurnSpan(BaseModel):
     """Token positions [start, end) of one assistant turn's generated tokens in `input_ids`."""
@@ -44,6 +46,11 @@ class RolloutSample(BaseModel):
     num_tool_calls: int = 0
     response_tokens: int = 0               # assistant tokens over all turns (the L of Eq. 4)
     metadata: dict[str, Any] = Field(default_factory=dict)
+    # The env's episode record (tool calls with arguments, observations, parse errors, the submitted
+    # answer, the reward's reasons and safety violations), for people reading a run (`hcgym view`);
+    # never used by the loss. Without the system prompt (one per domain) and wall-clock durations, so
+    # a re-run of the same episode gives the same record.
+    episode: Trajectory | None = None
 
     @model_validator(mode="after")
     def _aligned(self) -> "RolloutSample":

@@ -166,7 +166,7 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, Any]]:
 # Trajectories <-> Parquet
 # ---------------------------------------------------------------------------------------------
 
-_JSON_FIELDS = ("turns", "reward_components", "metadata")
+_JSON_FIELDS = ("turns", "reward_components", "metadata", "episode")
 
 
 def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: int,
@@ -205,6 +205,7 @@ def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: i
         ("policy_versions", pa.list_(pa.int32())), ("turns", pa.string()), ("reward", pa.float64()),
         ("reward_components", pa.string()), ("correct", pa.bool_()), ("truncated", pa.bool_()),
         ("num_tool_calls", pa.int32()), ("response_tokens", pa.int32()), ("metadata", pa.string()),
+        ("episode", pa.string()),
         ("step", pa.int32()), ("accepted", pa.bool_()), ("teacher_logprobs", pa.list_(pa.float32())),
         ("teacher_version", pa.int32()), ("teacher_hint", pa.string()),
     ])
@@ -231,7 +232,8 @@ def read_samples(path: str | Path) -> tuple[list[RolloutSample], dict[str, dict[
     for row in pq.read_table(str(path)).to_pylist():
         extra = {k: row.pop(k) for k in ("step", "accepted", "teacher_logprobs", "teacher_version", "teacher_hint")}
         for name in _JSON_FIELDS:
-            row[name] = json.loads(row[name])
+            if name in row:  # files written before a column existed (e.g. `episode`) still read
+                row[name] = json.loads(row[name])
         # float32 storage: the log-probs come back rounded to float32, which is what the learner uses.
         sample = RolloutSample.model_validate(row)
         samples.append(sample)

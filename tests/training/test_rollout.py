@@ -258,3 +258,22 @@ def test_stale_generator_refuses_and_weights_update(ward_policy_dir, stop_ids, t
         gen.update_weights({**state, "bogus.weight": torch.zeros(1)}, 3)
     with pytest.raises(ValueError, match="unknown"):
         make_generator("nope", ward_policy_dir, SamplingConfig(), stop_ids)
+
+
+def test_the_sample_carries_the_envs_episode_record_through_parquet(tokenizer, hf, tmp_path):
+    """What `hcgym view` shows of a training episode is the env's own record: its turns are the
+    actions the agent loop sent, its observations what the env answered, and it survives Parquet."""
+    from learner.metrics import read_samples, write_samples
+
+    loop = AgentLoop(tokenizer, RolloutLimits(max_turns=3, max_new_tokens_per_turn=12))
+    env = RecordingEnv(3)
+    sample = run(loop.run(spec(seed=5), env, hf_generate(hf)))
+    record = sample.episode
+    assert record is not None and record.task_id == "ward_dose" and record.system_prompt == ""
+    assert [t.action for t in record.turns] == [loop.action_text(sample.input_ids[s.start:s.end]) for s in sample.turns]
+    assert [t.observation for t in record.turns] == [step[0] for step in env.steps]
+    assert record.reward == pytest.approx(sample.reward)
+    again = run(loop.run(spec(seed=5), RecordingEnv(3), hf_generate(hf)))
+    assert again.episode == record, "the record of a re-run episode differs (durations must stay out)"
+    back, _ = read_samples(write_samples([sample], tmp_path / "s.parquet", step=1))
+    assert back[0].episode == record
