@@ -14,6 +14,51 @@ class DataFileError(ValueError):
     """A data file (database, tasks) is missing or malformed; the message names file and field."""
 
 
+def read_text_file(path: str | Path, what: str) -> str:
+    """The UTF-8 text of a data file (a leading BOM is dropped); every failure names the file.
+
+    Args:
+        path: The file.
+        what: What the file is, for the message ("task file", "database file", ...).
+
+    Raises:
+        DataFileError: missing, unreadable, or not UTF-8 (with the line and byte offset of the
+            first bad byte, so a Latin-1 or UTF-16 file is found without a hex editor).
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise DataFileError(f"{path}: {what} not found") from None
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    try:
+        # utf-8-sig: files saved by Windows editors start with a BOM; the text itself is the same.
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise DataFileError(f"{path}: {what} is not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}, "
+                            f"offset {exc.start}); re-save it as UTF-8") from None
+
+
+def read_json_file(path: str | Path, what: str) -> Any:
+    """Parse a JSON data file; every failure names the file (and the line and column of a syntax error).
+
+    Raises:
+        DataFileError: see `read_text_file`, plus invalid JSON, nesting too deep to parse, or a
+            number too long to convert (Python's int limit).
+    """
+    text = read_text_file(path, what)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DataFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    except RecursionError:
+        raise DataFileError(f"{path}: {what} is nested too deeply to parse") from None
+    except ValueError as exc:  # e.g. an integer literal over sys.get_int_max_str_digits() digits
+        raise DataFileError(f"{path}: {what} holds a value JSON cannot convert ({exc})") from None
+
+
 def format_validation_error(exc: ValidationError, *, source: str, item: str | None = None) -> str:
     """One line per problem: `file [item] field.path: message (got value)`."""
     lines = []
@@ -35,10 +80,7 @@ class DB(BaseModel):
         path = Path(path)
         if not path.exists():
             raise DataFileError(f"{path}: database file not found (run `hcgym data build`)")
-        try:
-            raw = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise DataFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+        raw = read_json_file(path, "database file")
         try:
             return cls.model_validate(raw)
         except ValidationError as exc:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from envs.core.db import DB, DataFileError
+from envs.core.db import DB, DataFileError, read_text_file
 from envs.core.paths import data_dir
 from envs.core.task import Task, load_split, load_tasks
 from envs.core.tools import Toolkit
@@ -123,7 +123,7 @@ def read_policy(package_dir: Path) -> str:
     path = package_dir / "policy.md"
     if not path.exists():
         raise DataFileError(f"{path}: the domain policy is missing")
-    return path.read_text(encoding="utf-8").strip()
+    return read_text_file(path, "domain policy").strip()
 
 
 def write_split(path: Path, splits: dict[str, list[str]]) -> None:

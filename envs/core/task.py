@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from envs.core.db import DataFileError, format_validation_error
+from envs.core.db import DataFileError, format_validation_error, read_json_file
 
 AnswerType = Literal["choice", "exact", "numeric", "category", "free_text", "none"]
 RewardBasis = Literal["ACTION", "NL_ASSERTION", "ANSWER", "DB", "RUBRIC"]
@@ -174,10 +174,7 @@ def load_tasks(path: str | Path, *, domain: str | None = None) -> list[Task]:
     path = Path(path)
     if not path.exists():
         raise DataFileError(f"{path}: task file not found (run `hcgym data build`)")
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    raw = read_json_file(path, "task file")
     return parse_tasks(raw, source=str(path), domain=domain)
 
 
@@ -192,12 +189,14 @@ def load_split(path: str | Path) -> dict[str, list[str]]:
     path = Path(path)
     if not path.exists():
         raise DataFileError(f"{path}: split file not found (run `hcgym data build`)")
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataFileError(f"{path}: not valid JSON at line {exc.lineno}: {exc.msg}") from None
-    if not isinstance(raw, dict) or not all(
-        isinstance(v, list) and all(isinstance(i, str) for i in v) for v in raw.values()
-    ):
-        raise DataFileError(f"{path}: expected {{split name: [task ids]}}")
+    raw = read_json_file(path, "split file")
+    if not isinstance(raw, dict):
+        raise DataFileError(f"{path}: expected {{split name: [task ids]}}, got a JSON {type(raw).__name__}")
+    for split, ids in raw.items():
+        if not isinstance(ids, list):
+            raise DataFileError(f"{path} split {split!r}: expected a list of task ids, got {type(ids).__name__}")
+        for index, task_id in enumerate(ids):
+            if not isinstance(task_id, str):
+                raise DataFileError(f"{path} split {split!r} entry #{index}: expected a task id string, "
+                                    f"got {type(task_id).__name__}")
     return raw
