@@ -465,7 +465,7 @@ class Teacher:
 
     def load(self, directory: str) -> None:
         src = Path(directory) / "teacher"
-        meta = read_json(src / "teacher_state.json")
+        meta = read_json(src / "teacher_state.json", required={"version": int})
         self.set_state({"weights": load_tensors(src / "teacher.safetensors"), "version": meta["version"],
                         "history": meta.get("history", [])})
 

@@ -16,71 +16,169 @@ Layout of a run's checkpoints (the driver owns the directory; each actor writes 
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
+import re
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
 
 LATEST = "latest"
+STEP_DIR_PATTERN = re.compile(r"step_\d{6,}")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is unreadable, malformed or points outside its run; the message names the file."""
+
+
+def find_non_finite(obj: Any, path: str = "") -> str | None:
+    """The key path (`history[3].kl`) of the first NaN or infinity in a JSON-ready value, or None."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return path or "<top level>"
+    if isinstance(obj, dict):
+        for key, value in obj.items():
+            found = find_non_finite(value, f"{path}.{key}" if path else str(key))
+            if found:
+                return found
+    elif isinstance(obj, (list, tuple)):
+        for index, value in enumerate(obj):
+            found = find_non_finite(value, f"{path}[{index}]")
+            if found:
+                return found
+    return None
 
 
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
-    """Write JSON through a temporary file and rename, so readers never see half a file."""
+    """Write JSON through a temporary file and rename, so readers never see half a file.
+
+    NaN and infinity are refused (strict JSON has no spelling for them; Python would write the bare
+    token `NaN`, which other readers reject, and a checkpoint must reload to the values it saved).
+    On any failure the temporary file is removed and the previous file, if any, is left as it was.
+
+    Raises:
+        CheckpointError: naming the file and the key path of the first non-finite number.
+        TypeError: naming the file, for a value JSON cannot represent.
+    """
     path = Path(path)
+    bad = find_non_finite(obj)
+    if bad is not None:
+        raise CheckpointError(f"{path}: refusing to write a non-finite number (NaN or infinity) at key {bad!r}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as handle:
-        json.dump(obj, handle, indent=1, sort_keys=True)
-    os.replace(tmp, path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            json.dump(obj, handle, indent=1, sort_keys=True, allow_nan=False)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, TypeError):
+            raise TypeError(f"{path}: {exc}") from exc
+        raise
 
 
-def read_json(path: str | os.PathLike) -> Any:
+def _replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """`write(tmp)` then rename over `path`; the temporary file is removed if anything fails."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def read_json(path: str | os.PathLike, required: dict[str, type | tuple[type, ...]] | None = None) -> Any:
+    """A JSON checkpoint file; every failure names the file.
+
+    Args:
+        path: The file.
+        required: Keys the top-level object must have, with their types (`bool` never counts as `int`).
+
+    Raises:
+        FileNotFoundError: the file is missing.
+        CheckpointError: unreadable, not UTF-8, truncated or invalid JSON, or a required key missing
+            or of the wrong type.
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"checkpoint file missing: {path}")
-    with open(path) as handle:
-        return json.load(handle)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise CheckpointError(f"{path}: cannot read the checkpoint file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise CheckpointError(f"{path}: checkpoint file is not UTF-8 text (bad byte at offset {exc.start})") from None
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        # A save cut short ends mid-value: the parser stops at the end or inside an open string.
+        cut_short = exc.pos >= len(text.rstrip()) or exc.msg.startswith("Unterminated string")
+        hint = " (truncated?)" if cut_short else ""
+        raise CheckpointError(f"{path}: not valid JSON{hint} at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    except (RecursionError, ValueError) as exc:
+        raise CheckpointError(f"{path}: checkpoint file cannot be parsed ({type(exc).__name__})") from None
+    for key, kind in (required or {}).items():
+        if not isinstance(obj, dict):
+            raise CheckpointError(f"{path}: expected a JSON object with key {key!r}, got a JSON {type(obj).__name__}")
+        if key not in obj:
+            raise CheckpointError(f"{path}: missing key {key!r}")
+        value = obj[key]
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+            names = " or ".join(k.__name__ for k in kinds)
+            raise CheckpointError(f"{path}: key {key!r} should be {names}, got {type(value).__name__} {value!r:.60}")
+    return obj
 
 
 def save_tensors(path: str | os.PathLike, tensors: dict[str, torch.Tensor], metadata: dict[str, str] | None = None) -> None:
     """Save a flat name -> tensor dict with safetensors (contiguous CPU copies, atomic rename)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     clean = {k: v.detach().to("cpu").contiguous() for k, v in tensors.items()}
-    tmp = path.with_name(f".{path.name}.tmp")
-    save_file(clean, str(tmp), metadata=metadata)
-    os.replace(tmp, path)
+    _replace_atomic(path, lambda tmp: save_file(clean, str(tmp), metadata=metadata))
 
 
 def load_tensors(path: str | os.PathLike, device: str = "cpu") -> dict[str, torch.Tensor]:
-    """Load a safetensors file (no pickle involved)."""
+    """Load a safetensors file (no pickle involved).
+
+    Raises:
+        FileNotFoundError: the file is missing.
+        CheckpointError: naming the file, when it is not a valid safetensors file (truncated, corrupt).
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"checkpoint tensor file missing: {path}")
-    return load_file(str(path), device=device)
+    try:
+        return load_file(str(path), device=device)
+    except Exception as exc:  # safetensors raises SafetensorError / OSError with no file name
+        raise CheckpointError(f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})") from None
 
 
 def save_torch_state(path: str | os.PathLike, obj: Any) -> None:
     """torch.save for optimizer states: only tensors and plain containers, so `load_torch_state` can read it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    _replace_atomic(Path(path), lambda tmp: torch.save(obj, tmp))
 
 
 def load_torch_state(path: str | os.PathLike) -> Any:
-    """torch.load with `weights_only=True`: refuses anything but tensors and primitive containers."""
+    """torch.load with `weights_only=True`: refuses anything but tensors and primitive containers.
+
+    Raises:
+        FileNotFoundError: the file is missing.
+        CheckpointError: naming the file, when it is corrupt or holds objects weights-only loading refuses.
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"checkpoint state file missing: {path}")
-    return torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # pickle.UnpicklingError, RuntimeError (bad zip), EOFError ...
+        raise CheckpointError(f"{path}: not a loadable weights-only torch state ({type(exc).__name__}: {exc})") from None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -102,18 +200,46 @@ def capture_rng_state() -> dict[str, Any]:
     return state
 
 
-def restore_rng_state(state: dict[str, Any]) -> None:
-    """Inverse of `capture_rng_state`."""
+def restore_rng_state(state: dict[str, Any], source: str | os.PathLike | None = None) -> None:
+    """Inverse of `capture_rng_state`.
+
+    Args:
+        state: What `capture_rng_state` returned (read back from JSON).
+        source: The file it came from, named in errors.
+
+    Raises:
+        ValueError: an entry is missing or malformed (a `CheckpointError` naming `source` when given).
+    """
+    where = f"{source}: " if source is not None else ""
+    error = CheckpointError if source is not None else ValueError
+    if not isinstance(state, dict):
+        raise error(f"{where}RNG state should be a JSON object, got {type(state).__name__}")
     for key in ("python", "numpy", "torch"):
         if key not in state:
-            raise ValueError(f"RNG state lacks the {key!r} entry")
-    version, internal, gauss = state["python"]
-    random.setstate((version, tuple(internal), gauss))
-    name, keys, pos, has_gauss, cached = state["numpy"]
-    np.random.set_state((name, np.array(keys, dtype=np.uint32), pos, has_gauss, cached))
-    torch.set_rng_state(torch.tensor(state["torch"], dtype=torch.uint8))
-    if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all([torch.tensor(s, dtype=torch.uint8) for s in state["cuda"]])
+            raise error(f"{where}RNG state lacks the {key!r} entry")
+    entry = "python"
+    try:
+        version, internal, gauss = state["python"]
+        python_state = (version, tuple(internal), gauss)
+        random.Random().setstate(python_state)  # trial on a scratch generator: raises on a bad state
+        entry = "numpy"
+        name, keys, pos, has_gauss, cached = state["numpy"]
+        numpy_state = (name, np.array(keys, dtype=np.uint32), pos, has_gauss, cached)
+        np.random.RandomState().set_state(numpy_state)
+        entry = "torch"
+        torch_state = torch.tensor(state["torch"], dtype=torch.uint8)
+        torch.Generator().set_state(torch_state)
+        entry = "cuda"
+        cuda_states = [torch.tensor(s, dtype=torch.uint8) for s in state.get("cuda", [])]
+    except (TypeError, ValueError, IndexError, KeyError, OverflowError, RuntimeError) as exc:
+        raise error(f"{where}RNG state entry {entry!r} is malformed ({type(exc).__name__}: {exc})") from None
+    # Every entry parsed and was accepted by a scratch generator: only now touch the global ones,
+    # so a bad file leaves them as they were.
+    random.setstate(python_state)
+    np.random.set_state(numpy_state)
+    torch.set_rng_state(torch_state)
+    if cuda_states and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(cuda_states)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -132,19 +258,37 @@ def mark_latest(run_dir: str | os.PathLike, step: int) -> None:
     if not target.is_dir():
         raise FileNotFoundError(f"cannot mark missing checkpoint {target} as latest")
     latest = Path(run_dir) / "checkpoints" / LATEST
-    tmp = latest.with_name(f".{LATEST}.tmp")
-    tmp.write_text(target.name)
-    os.replace(tmp, latest)
+    _replace_atomic(latest, lambda tmp: tmp.write_text(target.name, encoding="utf-8"))
 
 
 def latest_checkpoint(run_dir: str | os.PathLike) -> Path | None:
-    """The directory `latest` points to, or None when the run has no finished checkpoint."""
-    latest = Path(run_dir) / "checkpoints" / LATEST
+    """The directory `latest` points to, or None when the run has no finished checkpoint.
+
+    `latest` holds one folder name, `step_NNNNNN`, of the run's own checkpoints folder; anything
+    else (a path, `..`, a symlink leading elsewhere) is refused, so a crafted or damaged run folder
+    cannot make a resume read files from outside it.
+
+    Raises:
+        CheckpointError: naming the `latest` file when it is unreadable or points anywhere else.
+        FileNotFoundError: the step folder it names does not exist.
+    """
+    root = Path(run_dir) / "checkpoints"
+    latest = root / LATEST
     if not latest.exists():
         return None
-    target = latest.parent / latest.read_text().strip()
+    try:
+        name = latest.read_bytes().decode("utf-8").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{latest}: unreadable ({type(exc).__name__}); expected a folder name like "
+                              f"step_000004") from None
+    if not STEP_DIR_PATTERN.fullmatch(name):
+        raise CheckpointError(f"{latest}: points to {name[:200]!r}, not a step folder of {root} "
+                              f"(expected a name like step_000004)")
+    target = root / name
     if not target.is_dir():
         raise FileNotFoundError(f"{latest} points to {target.name}, which does not exist")
+    if target.resolve().parent != root.resolve():
+        raise CheckpointError(f"{latest}: {name} resolves to {target.resolve()}, outside {root}")
     return target
 
 

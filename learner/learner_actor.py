@@ -289,7 +289,8 @@ class Learner:
             ValueError: If the checkpoint was written by another backend or world size.
         """
         src = Path(directory) / LEARNER_SUBDIR
-        meta = read_json(src / "learner_state.json")
+        meta = read_json(src / "learner_state.json", required={"step": int, "policy_version": int, "backend": str,
+                                                               "world_size": int})
         if meta["backend"] != self.config.backend or meta["world_size"] != self.world_size:
             raise ValueError(
                 f"checkpoint {src} was written by backend={meta['backend']} world_size={meta['world_size']}, "

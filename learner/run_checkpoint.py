@@ -8,11 +8,17 @@ from pathlib import Path
 from typing import Any, Callable
 
 from learner.batching import BatchScheduler
-from learner.checkpoint import (checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints, read_json,
-                                write_json_atomic)
+from learner.checkpoint import (CheckpointError, checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints,
+                                read_json, write_json_atomic)
 from learner.teacher_client import TeacherClient
 
 DRIVER_STATE = "driver.json"
+# What `restore_run_checkpoint` reads from driver.json before touching any actor: a file lacking one
+# fails naming the file and the key, not with a bare KeyError halfway through the restore.
+DRIVER_STATE_KEYS: dict[str, type | tuple[type, ...]] = {
+    "step": int, "teacher_version": int, "counters": dict, "sampler": dict, "next_seq": int, "consume_seq": int,
+    "readmit": list,
+}
 
 
 async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: TeacherClient | None,
@@ -44,12 +50,18 @@ async def restore_run_checkpoint(run_dir: Path, learner, teacher: TeacherClient 
     if directory is None:
         log(f"[resume] {run_dir} has no checkpoint yet: starting from step 0")
         return None
-    state = read_json(directory / DRIVER_STATE)
+    driver_file = directory / DRIVER_STATE
+    state = read_json(driver_file, required=DRIVER_STATE_KEYS)
+    step = state["step"]
+    if step < 1:
+        raise CheckpointError(f"{driver_file}: key 'step' should be >= 1, got {step}")
     learner_state = await learner.load_checkpoint.remote(str(directory))
-    step = int(state["step"])
     if int(learner_state["step"]) != step:
         raise RuntimeError(f"{directory}: learner step {learner_state['step']} != driver step {step}")
-    scheduler.load_state_dict(state, version=step)
+    try:
+        scheduler.load_state_dict(state, version=step)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{driver_file}: malformed data position ({type(exc).__name__}: {exc})") from None
     counters.update(state["counters"])
     if teacher is not None:
         await teacher.restore(str(directory), int(state["teacher_version"]))

@@ -377,11 +377,12 @@ class RankWorker:
     def load_rank_state(self, directory: str) -> None:
         directory = Path(directory)
         self.backend.load_state(directory)
-        restore_rng_state(read_json(directory / f"rng_rank{self.rank}.json"))
+        rng_file = directory / f"rng_rank{self.rank}.json"
+        restore_rng_state(read_json(rng_file), source=rng_file)
         # LearnerActor.save_checkpoint writes the version next to the rank states.
         learner_state = directory / "learner_state.json"
         if learner_state.exists():
-            self.policy_version = int(read_json(learner_state)["policy_version"])
+            self.policy_version = read_json(learner_state, required={"policy_version": int})["policy_version"]
 
     def shutdown(self) -> None:
         self.backend.shutdown()
