@@ -10,9 +10,14 @@ anywhere. Here a letter counts only where it is a committed answer:
 3. otherwise the text of exactly one option ("Pneumothorax due to pleural injury");
 4. otherwise a single parenthesised letter "(C)" that is an option.
 
-A hedge or a list ("A or C", "A, B, C, D", "either B or D") returns None, and a letter that is
-part of a word or a name ("Vitamin D", "Hepatitis B", "type A dissection", "B cells") is never
-read as an option.
+A hedge or a list ("A or C", "A, B, C, D", "either B or D") returns None, and so does every
+option listed after an answer marker ("Answer: A) Vitamin A, B) Vitamin C, C) Iron, D) Vitamin D"
+or one letter a line): a copy of the option list commits to nothing, it is not the first option.
+A letter that is part of a word or a name ("Vitamin D", "Hepatitis B", "type A dissection",
+"B cells") is never read as an option. An option's *text* given as the final answer after other
+options were discussed ("A rotator cuff tear is unlikely ... Final answer: pneumothorax due to
+pleural injury") is that option: the text after the last answer marker, or else the last sentence
+when it names one option without negating it, decides.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
-from envs.rewards.text import normalise_text
+from envs.rewards.text import negated, normalise_text
 
 _DEFAULT_LETTERS = "ABCDEFGHIJ"
 
@@ -78,6 +83,66 @@ def _compiled(letters: str) -> tuple[list[re.Pattern[str]], re.Pattern[str], re.
         rf"^\s*(?:(?i:final\s+answer|answer|option|choice|letter)\s*[:\-=]?\s*)?[(\[]?\s*([{letters}])\s*[)\]]?\s*[.:)]?\s*$"
     )
     return _commit_patterns(letters), paren, bare
+
+
+# An option letter written as a list item: "B)", "(B)", "B.", "B:", "B;", "B,", "B (text)", or a bare
+# letter followed by another one or by the end ("A B C D"). Used only on the text *after* a
+# commitment, to tell "Answer: A) ..., B) ..., C) ..., D) ..." (a copied option list) from an answer.
+_LIST_ITEM = re.compile(
+    r"(?<![A-Za-z0-9'])[(\[]?\s*([A-J])\s*(?:[)\]]|[.:;,](?=\s|$)|(?=\s*$)|(?=\s+\()|"
+    r"(?=\s+(?:or|and)\b)|(?=\s+[(\[]?[A-J](?![A-Za-z0-9'])))"
+)
+# Where a final answer given as text starts: after the last of these markers.
+_TEXT_MARKER = re.compile(
+    r"(?i:\b(?:final\s+)?answer\b(?:\s+(?:is|was|would\s+be|will\s+be|should\s+be))?\s*[:=\-\u2013\u2014]?|"
+    r"\b(?:most\s+likely|final|working)\s+diagnosis\b(?:\s+is)?\s*:?|"
+    r"\b(?:i|we)(?:'d|\s+would|\s+will|'ll)?\s+(?:choose|chose|select|pick|go\s+with|conclude|concluded|settle\s+on)\b|"
+    r"\bso\s+(?:it|this)\s+is\b|\btherefore\b|\bin\s+conclusion\b)"
+)
+_SENTENCE_END = re.compile(r"[.!?;\n]\s+|\n")
+
+
+def _lists_every_option(tail: str, committed: str, letters: str) -> bool:
+    """True when the text after a committed letter goes on to list the other options as items, so
+    that together with the committed letter every option (at least three) is named: a copied
+    option list, not an answer."""
+    listed = {m.group(1) for m in _LIST_ITEM.finditer(tail[:600]) if m.group(1) in letters}
+    named = listed | {committed}
+    return len(letters) >= 3 and named >= set(letters) if len(letters) <= 6 else len(named) >= 4
+
+
+def _trailing_bare_letters(clean: str, bare: re.Pattern[str]) -> set[str]:
+    """Distinct letters on the trailing run of lines that are each a bare letter ("A\nB\nC\nD")."""
+    found: set[str] = set()
+    for line in reversed(clean.rstrip().split("\n")):
+        match = bare.match(line) or (bare.match(line.upper()) if len(line.strip()) <= 12 else None)
+        if not match:
+            break
+        found.add(match.group(1))
+    return found
+
+
+def _final_option_text(text: str, options: dict[str, str]) -> str | None:
+    """The option whose text is given as the final answer when earlier text discusses others: the
+    single option named after the last answer marker, else the single option named, not negated,
+    in the last sentence."""
+    markers = list(_TEXT_MARKER.finditer(text))
+    if markers:
+        found = _option_text_match(text[markers[-1].end():], options)
+        if found is not None:
+            return found
+    whole = " " + normalise_text(text) + " "
+    if all(f" {phrase} " in whole for _, phrase in _option_phrases(tuple(sorted(options.items())))):
+        return None  # the question's option list, copied: no sentence of it is a commitment
+    parts = _SENTENCE_END.split(text.strip())
+    last = next((p for p in reversed(parts) if p.strip()), "")
+    found = _option_text_match(last, options)
+    if found is None:
+        return None
+    phrase = normalise_text(options[found])
+    norm_last = normalise_text(last)
+    position = norm_last.find(phrase)
+    return None if position < 0 or negated(norm_last, position) else found
 
 
 _LIST_ONLY = re.compile(r"^[\s(\[]*[A-J][)\]]?(?:\s*(?:,|/|\bor\b|\band\b|&)\s*[(\[]?[A-J][)\]]?)+[\s.]*$")
@@ -165,11 +230,15 @@ def extract_choice(text: str | None, options: dict[str, str] | list[str] | None 
     if len(lines) == 2:  # a bare letter on the last line ("...reasoning...\nB") is a commitment
         tail = bare.match(lines[1]) or (bare.match(lines[1].upper()) if len(lines[1].strip()) <= 12 else None)
         if tail:
+            if len(_trailing_bare_letters(clean, bare)) > 1:  # "Answer:\nA\nB\nC\nD": one letter a line
+                return None
             offset = len(lines[0]) + 1
             last = (offset + tail.start(1), tail.group(1), offset + tail.end(1))
     if last is not None:
         start, letter, end = last
         if _HEDGE_AFTER.match(clean[end:end + 20]) or _HEDGE_BEFORE.search(clean[max(0, start - 20):start]):
+            return None
+        if _lists_every_option(clean[end:], letter, letters):
             return None
         return letter
 
@@ -177,7 +246,7 @@ def extract_choice(text: str | None, options: dict[str, str] | list[str] | None 
         return None
     # 3. the text of exactly one option
     if option_texts:
-        by_text = _option_text_match(clean, option_texts)
+        by_text = _option_text_match(clean, option_texts) or _final_option_text(clean, option_texts)
         if by_text is not None:
             return by_text
 
