@@ -1,14 +1,26 @@
-"""Shared machinery for converters: row readers that keep line numbers, and the result type."""
+"""Shared machinery for converters: readers that keep file line numbers, and the result type.
+
+Every reader here takes benchmark files as users really have them (../shared/reference/benchmark_layouts.md):
+UTF-8 with or without a byte-order mark, LF or CRLF line ends, plain or gzip-compressed (`.gz`). Anything
+else stops with a `SourceFileError` that names the file and the line: another encoding (Latin-1 bytes that
+are not UTF-8), a truncated or damaged gzip stream. Rows are decoded one line at a time, so a bad byte is
+reported on its own line and a large file (MIMIC-III LABEVENTS) is streamed, never held whole.
+"""
 
 from __future__ import annotations
 
 import csv
+import gzip
 import json
+import zlib
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from envs.core.task import Task
+
+BOM = b"\xef\xbb\xbf"
 
 
 @dataclass
@@ -27,79 +39,189 @@ class ConversionResult:
     errors: list[RowError] = field(default_factory=list)
     # file-level facts the user must see in the import summary (e.g. which MedMCQA `cop` base was assumed)
     notes: list[str] = field(default_factory=list)
+    # rows read from the source (data rows / records), for the import table (read / imported / rejected)
+    rows_read: int = 0
 
     def add_error(self, path: Path, line: int, message: str) -> None:
         self.errors.append(RowError(str(path), line, message))
 
 
 class SourceFileError(ValueError):
-    """The whole file cannot be read (missing, wrong top-level shape)."""
+    """The whole file cannot be read (missing, wrong top-level shape, not UTF-8, damaged gzip)."""
+
+
+def _require_file(path: Path) -> None:
+    if not path.exists():
+        raise SourceFileError(f"{path}: file not found")
+    if not path.is_file():
+        raise SourceFileError(f"{path}: not a file")
+
+
+def _decode(raw: bytes, path: Path, line: int) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        byte = raw[exc.start]
+        raise SourceFileError(
+            f"{path}:{line}: not UTF-8 (byte 0x{byte:02x} at column {exc.start + 1}); the file looks like another "
+            "encoding (e.g. Latin-1 / Windows-1252): re-save it as UTF-8") from None
+
+
+def iter_lines(path: Path) -> Iterator[tuple[int, str]]:
+    """(1-based line number, text with its line end) for every line of a UTF-8 file, `.gz` decompressed.
+
+    The BOM is dropped from the first line; CRLF is kept (csv handles it, `str.strip` removes it)."""
+    _require_file(path)
+    opener = gzip.open if path.name.endswith(".gz") else open
+    number = 0
+    try:
+        with opener(path, "rb") as handle:
+            for number, raw in enumerate(handle, start=1):
+                if number == 1 and raw.startswith(BOM):
+                    raw = raw[len(BOM):]
+                yield number, _decode(raw, path, number)
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise SourceFileError(f"{path}:{number + 1}: damaged or truncated gzip file ({type(exc).__name__}: {exc}); "
+                              "download it again") from None
+
+
+def read_text(path: Path) -> str:
+    """The whole file as text (see `iter_lines` for what is accepted)."""
+    return "".join(text for _, text in iter_lines(path))
 
 
 def iter_jsonl(path: Path, result: ConversionResult) -> Iterator[tuple[int, dict[str, Any]]]:
     """Yield (line number, object) for each non-empty line; bad lines go to `result.errors`."""
-    if not path.exists():
-        raise SourceFileError(f"{path}: file not found")
-    with path.open(encoding="utf-8") as handle:
-        for number, line in enumerate(handle, start=1):
-            if not line.strip():
-                continue
-            try:
-                obj = json.loads(line)
-            except json.JSONDecodeError as exc:
-                result.add_error(path, number, f"not valid JSON: {exc.msg} at column {exc.colno}")
-                continue
-            if not isinstance(obj, dict):
-                result.add_error(path, number, f"expected a JSON object, got {type(obj).__name__}")
-                continue
-            yield number, obj
+    for number, line in iter_lines(path):
+        if not line.strip():
+            continue
+        result.rows_read += 1
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as exc:
+            result.add_error(path, number, f"not valid JSON: {exc.msg} at column {exc.colno}")
+            continue
+        if not isinstance(obj, dict):
+            result.add_error(path, number, f"expected a JSON object, got {type(obj).__name__}")
+            continue
+        yield number, obj
 
 
 def load_json(path: Path) -> Any:
-    if not path.exists():
-        raise SourceFileError(f"{path}: file not found")
+    text = read_text(path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise SourceFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+        raise SourceFileError(f"{path}:{exc.lineno}: not valid JSON at line {exc.lineno} column {exc.colno}: "
+                              f"{exc.msg}") from None
+
+
+def _line_at(text: str, position: int, cache: list[int]) -> int:
+    """1-based line of `position`; `cache` = [last position, its line] so a forward scan stays linear."""
+    last_pos, last_line = cache
+    if position < last_pos:
+        last_pos, last_line = 0, 1
+    line = last_line + text.count("\n", last_pos, position)
+    cache[0], cache[1] = position, line
+    return line
+
+
+def iter_json_array(path: Path, text: str, result: ConversionResult,
+                    what: str = "item") -> Iterator[tuple[int, int, Any]]:
+    """(item index 1-based, file line, value) for each item of a top-level JSON array.
+
+    Items are decoded one by one, so a damaged item is reported with its index and the line it starts
+    on, and the items before it are kept."""
+    decoder = json.JSONDecoder()
+    ws = " \t\r\n"
+    position = len(text) - len(text.lstrip(ws))
+    if not text.startswith("[", position):
+        raise SourceFileError(f"{path}: expected a JSON array")
+    position += 1
+    cache = [0, 1]
+    index = 0
+    while True:
+        while position < len(text) and text[position] in ws:
+            position += 1
+        if position >= len(text):
+            raise SourceFileError(f"{path}:{_line_at(text, position, cache)}: the JSON array is not closed "
+                                  f"(file truncated after {what} {index}?)")
+        if text[position] == "]":
+            return
+        if index:
+            if text[position] != ",":
+                raise SourceFileError(f"{path}:{_line_at(text, position, cache)}: expected ',' or ']' after "
+                                      f"{what} {index}")
+            position += 1
+            while position < len(text) and text[position] in ws:
+                position += 1
+        index += 1
+        line = _line_at(text, position, cache)
+        result.rows_read += 1
+        try:
+            value, position = decoder.raw_decode(text, position)
+        except json.JSONDecodeError as exc:
+            raise SourceFileError(f"{path}:{exc.lineno}: {what} {index} (starting on line {line}) is not valid JSON: "
+                                  f"{exc.msg} at line {exc.lineno} column {exc.colno}; the {index - 1} "
+                                  f"{what}s before it were read") from None
+        yield index, line, value
 
 
 def iter_json_records(path: Path, result: ConversionResult) -> Iterator[tuple[int, dict[str, Any]]]:
-    """A JSON array of objects (item index as the 'line', 1-based) or, failing that, JSON lines."""
-    text = path.read_text(encoding="utf-8") if path.exists() else None
-    if text is None:
-        raise SourceFileError(f"{path}: file not found")
-    stripped = text.lstrip()
-    if stripped.startswith("["):
-        data = load_json(path)
-        for index, obj in enumerate(data, start=1):
+    """A JSON array of objects or, failing that, JSON lines: (file line, object).
+
+    For an array, errors name the item index and its file line ("item 3: ...")."""
+    text = read_text(path)
+    if text.lstrip().startswith("["):
+        for index, line, obj in iter_json_array(path, text, result):
             if not isinstance(obj, dict):
-                result.add_error(path, index, f"item {index}: expected a JSON object, got {type(obj).__name__}")
+                result.add_error(path, line, f"item {index}: expected a JSON object, got {type(obj).__name__}")
                 continue
-            yield index, obj
+            obj = dict(obj)
+            obj["__item__"] = index
+            yield line, obj
     else:
         yield from iter_jsonl(path, result)
 
 
-def iter_csv(path: Path, result: ConversionResult, *, expected_columns: int) -> Iterator[tuple[int, list[str]]]:
-    if not path.exists():
-        raise SourceFileError(f"{path}: file not found")
-    with path.open(encoding="utf-8", newline="") as handle:
-        reader = csv.reader(handle)
-        while True:
-            try:
-                row = next(reader)
-            except StopIteration:
-                return
-            except csv.Error as exc:
-                result.add_error(path, reader.line_num, f"CSV error: {exc}")
-                continue
-            if not row or all(not cell.strip() for cell in row):
-                continue
-            if len(row) != expected_columns:
-                result.add_error(path, reader.line_num, f"expected {expected_columns} columns, got {len(row)}")
-                continue
-            yield reader.line_num, row
+def csv_rows(path: Path, lines: Iterable[tuple[int, str]] | None = None) -> Iterator[tuple[int, list[str] | None, str]]:
+    """(first line of the record, fields or None, CSV error message) over a CSV file: quoted fields may hold
+    commas and newlines (MMLU's questions do); the line reported is the line the record starts on."""
+    source = iter(lines if lines is not None else iter_lines(path))
+    state = {"line": 0}
+
+    def feed() -> Iterator[str]:
+        for number, text in source:
+            state["line"] = number
+            yield text
+
+    reader = csv.reader(feed())
+    while True:
+        start = state["line"] + 1
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            yield start, None, f"CSV error: {exc}"
+            continue
+        yield start, row, ""
+
+
+def iter_csv(path: Path, result: ConversionResult, *, expected_columns: int,
+             lines: Iterable[tuple[int, str]] | None = None) -> Iterator[tuple[int, list[str]]]:
+    for line, row, problem in csv_rows(path, lines):
+        if row is None:
+            result.rows_read += 1
+            result.add_error(path, line, problem)
+            continue
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        result.rows_read += 1
+        if len(row) != expected_columns:
+            result.add_error(path, line, f"expected {expected_columns} columns, got {len(row)}")
+            continue
+        yield line, row
 
 
 def require(obj: dict[str, Any], keys: list[str]) -> str | None:
@@ -109,3 +231,24 @@ def require(obj: dict[str, Any], keys: list[str]) -> str | None:
         if value is None or (isinstance(value, str) and not value.strip()):
             return key
     return None
+
+
+def confined_image(images: Path, name: str) -> tuple[Path | None, str | None]:
+    """The image file `name` inside the folder `images` (trying .jpg/.png/.jpeg when `name` has no extension).
+
+    Returns (path, None) or (None, the reason): a name that is absolute or climbs out of the folder
+    (`../../etc/passwd`, a symlink pointing elsewhere) is refused, so an imported task never points the
+    policy at a file outside the image folder the user named."""
+    root = images.resolve()
+    if not name.strip():
+        return None, "empty image name"
+    if Path(name).is_absolute() or "\x00" in name:
+        return None, f"image {name!r} is not a path inside the image folder {images}"
+    candidates = [images / name] + [images / f"{name}{ext}" for ext in (".jpg", ".png", ".jpeg")]
+    for candidate in candidates:
+        resolved = candidate.resolve()
+        if not resolved.is_relative_to(root):
+            return None, f"image {name!r} escapes the image folder {images} (resolves to {resolved})"
+        if resolved.is_file():
+            return resolved, None
+    return None, f"image {name!r} not found in {images}"

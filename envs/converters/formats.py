@@ -2,19 +2,26 @@
 
 | format | file | domain | gold |
 |---|---|---|---|
-| medqa | JSONL: question, options {A..}, answer_idx | medical_qa | option letter |
+| medqa | JSONL: question, answer (text), options {A..} (4 or 5), answer_idx, meta_info [, metamap_phrases, realidx] | medical_qa | option letter |
 | medmcqa | JSON lines: id, question, opa..opd, cop (1-4 as released, 0-3 in the HF layout: detected per file, `cop_base` overrides) | medical_qa | option letter |
-| mmlu | CSV without header: question, A, B, C, D, answer letter | medical_qa | option letter |
-| pubmedqa | JSON {pmid: {QUESTION, CONTEXTS, final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
+| mmlu | original CSV without header (question, A, B, C, D, answer letter); Hugging Face parquet or its CSV export (question, subject, choices [4], answer 0-3) | medical_qa | option letter |
+| pubmedqa | JSON {pmid: {QUESTION, CONTEXTS (list, or one string), final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
 | medlfqa | JSONL: Question, Free_form_answer, Must_have [..], Nice_to_have [..] | medical_qa | free text + rubric |
-| vqa-rad | JSON list: image_name, question, answer, answer_type (CLOSED/OPEN) + image folder | visual_diagnosis | yes/no choice or exact |
+| vqa-rad | JSON list: image_name, question, answer, answer_type (CLOSED/OPEN) + image folder | visual_diagnosis | closed: choice between the question's alternatives; open: exact |
 | slake | JSON list: img_name, question, answer, answer_type, q_lang + image folder | visual_diagnosis | same |
-| pathvqa | JSON list: image, question, answer + image folder | visual_diagnosis | same |
+| pathvqa | official pickled split (`*_vqa.pkl`, read by a restricted reader) or JSON: {image, question, answer} or LXMERT-style {img_id, sent, label {answer: score}} + image folder | visual_diagnosis | same |
 | pmc-vqa | CSV: Figure_path, Question, Answer, Choice A..D ("A:text"), Answer_label + image folder | visual_diagnosis | option letter |
 | vqa-med-2021 | text: image id, question, answer separated by pipes, one per line + image folder | visual_diagnosis | yes/no choice or exact |
 | quilt-vqa | JSON list / lines: image, question, answer, answer_type (closed/open) + image folder | visual_diagnosis | same |
 | mimic3 | folder: PATIENTS, ADMISSIONS, ICUSTAYS, LABEVENTS, D_LABITEMS, DIAGNOSES_ICD, D_ICD_DIAGNOSES (.csv/.csv.gz) | ehr_management | tool-computed |
 | eicu | folder: patient, lab, diagnosis (.csv/.csv.gz) | ehr_management | tool-computed |
+
+Every file may be UTF-8 with or without a BOM, with LF or CRLF line ends, and gzip-compressed (`.gz`);
+other encodings and damaged gzip stop with the file and line (`envs/converters/base.py`). Ids are
+`<format>_<hash of everything that makes the task distinct>` (question, options, answer, and the image or
+subject where there is one), so they are namespaced by source and two layouts of one question differ.
+Image names are resolved inside the image folder (`--image-dir`, default: the dataset file's folder);
+a name that escapes it is reported with its row.
 """
 
 from __future__ import annotations
@@ -33,9 +40,12 @@ from pydantic import ValidationError
 from envs.converters.base import (
     ConversionResult,
     SourceFileError,
+    confined_image,
+    csv_rows,
     iter_csv,
     iter_json_records,
     iter_jsonl,
+    iter_lines,
     load_json,
     require,
 )
@@ -61,6 +71,7 @@ def _mcq(fmt: str, key: str, question: str, options: dict[str, str], answer: str
     return {
         "id": _task_id(fmt, key), "domain": domain, "ticket": question.strip(), "options": options,
         "correct_answer": answer, "answer_type": "choice", "raw_question": question,
+        "raw_answer": options.get(answer),
         "description": {"source": fmt, "task_type": "multiple_choice", "category": "benchmark"},
         "evaluation_criteria": {"reward_basis": ["ANSWER"]},
         "metadata": extra or {},
@@ -72,7 +83,14 @@ def _options_key(options: dict[str, str]) -> str:
     return json.dumps(options, sort_keys=True, ensure_ascii=False)
 
 
+def _empty_options(options: dict[str, str]) -> list[str]:
+    return [letter for letter, text in options.items() if not str(text).strip()]
+
+
 def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    """MedQA (Jin et al. 2021) US files as released: `question`, `answer` (the option text), `options`
+    (4 or 5 letters), `answer_idx`, `meta_info`; the 4-option files add `metamap_phrases`, some
+    redistributions `realidx`. `answer`, when present, must be the text of option `answer_idx`."""
     result = ConversionResult()
     for line, row in iter_jsonl(path, result):
         missing = require(row, ["question", "options", "answer_idx"])
@@ -83,14 +101,24 @@ def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conversio
         if not isinstance(options, dict) or not options:
             result.add_error(path, line, "field 'options' must be an object of letter -> text")
             continue
+        options = {str(k).strip().upper(): str(v) for k, v in options.items()}
         answer = str(row["answer_idx"]).strip().upper()
         if answer not in options:
             result.add_error(path, line, f"answer_idx {answer!r} is not one of the options {sorted(options)}")
             continue
-        options = {str(k): str(v) for k, v in options.items()}
+        if _empty_options(options):
+            result.add_error(path, line, f"option(s) {_empty_options(options)} are empty")
+            continue
+        text = row.get("answer")
+        if isinstance(text, str) and text.strip() and text.strip() != options[answer].strip():
+            result.add_error(path, line, f"answer {text!r} is not the text of option {answer} "
+                                         f"({options[answer]!r}): answer_idx and answer disagree")
+            continue
+        extra = {"meta_info": row.get("meta_info")}
+        if row.get("realidx") is not None:
+            extra["realidx"] = row["realidx"]
         _add(result, path, line, _mcq("medqa", row["question"] + answer + _options_key(options), row["question"],
-                                      options, answer, domain,
-                                      {"meta_info": row.get("meta_info")}))
+                                      options, answer, domain, extra))
     return result
 
 
@@ -124,7 +152,7 @@ def _medmcqa_base(cops: list[int], path: Path, cop_base: int | None, result: Con
 def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int | None = None, **_: Any) -> ConversionResult:
     result = ConversionResult()
     rows: list[tuple[int, dict[str, Any], int]] = []
-    for line, row in iter_jsonl(path, result):
+    for line, row in iter_json_records(path, result):
         missing = require(row, ["question", *MEDMCQA_OPTION_FIELDS, "cop"])
         if missing:
             result.add_error(path, line, f"missing field {missing!r}")
@@ -149,30 +177,174 @@ def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int | None
     return result
 
 
+# -- MMLU --------------------------------------------------------------------------------------------
+# Original release (Hendrycks et al. 2021, data.tar): one header-less CSV per subject and split,
+# `question,A,B,C,D,answer_letter`, fields quoted where they hold commas or newlines.
+# Hugging Face `cais/mmlu`: parquet per subject/split with `question`, `subject`, `choices` (list of 4),
+# `answer` (int 0-3); its CSV export has the header `question,subject,choices,answer`, `choices` written
+# as a Python / JSON list or, from a pandas frame of numpy arrays, as `['a' 'b' 'c' 'd']`.
+MMLU_HF_COLUMNS = ("question", "choices", "answer")
+_PY_STRING = re.compile(r"""'(?:[^'\\]|\\.)*'|"(?:[^"\\]|\\.)*\"""", re.DOTALL)
+
+
+def parse_choices(text: str) -> list[str]:
+    """A `choices` cell of an MMLU CSV export -> the list of option texts (ValueError if it is not one)."""
+    import ast
+
+    cell = text.strip()
+    if cell.startswith("["):
+        try:
+            value = json.loads(cell)
+        except ValueError:
+            try:
+                value = ast.literal_eval(cell)  # literals only: never evaluates code
+            except (ValueError, SyntaxError):
+                value = None
+        if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+            return list(value)
+        # numpy's repr of a string array: quoted strings separated by whitespace, no commas
+        inner = cell[1:-1] if cell.endswith("]") else None
+        if inner is not None:
+            parts = _PY_STRING.findall(inner)
+            if parts and not _PY_STRING.sub("", inner).strip():
+                return [ast.literal_eval(p) for p in parts]
+    raise ValueError(f"'choices' is not a list of option texts: {text[:80]!r}")
+
+
+def _mmlu_row(result: ConversionResult, path: Path, line: int, domain: str, subject: str, question: str,
+              choices: list[str], answer: str) -> None:
+    if not question.strip():
+        result.add_error(path, line, "empty question")
+        return
+    if len(choices) != 4:
+        result.add_error(path, line, f"expected 4 choices, got {len(choices)}")
+        return
+    options = dict(zip("ABCD", (str(c) for c in choices)))
+    if _empty_options(options):
+        result.add_error(path, line, f"option(s) {_empty_options(options)} are empty")
+        return
+    _add(result, path, line, _mcq("mmlu", subject + question + answer + _options_key(options), question, options,
+                                  answer, domain, {"subject": subject}))
+
+
+def _mmlu_hf_answer(value: Any) -> str:
+    if isinstance(value, bool):  # JSON true is not an index
+        raise ValueError(f"answer must be an integer 0-3, got {value!r}")  # noqa: TRY004 (a row error, not a type bug)
+    if isinstance(value, str):
+        value = value.strip()
+        if value in ("0", "1", "2", "3"):
+            return "ABCD"[int(value)]
+        if value.upper() in ("A", "B", "C", "D"):
+            return value.upper()
+        raise ValueError(f"answer must be an integer 0-3, got {value!r}")
+    if isinstance(value, int) and 0 <= value <= 3:
+        return "ABCD"[value]
+    raise ValueError(f"answer must be an integer 0-3, got {value!r}")
+
+
+def _mmlu_parquet(path: Path, result: ConversionResult, domain: str, subject: str | None) -> None:
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:  # pragma: no cover - pyarrow is a dependency
+        raise SourceFileError(f"{path}: reading parquet needs pyarrow (pip install pyarrow)") from None
+    try:
+        table = pq.read_table(path)
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid / ArrowIOError derive from these
+        raise SourceFileError(f"{path}: not a readable parquet file ({type(exc).__name__}: {exc})") from None
+    absent = [c for c in MMLU_HF_COLUMNS if c not in table.column_names]
+    if absent:
+        raise SourceFileError(f"{path}: not an MMLU parquet: columns {absent} missing (found {table.column_names})")
+    fallback = subject or _mmlu_subject(path)
+    for number, row in enumerate(table.to_pylist(), start=1):
+        result.rows_read += 1
+        where = f"row {number}"
+        try:
+            answer = _mmlu_hf_answer(row["answer"])
+        except ValueError as exc:
+            result.add_error(path, number, f"{where}: {exc}")
+            continue
+        choices = row["choices"]
+        if not isinstance(choices, list):
+            result.add_error(path, number, f"{where}: 'choices' is not a list")
+            continue
+        _mmlu_row(result, path, number, domain, str(row.get("subject") or fallback), str(row["question"] or ""),
+                  [str(c) for c in choices], answer)
+
+
+def _mmlu_subject(path: Path) -> str:
+    stem = path.name.removesuffix(".gz").removesuffix(".csv").removesuffix(".parquet")
+    for suffix in ("_test", "_dev", "_val", "_validation", "_train", "_auxiliary_train"):
+        stem = stem.removesuffix(suffix)
+    return stem.removeprefix("test-").removeprefix("validation-").removeprefix("dev-")
+
+
 def convert_mmlu(path: Path, domain: str = "medical_qa", subject: str | None = None, **_: Any) -> ConversionResult:
     result = ConversionResult()
-    subject = subject or path.stem.removesuffix("_test").removesuffix("_dev").removesuffix("_val")
-    for line, row in iter_csv(path, result, expected_columns=6):
+    if path.name.endswith(".parquet"):
+        _mmlu_parquet(path, result, domain, subject)
+        return result
+    lines = iter_lines(path)
+    first = next(lines, None)
+    if first is None:
+        return result
+    header = next(csv.reader([first[1]]), [])
+    if [h.strip().lower() for h in header[:1]] == ["question"] and "choices" in [h.strip().lower() for h in header]:
+        # the Hugging Face CSV export: a header row, `choices` as a list, `answer` 0-3
+        columns = [h.strip().lower() for h in header]
+        absent = [c for c in MMLU_HF_COLUMNS if c not in columns]
+        if absent:
+            raise SourceFileError(f"{path}: MMLU CSV header lacks column(s) {absent} (found {header})")
+        fallback = subject or _mmlu_subject(path)
+        for line, row, problem in csv_rows(path, lines):
+            if row is None:
+                result.rows_read += 1
+                result.add_error(path, line, problem)
+                continue
+            if not row or all(not c.strip() for c in row):
+                continue
+            result.rows_read += 1
+            if len(row) != len(columns):
+                result.add_error(path, line, f"expected {len(columns)} columns, got {len(row)}")
+                continue
+            record = dict(zip(columns, row))
+            try:
+                answer = _mmlu_hf_answer(record["answer"])
+                choices = parse_choices(record["choices"])
+            except ValueError as exc:
+                result.add_error(path, line, str(exc))
+                continue
+            _mmlu_row(result, path, line, domain, record.get("subject") or fallback, record["question"], choices,
+                      answer)
+        return result
+    subject = subject or _mmlu_subject(path)
+    rows = iter_csv(path, result, expected_columns=6, lines=_chain(first, lines))
+    for line, row in rows:
         question, *choices, answer = row
         answer = answer.strip().upper()
         if answer not in "ABCD" or len(answer) != 1:
             result.add_error(path, line, f"answer column must be A-D, got {answer!r}")
             continue
-        options = dict(zip("ABCD", choices))
-        _add(result, path, line, _mcq("mmlu", subject + question + answer + _options_key(options), question, options, answer, domain,
-                                      {"subject": subject}))
+        _mmlu_row(result, path, line, domain, subject, question, choices, answer)
     return result
+
+
+def _chain(first: tuple[int, str], rest: Any) -> Any:
+    yield first
+    yield from rest
 
 
 PUBMEDQA_OPTIONS = {"A": "yes", "B": "no", "C": "maybe"}
 
 
 def convert_pubmedqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    """PubMedQA `ori_pqal.json` (and the unlabeled/artificial files, which share the layout):
+    {pmid: {QUESTION, CONTEXTS [..], LABELS, MESHES, YEAR, reasoning_*_pred, final_decision, LONG_ANSWER}}."""
     result = ConversionResult()
     data = load_json(path)
     if not isinstance(data, dict):
         raise SourceFileError(f"{path}: expected an object of pmid -> record, got {type(data).__name__}")
     for index, (pmid, row) in enumerate(data.items(), start=1):
+        result.rows_read += 1
         if not isinstance(row, dict):
             result.add_error(path, index, f"record {pmid}: expected an object")
             continue
@@ -186,6 +358,12 @@ def convert_pubmedqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conver
             result.add_error(path, index, f"record {pmid}: final_decision must be yes/no/maybe, got {decision!r}")
             continue
         contexts = row.get("CONTEXTS") or []
+        # a redistribution that joined the abstract into one string must not become one line per character
+        if isinstance(contexts, str):
+            contexts = [contexts]
+        if not isinstance(contexts, list):
+            result.add_error(path, index, f"record {pmid}: CONTEXTS must be a list of strings or a string")
+            continue
         ticket = "Context:\n" + "\n".join(str(c) for c in contexts) + f"\n\nQuestion: {row['QUESTION']}"
         task = _mcq("pubmedqa", str(pmid), ticket, dict(PUBMEDQA_OPTIONS), letter, domain,
                     {"pmid": str(pmid), "long_answer": row.get("LONG_ANSWER")})
@@ -195,6 +373,7 @@ def convert_pubmedqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conver
 
 
 def convert_medlfqa(path: Path, domain: str = "medical_qa", **_: Any) -> ConversionResult:
+    """MedLFQA (Jeong et al. 2024, OLAPH): JSON lines `Question`, `Free_form_answer`, `Must_have`, `Nice_to_have`."""
     result = ConversionResult()
     for line, row in iter_jsonl(path, result):
         missing = require(row, ["Question", "Free_form_answer"])
@@ -218,68 +397,158 @@ def convert_medlfqa(path: Path, domain: str = "medical_qa", **_: Any) -> Convers
     return result
 
 
-def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[..., ConversionResult]:
-    def convert(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
-                **_: Any) -> ConversionResult:
-        if image_dir is None:
-            raise SourceFileError(f"{fmt}: pass the image folder (--image-dir) that the JSON's {image_key!r} names refer to")
-        images = Path(image_dir)
-        if not images.is_dir():
-            raise SourceFileError(f"{images}: image folder not found")
-        result = ConversionResult()
-        for line, row in iter_json_records(path, result):
-            if lang_key and row.get(lang_key, "en") != "en":
-                continue  # SLAKE is bilingual; we keep the English questions
-            missing = require(row, [image_key, "question", "answer"])
-            if missing:
-                result.add_error(path, line, f"missing field {missing!r}")
-                continue
-            name = str(row[image_key])
-            candidates = [images / name] + [images / f"{name}{ext}" for ext in (".jpg", ".png", ".jpeg")]
-            image = next((c for c in candidates if c.is_file()), None)
-            if image is None:
-                result.add_error(path, line, f"image {name!r} not found in {images}")
-                continue
-            metadata = {k: row[k] for k in ("qid", "question_type", "modality", "location", "content_type") if k in row}
-            _add(result, path, line, _vqa_task(fmt, domain, name, image, str(row["question"]), str(row["answer"]),
-                                               str(row.get("answer_type", "")), metadata))
-        return result
-
-    return convert
-
-
-def _find_image(images: Path, name: str) -> Path | None:
-    candidates = [images / name] + [images / f"{name}{ext}" for ext in (".jpg", ".png", ".jpeg")]
-    return next((c for c in candidates if c.is_file()), None)
-
-
-def _image_folder(fmt: str, image_dir: str | Path | None, what: str) -> Path:
-    if image_dir is None:
-        raise SourceFileError(f"{fmt}: pass the image folder (--image-dir) that the file's {what} refer to")
-    images = Path(image_dir)
+# -- VQA -----------------------------------------------------------------------------------------------
+def _image_folder(fmt: str, image_dir: str | Path | None, path: Path) -> Path:
+    """The folder image names are resolved in: the one given, else the dataset file's own folder."""
+    images = Path(image_dir) if image_dir is not None else path.resolve().parent
     if not images.is_dir():
-        raise SourceFileError(f"{images}: image folder not found")
+        raise SourceFileError(f"{images}: image folder not found (--image-dir for {fmt})")
     return images
+
+
+def _item(row: dict[str, Any]) -> str:
+    return f"item {row['__item__']}: " if "__item__" in row else ""
+
+
+_ARTICLES = {"a", "an", "the"}
+
+
+def _words(text: str) -> list[str]:
+    return [w for w in re.findall(r"[\w\-+/.]+", text.lower()) if w not in _ARTICLES]
+
+
+def closed_alternatives(question: str, answer: str) -> list[str] | None:
+    """The two alternatives of a closed question "Is this a CT or an MRI?" as written, when the answer is one.
+
+    The question must hold one " or "; the answer must be the words just before it or just after it
+    (articles ignored); the other alternative is as many words on the other side. None otherwise."""
+    text = question.strip().rstrip("?.! ")
+    parts = re.split(r"\s+or\s+", text, flags=re.IGNORECASE)
+    if len(parts) != 2:
+        return None
+    left, right = _words(parts[0]), _words(re.split(r"[,;:]", parts[1])[0])
+    want = _words(answer)
+    n = len(want)
+    if not n or n > len(left) or n > len(right):
+        return None
+    if left[-n:] == want:
+        return [" ".join(want), " ".join(right[:n])]
+    if right[:n] == want:
+        return [" ".join(left[-n:]), " ".join(want)]
+    return None
 
 
 def _vqa_task(fmt: str, domain: str, name: str, image: Path, question: str, answer: str, answer_type: str,
               metadata: dict[str, Any]) -> dict[str, Any]:
-    """A yes/no answer (or a CLOSED one) becomes a two-option choice; anything else an exact-match answer."""
+    """A closed question becomes a choice: yes/no, or the two alternatives it names ("left or right?");
+    a closed answer that is neither stays a closed question graded on the exact answer; open ones are exact."""
     answer = answer.strip()
-    closed = answer.lower() in ("yes", "no") or answer_type.upper() == "CLOSED"
+    closed = answer.lower() in ("yes", "no") or answer_type.strip().upper() == "CLOSED"
     base = {
         "id": _task_id(fmt, f"{name}|{question}|{answer}"), "domain": domain,
-        "ticket": question, "image_path": str(image.resolve()),
+        "ticket": question, "image_path": str(image),
         "description": {"source": fmt, "task_type": "vqa_closed" if closed else "vqa_open"},
         "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+        "raw_question": question, "raw_answer": answer,
         "metadata": metadata,
     }
+    alternatives = closed_alternatives(question, answer) if closed and answer.lower() not in ("yes", "no") else None
     if closed and answer.lower() in ("yes", "no"):
         base.update(options={"A": "yes", "B": "no"}, correct_answer="A" if answer.lower() == "yes" else "B",
                     answer_type="choice")
+    elif alternatives and alternatives[0] != alternatives[1]:
+        gold = _words(answer)
+        options = {"A": alternatives[0], "B": alternatives[1]}
+        letter = "A" if _words(alternatives[0]) == gold else "B"
+        base.update(options=options, correct_answer=letter, answer_type="choice")
+        base["metadata"] = {**metadata, "closed_alternatives": "from the question"}
     else:
         base.update(correct_answer=answer, answer_type="exact")
     return base
+
+
+# PathVQA (He et al. 2020, github.com/UCSD-AI4H/PathVQA): the released split files are pickles
+# (`qas/train_vqa.pkl`, `val_vqa.pkl`, `test_vqa.pkl`), each a list of dicts; rows are either
+# {image, question, answer} or LXMERT-style {img_id, sent, label {answer: score}, question_id, answer_type}.
+# They are read by envs/data/safe_pickle.load_plain_pickle, which refuses anything but plain data.
+def _pathvqa_fields(row: dict[str, Any]) -> tuple[str | None, str | None, str | None, str]:
+    image = row.get("image") if row.get("image") is not None else row.get("img_id")
+    question = row.get("question") if row.get("question") is not None else row.get("sent")
+    answer = row.get("answer")
+    if answer is None and isinstance(row.get("label"), dict) and row["label"]:
+        label = row["label"]
+        answer = max(label, key=lambda k: (label[k], k))  # the highest-scored answer (PathVQA has one, score 1)
+    kind = str(row.get("answer_type") or "")
+    if kind.lower() in ("yes/no", "yes_no"):
+        kind = "CLOSED"
+    return (None if image is None else str(image), None if question is None else str(question),
+            None if answer is None else str(answer), kind)
+
+
+def _pathvqa_rows(path: Path, result: ConversionResult) -> Any:
+    if path.name.endswith((".pkl", ".pickle", ".pkl.gz")):
+        from envs.data.safe_pickle import load_plain_pickle
+
+        data = load_plain_pickle(_read_bytes(path), source=str(path))
+        if isinstance(data, dict):  # some copies key the rows by question id
+            data = list(data.values())
+        if not isinstance(data, list):
+            raise SourceFileError(f"{path}: expected a pickled list of question records, got {type(data).__name__}")
+        for index, row in enumerate(data, start=1):
+            result.rows_read += 1
+            if not isinstance(row, dict):
+                result.add_error(path, index, f"record {index}: expected a dict, got {type(row).__name__}")
+                continue
+            yield index, {**row, "__item__": index}
+        return
+    yield from iter_json_records(path, result)
+
+
+def _read_bytes(path: Path) -> bytes:
+    import gzip
+    import zlib
+
+    if not path.is_file():
+        raise SourceFileError(f"{path}: file not found")
+    try:
+        return gzip.decompress(path.read_bytes()) if path.name.endswith(".gz") else path.read_bytes()
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise SourceFileError(f"{path}: damaged or truncated gzip file ({type(exc).__name__}: {exc})") from None
+
+
+def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[..., ConversionResult]:
+    def convert(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
+                **_: Any) -> ConversionResult:
+        images = _image_folder(fmt, image_dir, path)
+        result = ConversionResult()
+        rows = _pathvqa_rows(path, result) if fmt == "pathvqa" else iter_json_records(path, result)
+        for line, row in rows:
+            item = _item(row)
+            if lang_key and row.get(lang_key, "en") != "en":
+                continue  # SLAKE is bilingual; we keep the English questions
+            if fmt == "pathvqa":
+                name, question, answer, kind = _pathvqa_fields(row)
+                if name is None or not question or answer is None or not answer.strip():
+                    missing = "image" if name is None else "question" if not question else "answer"
+                    result.add_error(path, line, f"{item}missing field {missing!r}")
+                    continue
+            else:
+                missing = require(row, [image_key, "question", "answer"])
+                if missing:
+                    result.add_error(path, line, f"{item}missing field {missing!r}")
+                    continue
+                name, question, answer, kind = (str(row[image_key]), str(row["question"]), str(row["answer"]),
+                                                str(row.get("answer_type", "")))
+            image, problem = confined_image(images, name)
+            if image is None:
+                result.add_error(path, line, f"{item}{problem}")
+                continue
+            metadata = {k: row[k] for k in ("qid", "question_id", "question_type", "modality", "location",
+                                            "content_type") if k in row}
+            _add(result, path, line, _vqa_task(fmt, domain, name, image, question, answer, kind, metadata))
+        return result
+
+    return convert
 
 
 # PMC-VQA (Zhang et al. 2023), as distributed at huggingface.co/datasets/xmcmic/PMC-VQA (README "Sample"):
@@ -292,44 +561,51 @@ _CHOICE_PREFIX = re.compile(r"^\s*([A-D])\s*[:.)]\s*")
 
 def convert_pmc_vqa(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
                     **_: Any) -> ConversionResult:
-    images = _image_folder("pmc-vqa", image_dir, "'Figure_path' names")
-    if not path.exists():
-        raise SourceFileError(f"{path}: file not found")
+    images = _image_folder("pmc-vqa", image_dir, path)
     result = ConversionResult()
-    # utf-8-sig: a file saved by a spreadsheet tool starts with a BOM that would rename the first column
-    with path.open(encoding="utf-8-sig", newline="") as handle:
-        reader = csv.DictReader(handle)
-        header = reader.fieldnames or []
-        absent = [c for c in PMC_VQA_COLUMNS if c not in header]
-        if absent:
-            raise SourceFileError(f"{path}: not a PMC-VQA CSV: header lacks column(s) {absent} (found {header})")
-        for row in reader:
-            line = reader.line_num
-            missing = require(row, ["Figure_path", "Question", "Answer_label"])
-            if missing:
-                result.add_error(path, line, f"missing field {missing!r}")
-                continue
-            options = {}
-            for letter in "ABCD":
-                text = (row.get(f"Choice {letter}") or "").strip()
-                if text:
-                    options[letter] = _CHOICE_PREFIX.sub("", text, count=1).strip()
-            label = row["Answer_label"].strip().upper()
-            if label not in options:
-                result.add_error(path, line, f"Answer_label {label!r} is not one of the choices {sorted(options)}")
-                continue
-            image = _find_image(images, row["Figure_path"].strip())
-            if image is None:
-                result.add_error(path, line, f"image {row['Figure_path']!r} not found in {images}")
-                continue
-            _add(result, path, line, {
-                "id": _task_id("pmc-vqa", f"{row['Figure_path']}|{row['Question']}|{label}"), "domain": domain,
-                "ticket": row["Question"].strip(), "image_path": str(image.resolve()), "options": options,
-                "correct_answer": label, "answer_type": "choice",
-                "description": {"source": "pmc-vqa", "task_type": "vqa_choice"},
-                "evaluation_criteria": {"reward_basis": ["ANSWER"]},
-                "metadata": {"figure": row["Figure_path"].strip(), "answer_text": (row.get("Answer") or "").strip()},
-            })
+    records = csv_rows(path)
+    first = next(records, None)
+    header = [h.strip() for h in first[1]] if first and first[1] else []
+    absent = [c for c in PMC_VQA_COLUMNS if c not in header]
+    if absent:
+        raise SourceFileError(f"{path}: not a PMC-VQA CSV: header lacks column(s) {absent} (found {header})")
+    for line, cells, problem in records:
+        if cells is None:
+            result.rows_read += 1
+            result.add_error(path, line, problem)
+            continue
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        result.rows_read += 1
+        if len(cells) != len(header):
+            result.add_error(path, line, f"expected {len(header)} columns, got {len(cells)}")
+            continue
+        row = dict(zip(header, cells))
+        missing = require(row, ["Figure_path", "Question", "Answer_label"])
+        if missing:
+            result.add_error(path, line, f"missing field {missing!r}")
+            continue
+        options = {}
+        for letter in "ABCD":
+            text = (row.get(f"Choice {letter}") or "").strip()
+            if text:
+                options[letter] = _CHOICE_PREFIX.sub("", text, count=1).strip()
+        label = row["Answer_label"].strip().upper()
+        if label not in options:
+            result.add_error(path, line, f"Answer_label {label!r} is not one of the choices {sorted(options)}")
+            continue
+        image, problem = confined_image(images, row["Figure_path"].strip())
+        if image is None:
+            result.add_error(path, line, problem)
+            continue
+        _add(result, path, line, {
+            "id": _task_id("pmc-vqa", f"{row['Figure_path']}|{row['Question']}|{label}|{_options_key(options)}"),
+            "domain": domain, "ticket": row["Question"].strip(), "image_path": str(image), "options": options,
+            "correct_answer": label, "answer_type": "choice", "raw_answer": (row.get("Answer") or "").strip(),
+            "description": {"source": "pmc-vqa", "task_type": "vqa_choice"},
+            "evaluation_criteria": {"reward_basis": ["ANSWER"]},
+            "metadata": {"figure": row["Figure_path"].strip(), "answer_text": (row.get("Answer") or "").strip()},
+        })
     return result
 
 
@@ -339,28 +615,26 @@ def convert_pmc_vqa(path: Path, domain: str = "visual_diagnosis", image_dir: str
 # with ground truth); the image id names `<image id>.jpg` in the images folder.
 def convert_vqa_med_2021(path: Path, domain: str = "visual_diagnosis", image_dir: str | Path | None = None,
                          **_: Any) -> ConversionResult:
-    images = _image_folder("vqa-med-2021", image_dir, "image ids")
-    if not path.exists():
-        raise SourceFileError(f"{path}: file not found")
+    images = _image_folder("vqa-med-2021", image_dir, path)
     result = ConversionResult()
-    with path.open(encoding="utf-8-sig") as handle:
-        for line, text in enumerate(handle, start=1):
-            if not text.strip():
-                continue
-            fields = [f.strip() for f in text.rstrip("\r\n").split("|")]
-            if len(fields) != 3:
-                result.add_error(path, line, f"expected 3 '|'-separated fields (image id|question|answer), got {len(fields)}")
-                continue
-            image_id, question, answer = fields
-            if not image_id or not question or not answer:
-                result.add_error(path, line, "empty image id, question or answer")
-                continue
-            image = _find_image(images, image_id)
-            if image is None:
-                result.add_error(path, line, f"image {image_id!r} not found in {images}")
-                continue
-            _add(result, path, line, _vqa_task("vqa-med-2021", domain, image_id, image, question, answer, "",
-                                               {"image_id": image_id}))
+    for line, text in iter_lines(path):
+        if not text.strip():
+            continue
+        result.rows_read += 1
+        fields = [f.strip() for f in text.rstrip("\r\n").split("|")]
+        if len(fields) != 3:
+            result.add_error(path, line, f"expected 3 '|'-separated fields (image id|question|answer), got {len(fields)}")
+            continue
+        image_id, question, answer = fields
+        if not image_id or not question or not answer:
+            result.add_error(path, line, "empty image id, question or answer")
+            continue
+        image, problem = confined_image(images, image_id)
+        if image is None:
+            result.add_error(path, line, problem)
+            continue
+        _add(result, path, line, _vqa_task("vqa-med-2021", domain, image_id, image, question, answer, "",
+                                           {"image_id": image_id}))
     return result
 
 

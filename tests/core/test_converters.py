@@ -76,7 +76,7 @@ def test_vqa_formats_with_images():
     assert [t.answer_type for t in rad.tasks] == ["choice", "exact"]
     assert rad.tasks[0].correct_answer == "A" and Path(rad.tasks[0].image_path).is_file()
     assert rad.tasks[0].domain == "visual_diagnosis"
-    assert errors(rad) == [("vqa_rad.json", 3, f"image 'missing.jpg' not found in {images}")]
+    assert errors(rad) == [("vqa_rad.json", 3, f"item 3: image 'missing.jpg' not found in {images}")]
     slake = convert("slake", FIX / "slake.json", image_dir=images)
     assert len(slake.tasks) == 1 and slake.tasks[0].correct_answer == "B"  # the Chinese row is skipped
     path = convert("pathvqa", FIX / "pathvqa.json", image_dir=images)
@@ -86,8 +86,8 @@ def test_vqa_formats_with_images():
 def test_whole_file_problems_raise_clearly(tmp_path):
     with pytest.raises(SourceFileError, match="file not found"):
         convert("medqa", tmp_path / "nope.jsonl")
-    with pytest.raises(SourceFileError, match="image folder"):
-        convert("vqa-rad", FIX / "vqa_rad.json")
+    with pytest.raises(SourceFileError, match="image folder not found"):
+        convert("vqa-rad", FIX / "vqa_rad.json", image_dir=tmp_path / "no_such_folder")
     with pytest.raises(ValueError, match="unknown format"):
         convert("medqa2", FIX / "medqa.jsonl")
     bad = tmp_path / "p.json"

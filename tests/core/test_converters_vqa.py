@@ -41,8 +41,8 @@ def test_pmc_vqa_wrong_header_names_the_missing_columns(tmp_path):
     bad.write_text("image,question,answer\nx.jpg,q,a\n", encoding="utf-8")
     with pytest.raises(SourceFileError, match=r"header lacks column\(s\) \['Figure_path'"):
         convert("pmc-vqa", bad, image_dir=IMAGES)
-    with pytest.raises(SourceFileError, match="image folder"):
-        convert("pmc-vqa", FIX / "pmc_vqa.csv")
+    with pytest.raises(SourceFileError, match="image folder not found"):
+        convert("pmc-vqa", FIX / "pmc_vqa.csv", image_dir=tmp_path / "no_such_folder")
 
 
 def test_vqa_med_2021_pipe_lines():
@@ -64,7 +64,7 @@ def test_quilt_vqa_closed_and_open():
     assert closed.correct_answer == "A" and closed.description.task_type == "vqa_closed"
     assert open_task.correct_answer == "lymphocytes" and open_task.answer_type == "exact"
     assert open_task.description.source == "quilt-vqa"
-    assert errors(result) == [("quilt_vqa.json", 3, "missing field 'answer'")]
+    assert errors(result) == [("quilt_vqa.json", 3, "item 3: missing field 'answer'")]
 
 
 def test_medlfqa_records_its_subset_file():
