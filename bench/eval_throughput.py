@@ -143,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     run_eval(policy, items, root / "plain", EvalOptions(use_ray=False, concurrency=1, **base))
     plain_s = time.perf_counter() - t0
 
-    ray.init(address="local", include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": env_vars})
+    from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only
+
+    init_ray("local", include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": env_vars})
     try:
         options = EvalOptions(use_ray=True, concurrency=args.actors * args.slots, **base)
         ray_s = asyncio.run(pooled(policy, items, root / "ray", options, args.actors, args.slots, env_vars))

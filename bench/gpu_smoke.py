@@ -99,7 +99,9 @@ def run(args, model_dir: str, params: int, stop_id: int, runtime_env: dict | Non
     from learner.config_models import LearnerConfig, WeightSyncConfig
     from learner.learner_actor import LearnerActor
 
-    ray.init(num_gpus=1, include_dashboard=False)
+    from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only
+
+    init_ray(num_gpus=1, include_dashboard=False)
     result: dict = {}
     gen_cls = generator_actor_class().options(num_gpus=0.4, max_concurrency=1000, runtime_env=runtime_env)
     options = {"dtype": "bfloat16", "gpu_memory_utilization": 0.35, "max_model_len": args.prompt_tokens +

@@ -114,7 +114,9 @@ def main(argv: list[str] | None = None) -> int:
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
                "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
                "plain": {"wall_s": plain_s, "episodes_per_s": args.episodes / plain_s}}
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only
+
+    init_ray(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         for actors in (1, 2):
             runs = [asyncio.run(ray_pool(loop, policy, episode_specs, args.max_turns, actors, args.slots,

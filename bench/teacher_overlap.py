@@ -159,7 +159,9 @@ def main() -> int:
     import torch
 
     model_dir = args.model_dir or build_model(Path(tempfile.mkdtemp(prefix="bench_teacher_")))
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only
+
+    init_ray(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         rows = []
         for mode in ("async", "sync"):

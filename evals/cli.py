@@ -177,8 +177,10 @@ def evaluate(args: argparse.Namespace) -> int:
     if options.use_ray:
         import ray
 
-        if not ray.is_initialized():
-            ray.init(address=os.environ.get("RAY_ADDRESS") or "local", include_dashboard=False,
+        from envs._runtime import init_ray
+
+        if not ray.is_initialized():  # RAY_ADDRESS joins that cluster; else a local one on loopback
+            init_ray(os.environ.get("RAY_ADDRESS") or "local", include_dashboard=False,
                      log_to_driver=False, runtime_env={"env_vars": env_vars} if env_vars else None)
             started_ray = True
     try:

@@ -116,7 +116,10 @@ class Learner:
         """
         ds, spec = self.config.deepspeed, self.placement
         if not ray.is_initialized():
-            ray.init()  # what Ray's auto-init on the first `.remote()` did before the resource check came first
+            from envs._runtime import init_ray
+
+            # RAY_ADDRESS's cluster, else a local one on loopback (Ray's own auto-init binds all interfaces)
+            init_ray()
         bundle = rank_bundle(self.config, spec.resources)
         if spec.check_resources:
             check_cluster_fits([ActorDemand(name="learner rank", count=ws, resources=bundle)],

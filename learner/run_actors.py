@@ -19,8 +19,12 @@ from learner.placement import check_cluster_fits, learner_world_size, rank_place
 
 
 def init_ray(cfg: RunConfig) -> None:
-    """Connect to `ray.address`, or start a local cluster with `ray.num_cpus` (no-op if connected)."""
+    """Connect to `ray.address`, or start a local cluster with `ray.num_cpus` (no-op if connected).
+
+    A local cluster listens on 127.0.0.1 only (envs._runtime.init_ray)."""
     import ray
+
+    from envs._runtime import init_ray as start_or_connect_ray
 
     if ray.is_initialized():
         return
@@ -30,13 +34,11 @@ def init_ray(cfg: RunConfig) -> None:
     # `ray job submit` runs the driver with RAY_ADDRESS set: a config without `ray.address` joins that
     # cluster instead of failing on `num_cpus` (which Ray refuses when connecting).
     address = rc.address or os.environ.get("RAY_ADDRESS")
-    if address:
-        kwargs["address"] = address
-    else:
+    if not address:
         # A fresh local cluster, never a head some other process left running on this machine.
-        kwargs["address"] = "local"
+        address = "local"
         kwargs["num_cpus"] = rc.num_cpus
-    ray.init(**kwargs)
+    start_or_connect_ray(address, **kwargs)
 
 
 def check_run_fits(cfg: RunConfig) -> None:

@@ -28,9 +28,11 @@ pytestmark = pytest.mark.usefixtures("ward_domain")
 def ray_session():
     import ray
 
+    from envs._runtime import init_ray
+
     started = not ray.is_initialized()
     if started:
-        ray.init(**SESSION_RAY_INIT)
+        init_ray(**SESSION_RAY_INIT)
     yield ray
     if started:
         ray.shutdown()

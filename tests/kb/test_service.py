@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-import kb_service  # noqa: F401  (sets RAY_AUTH_MODE=disabled)
+import kb_service  # noqa: F401  (CPU runtime defaults)
+from envs._runtime import init_ray
 
 ray = pytest.importorskip("ray")
 pytestmark = pytest.mark.ray
@@ -14,8 +15,9 @@ pytestmark = pytest.mark.ray
 def cluster():
     started = not ray.is_initialized()  # reuse a session cluster if another conftest started one
     if started:
-        # "local": never attach to a head another test or user left running (it rejects num_cpus)
-        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+        # "local": never attach to a head another test or user left running (it rejects num_cpus);
+        # on loopback, with Ray's default auth (token) unless RAY_AUTH_MODE says otherwise
+        init_ray("local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     if started:
         ray.shutdown()

@@ -17,19 +17,22 @@ import envs  # noqa: F401  (CPU runtime defaults before torch/ray load)
 NO_EMBEDDINGS = {"HCGYM_EMBEDDINGS": "0"}
 
 
-# The session cluster's arguments (test_placement.py restarts it after its own multi-node cluster).
+# The session cluster's `envs._runtime.init_ray` arguments (test_placement.py restarts it after its
+# own multi-node cluster).
 # "local": a fresh cluster even while a `ray start --head` (tests/cluster, a user) runs on this machine.
 SESSION_RAY_INIT = {"address": "local", "num_cpus": 2, "include_dashboard": False, "namespace": "hcgym-tests", "log_to_driver": False}
 
 
 @pytest.fixture(scope="session")
 def ray_cluster():
-    """`ray.init(num_cpus=2)` once per test session (about 5 s), shut down at the end."""
+    """A local 2-CPU cluster on loopback once per test session (about 5 s), shut down at the end."""
     import ray
+
+    from envs._runtime import init_ray
 
     started = False
     if not ray.is_initialized():
-        ray.init(**SESSION_RAY_INIT)
+        init_ray(**SESSION_RAY_INIT)
         started = True
     yield ray
     if started:

@@ -70,7 +70,9 @@ def cluster():
         ray.shutdown()
         sim.shutdown()
         if session_was_up:
-            ray.init(**SESSION_RAY_INIT)
+            from envs._runtime import init_ray
+
+            init_ray(**SESSION_RAY_INIT)
 
 
 def _ds_config(lr: float = 1e-2) -> LearnerConfig:
