@@ -32,13 +32,15 @@ FINAL_STATES = ("consumed", "filled", "filtered", "failed", "stale", "leftover",
 
 
 def is_correct(sample: RolloutSample, cfg: RunConfig) -> bool:
+    """Whether an episode counts as correct (dynamic sampling, teacher hints, the accuracy metric).
+
+    Always the task's accuracy criterion, never the total alone (issue 13: cheap strategies reach
+    any total threshold): `is_correct` is the env's grader, `accuracy_at_least` the accuracy
+    component against `reward.accuracy_threshold`.
+    """
     rule = cfg.reward.correct_if
     if rule == "is_correct":
         return bool(sample.metadata.get("is_correct", sample.correct))
-    if rule == "reward_positive":  # the reference implementation's rule
-        return float(sample.metadata.get("env_reward", sample.reward)) > 0
-    if rule == "total_at_least":
-        return float(sample.metadata.get("env_reward", sample.reward)) >= cfg.reward.total_threshold
     accuracy = sample.reward_components.get("accuracy")
     return accuracy is not None and float(accuracy) >= cfg.reward.accuracy_threshold
 

@@ -175,12 +175,33 @@ class RewardConfig(StrictModel):
     # Which limits count as "truncated" (R_penalty) in Eq. 4: the response-token limit L_max, and
     # optionally running out of assistant turns without submitting.
     penalize: list[Literal["response_tokens", "max_turns"]] = Field(default_factory=lambda: ["response_tokens"])
-    # is_correct: the env's grader; reward_positive: the reference's rule (5D total > 0);
-    # accuracy_at_least: the accuracy component >= accuracy_threshold; total_at_least: the 5D total
-    # >= total_threshold (a completed, well-formed episode; for policies too small to be accurate).
-    correct_if: Literal["is_correct", "reward_positive", "accuracy_at_least", "total_at_least"] = "is_correct"
+    # is_correct: the env's grader (the task's accuracy criterion met, no critical violation);
+    # accuracy_at_least: the accuracy component >= accuracy_threshold. No rule on the total alone:
+    # "every READ tool once + a constant answer" passed `total >= 0.55` in 44 of 44 episodes, 5 right
+    # (issue 13; bench/reward_gaming.py).
+    correct_if: Literal["is_correct", "accuracy_at_least"] = "is_correct"
     accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
-    total_threshold: float = 0.5
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_rule_on_the_total(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            if data.get("correct_if") in REMOVED_CORRECT_IF:
+                raise ValueError(f"reward.correct_if: {data['correct_if']!r} was removed: "
+                                 f"{REMOVED_CORRECT_IF[data['correct_if']]}; {_CORRECT_IF_INSTEAD}")
+            if "total_threshold" in data:
+                raise ValueError(f"reward.total_threshold was removed with correct_if 'total_at_least' (the total "
+                                 f"alone does not say an answer is right); delete it; {_CORRECT_IF_INSTEAD}")
+        return data
+
+
+#: Correctness rules that read only the 5D total, which cheap strategies reach without a right answer.
+REMOVED_CORRECT_IF = {
+    "total_at_least": "a total threshold is met by answers that are wrong (every tool once + a constant scored 0.6)",
+    "reward_positive": "every submitted episode has a total above 0, an empty answer included",
+}
+_CORRECT_IF_INSTEAD = ("use 'is_correct' (the env's grader: the task's accuracy criterion) or 'accuracy_at_least' "
+                       "with accuracy_threshold")
 
 
 class DynamicSamplingConfig(StrictModel):

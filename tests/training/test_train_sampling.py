@@ -8,7 +8,7 @@ import asyncio
 import pytest
 
 from actors.types import RolloutSample, TurnSpan
-from learner.config import validate_config
+from learner.config import ConfigError, validate_config
 from learner.batching import BatchScheduler
 from learner.train import Group, TaskRef, TaskSampler, episode_seed, is_correct, mixed_outcomes, shape_reward
 
@@ -111,18 +111,24 @@ def test_rewards_and_correctness_rules():
 
     zero = sample(0, 4, correct=False, reward=0.0)
     assert is_correct(right, cfg) and not is_correct(zero, cfg)
-    positive = validate_config({"reward": {"correct_if": "reward_positive"}})
-    assert is_correct(wrong, positive) and not is_correct(zero, positive)
     acc = validate_config({"reward": {"correct_if": "accuracy_at_least", "accuracy_threshold": 0.5}})
     assert is_correct(right, acc) and not is_correct(wrong, acc)
-    total = validate_config({"reward": {"correct_if": "total_at_least", "total_threshold": 0.4}})
-    assert is_correct(wrong, total) and not is_correct(zero, total)  # the 5D total, not the accuracy
 
     by_reward = validate_config({"trainer": {"dynamic_sampling": {"criterion": "reward"}}})
     same = [sample(0, i, correct=False, reward=0.3) for i in range(3)]
     assert not mixed_outcomes(same, by_reward) and not mixed_outcomes(same, cfg)
     assert mixed_outcomes([same[0], sample(0, 5, correct=False, reward=0.4)], by_reward)
     assert mixed_outcomes([right, wrong], cfg)
+
+
+@pytest.mark.parametrize("reward", [{"correct_if": "total_at_least"}, {"correct_if": "reward_positive"},
+                                    {"correct_if": "is_correct", "total_threshold": 0.55}])
+def test_a_correctness_rule_on_the_total_alone_is_refused_naming_the_key(reward):
+    # "wrong" earns a 0.5 total with a wrong answer: a rule on the total would call it correct (issue 13)
+    with pytest.raises(ConfigError) as err:
+        validate_config({"reward": reward})
+    key = "reward.total_threshold" if "total_threshold" in reward else "reward.correct_if"
+    assert key in str(err.value) and "is_correct" in str(err.value) and "accuracy_at_least" in str(err.value)
 
 
 def test_task_sampler_is_deterministic_and_resumable():
