@@ -43,18 +43,17 @@ as the release intends.
 
 from __future__ import annotations
 
-import csv
-import gzip
 import re
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from pydantic import ValidationError
 
-from envs.converters.base import ConversionResult, SourceFileError
+from envs.converters.base import ConversionResult, SourceFileError, csv_rows
 from envs.core.task import Task
 
 DOMAIN = "ehr_management"
@@ -116,38 +115,32 @@ def _table(folder: Path, name: str) -> Path:
 
 
 def _rows(path: Path, needed: list[str], result: ConversionResult) -> Iterator[tuple[int, dict[str, str]]]:
-    """(line, row) for each data row; a missing column stops with SourceFileError, a bad row is reported."""
-    # utf-8-sig: a BOM (files re-saved on Windows) would otherwise become part of the first column name
-    raw = gzip.open(path, "rt", encoding="utf-8-sig", newline="") if path.name.endswith(".gz") else \
-        path.open(encoding="utf-8-sig", newline="")
-    with raw as handle:
-        reader = csv.reader(handle)
-        try:
-            header = next(reader)
-        except StopIteration:
-            raise SourceFileError(f"{path}: empty file (no header)") from None
-        # column names match case-insensitively: the MIMIC-III demo v1.4 writes `row_id,subject_id,...`
-        # where the full release writes `ROW_ID,SUBJECT_ID,...`; rows are keyed by the names in `needed`
-        spelling = {c.lower(): c for c in needed}
-        header = [h.strip().lstrip("\ufeff") for h in header]
-        header = [spelling.get(h.lower(), h) for h in header]
-        missing = [c for c in needed if c not in header]
-        if missing:
-            raise SourceFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header[:12])})")
-        while True:
-            try:
-                row = next(reader)
-            except StopIteration:
-                return
-            except csv.Error as exc:
-                result.add_error(path, reader.line_num, f"CSV error: {exc}")
-                continue
-            if not row or all(not c.strip() for c in row):
-                continue
-            if len(row) != len(header):
-                result.add_error(path, reader.line_num, f"expected {len(header)} fields, got {len(row)}")
-                continue
-            yield reader.line_num, dict(zip(header, (c.strip() for c in row)))
+    """(line, row) for each data row, streamed; a missing column stops with SourceFileError, a bad row is reported.
+
+    Read through `envs.converters.base.csv_rows`: UTF-8 with or without a BOM (files re-saved on Windows),
+    CRLF, `.csv.gz`; another encoding or a truncated gzip stops with the file and line."""
+    records = csv_rows(path)
+    first = next(records, None)
+    if first is None or first[1] is None:
+        raise SourceFileError(f"{path}: empty file (no header)" if first is None else f"{path}:1: {first[2]}")
+    # column names match case-insensitively: the MIMIC-III demo v1.4 writes `row_id,subject_id,...`
+    # where the full release writes `ROW_ID,SUBJECT_ID,...`; rows are keyed by the names in `needed`
+    spelling = {c.lower(): c for c in needed}
+    header = [spelling.get(h.strip().lower(), h.strip()) for h in first[1]]
+    missing = [c for c in needed if c not in header]
+    if missing:
+        raise SourceFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header[:12])})")
+    width = len(header)
+    for line, row, problem in records:
+        if row is None:
+            result.add_error(path, line, problem)
+            continue
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != width:
+            result.add_error(path, line, f"expected {width} fields, got {len(row)}")
+            continue
+        yield line, dict(zip(header, (c.strip() for c in row)))
 
 
 class RowProblem(ValueError):
@@ -197,6 +190,10 @@ def _time(row: dict[str, str], key: str, *, optional: bool = False) -> datetime 
 
 def _fmt(t: datetime) -> str:
     return t.strftime("%Y-%m-%dT%H:%M")
+
+
+def _fmt_seconds(t: datetime) -> str:
+    return t.strftime("%Y-%m-%dT%H:%M:%S")
 
 
 def _key(text: str) -> str:
@@ -254,8 +251,10 @@ class _Admission:
             "hadm_id": self.hadm_id, "admit_time": _fmt(self.admit),
             "discharge_time": _fmt(self.discharge) if self.discharge else None,
             "admission_type": self.admission_type, "admission_diagnosis": self.diagnosis,
-            "icu_stays": [{"stay_id": s.stay_id, "unit": s.unit, "intime": _fmt(s.intime),
-                           "outtime": _fmt(s.outtime) if s.outtime else None} for s in stays],
+            # ICU times keep their seconds: the length of stay is computed from them and must match the
+            # source's LOS column (MIMIC-III ICUSTAYS.LOS, fractional days from the full timestamps)
+            "icu_stays": [{"stay_id": s.stay_id, "unit": s.unit, "intime": _fmt_seconds(s.intime),
+                           "outtime": _fmt_seconds(s.outtime) if s.outtime else None} for s in stays],
             "lab_events": sorted(self.labs, key=lambda e: (e["time"], e["test"], e["source_id"])),
             "coded_diagnoses": self.diagnoses,
         }
@@ -425,6 +424,21 @@ def convert_mimic3(path: str | Path, domain: str = DOMAIN, max_stays: int | None
         admissions[hadm].stays.append(stay)  # type: ignore[index]
         stays_line[str(stay_id)] = line
 
+    # The admissions (and ICU stays) to convert are chosen before LABEVENTS is read, so the stream keeps
+    # only their results: LABEVENTS is ~27.9 million rows in the full release and is never held whole.
+    selected: dict[int, list[_Stay]] = {}
+    converted = 0
+    for hadm in sorted(admissions):
+        chosen = sorted(admissions[hadm].stays, key=lambda s: s.intime)
+        if not chosen:
+            continue
+        if max_stays is not None:
+            chosen = chosen[: max(0, max_stays - converted)]
+            if not chosen:
+                break
+        converted += len(chosen)
+        selected[hadm] = chosen
+
     items: dict[int, tuple[str, str, str]] = {}
     for line, row in _rows(files["D_LABITEMS"], cols["D_LABITEMS"], result):
         try:
@@ -436,15 +450,16 @@ def convert_mimic3(path: str | Path, domain: str = DOMAIN, max_stays: int | None
         if row["HADM_ID"] == "" or row["VALUENUM"] == "":
             continue  # outpatient result, or a text result ("HEMOLYZED"): nothing numeric to place on an admission
         try:
-            hadm, item = _int(row, "HADM_ID"), _int(row, "ITEMID")
+            hadm = _int(row, "HADM_ID")
+            if hadm not in selected:
+                continue  # an admission not in this extract (or not converted): nothing else is parsed
+            item = _int(row, "ITEMID")
             if item not in items:
                 raise RowProblem(f"ITEMID {item} is not in D_LABITEMS")
             value, when = _float(row, "VALUENUM"), _time(row, "CHARTTIME")
         except RowProblem as exc:
             result.add_error(files["LABEVENTS"], line, str(exc))
             continue
-        if hadm not in admissions:
-            continue  # an admission not in this extract (or not converted)
         label, fluid, _loinc = items[item]  # type: ignore[index]
         if fluid.lower() == "blood" and label.lower() in MIMIC3_BLOOD_TESTS:
             test = MIMIC3_BLOOD_TESTS[label.lower()]
@@ -479,17 +494,8 @@ def convert_mimic3(path: str | Path, domain: str = DOMAIN, max_stays: int | None
         if len(first) == 1:
             adm.primary = (dotted_icd9(first[0]["code"]), [first[0]["code"]])
 
-    converted = 0
-    for hadm in sorted(admissions):
+    for hadm, stays in selected.items():
         adm = admissions[hadm]
-        if not adm.stays:
-            continue
-        stays = sorted(adm.stays, key=lambda s: s.intime)
-        if max_stays is not None:
-            stays = stays[: max(0, max_stays - converted)]
-            if not stays:
-                break
-        converted += len(stays)
         _make_tasks("mimic3", adm, stays, adm.record(sorted(adm.stays, key=lambda s: s.intime)), True, domain, result,
                     (files["ADMISSIONS"], adm_line[hadm]))
     return result

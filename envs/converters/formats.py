@@ -188,26 +188,27 @@ _PY_STRING = re.compile(r"""'(?:[^'\\]|\\.)*'|"(?:[^"\\]|\\.)*\"""", re.DOTALL)
 
 
 def parse_choices(text: str) -> list[str]:
-    """A `choices` cell of an MMLU CSV export -> the list of option texts (ValueError if it is not one)."""
+    """A `choices` cell of an MMLU CSV export -> the list of option texts (ValueError if it is not one).
+
+    Accepted: a JSON list, a Python list of string literals (`['a', "b's"]`), and numpy's repr of a string
+    array (`['a' 'b']`, no commas: Python would silently concatenate those, so they are split here)."""
     import ast
 
     cell = text.strip()
-    if cell.startswith("["):
+    if cell.startswith("[") and cell.endswith("]"):
         try:
             value = json.loads(cell)
+            if isinstance(value, list) and all(isinstance(v, str) for v in value):
+                return value
         except ValueError:
-            try:
-                value = ast.literal_eval(cell)  # literals only: never evaluates code
-            except (ValueError, SyntaxError):
-                value = None
-        if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
-            return list(value)
-        # numpy's repr of a string array: quoted strings separated by whitespace, no commas
-        inner = cell[1:-1] if cell.endswith("]") else None
-        if inner is not None:
-            parts = _PY_STRING.findall(inner)
-            if parts and not _PY_STRING.sub("", inner).strip():
-                return [ast.literal_eval(p) for p in parts]
+            pass
+        inner = cell[1:-1]
+        parts = _PY_STRING.findall(inner)
+        separators = [sep.strip() for sep in _PY_STRING.sub("\0", inner).split("\0")]
+        between = separators[1:-1]
+        if parts and not separators[0] and not separators[-1] and (
+                all(sep == "," for sep in between) or all(sep == "" for sep in between)):
+            return [ast.literal_eval(part) for part in parts]  # string literals only: never evaluates code
     raise ValueError(f"'choices' is not a list of option texts: {text[:80]!r}")
 
 

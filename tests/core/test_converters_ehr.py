@@ -93,7 +93,7 @@ def test_eicu_tasks_gold_and_errors():
     record = by_id["eicu_icu_los_300002"].metadata["ehr_patient"]
     assert record["age"] == 90 and record["weight_kg"] == 81.0  # "> 89"
     stay = record["admissions"][0]["icu_stays"][0]
-    assert (stay["intime"], stay["outtime"]) == ("2015-01-01T23:10", "2015-01-04T22:59")  # 23:10 + 4309 min
+    assert (stay["intime"], stay["outtime"]) == ("2015-01-01T23:10:00", "2015-01-04T22:59:00")  # 23:10 + 4309 min
     assert errors(result) == [
         ("patient.csv", 4, "gender '' is not Male or Female"),
         ("patient.csv", 5, "age is empty"),

@@ -21,6 +21,11 @@ FMT = "%Y-%m-%dT%H:%M"
 
 
 def _t(text: str) -> datetime:
+    # seconds are kept when the record has them (imported MIMIC-III ICU times: LOS from the full timestamps)
+    try:
+        return datetime.strptime(text[:19], FMT + ":%S")
+    except ValueError:
+        pass
     try:
         return datetime.strptime(text[:16], FMT)
     except ValueError:
