@@ -6,10 +6,11 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # The CPU path needs these; envs/_runtime.py also sets them on import for users who skip make.
+# RAY_AUTH_MODE is left to the user: local clusters listen on 127.0.0.1 only and Ray turns token auth
+# on for them by default (docs/cluster.md, "Local runs").
 export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export TOKENIZERS_PARALLELISM := false
-export RAY_AUTH_MODE := disabled
 export RAY_USAGE_STATS_ENABLED := 0
 export HF_HUB_OFFLINE := 1
 export TRANSFORMERS_OFFLINE := 1
