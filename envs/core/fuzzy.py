@@ -14,12 +14,15 @@ character overlap can reach the cutoff, and runs difflib's own three checks and 
 few. Since the pruning drops only names difflib itself would reject at `quick_ratio`, the
 suggestions are exactly difflib's, in difflib's order (ties included).
 
-Use `FuzzyIndex.for_names(collection)` for a read-only name collection that lives across calls
-(a database's name index): the index is built once per collection object and reused.
+Use `FuzzyIndex.for_names(collection)` (or `close_matches`) for a read-only name collection that
+lives across calls (a database's name index): the index is built once per collection object and
+reused. `PrefixIndex` does the same for "names starting with" suggestions (a binary search over
+the sorted names instead of a scan).
 """
 
 from __future__ import annotations
 
+import bisect
 import difflib
 import heapq
 import threading
@@ -122,32 +125,64 @@ class FuzzyIndex:
                     heapq.heappushpop(best, (ratio, name))
         return [name for _, name in sorted(best, reverse=True)]
 
-    # -- one index per long-lived collection ------------------------------------------------------
-    _cache: "OrderedDict[int, tuple[Any, int, FuzzyIndex]]" = OrderedDict()
-    _cache_lock = threading.Lock()
-    _CACHE_SIZE = 16
-
     @classmethod
     def for_names(cls, collection: Any) -> "FuzzyIndex":
-        """The index of a read-only collection of names (a list, or a dict's keys), built on first
-        use and reused while the same object is passed with the same length.
+        """The index of a long-lived, read-only collection of names (a list, or a dict's keys),
+        built on first use and reused (see `_cached_index`)."""
+        return _cached_index(cls, collection)
 
-        The cache holds a reference to the collection, so its id cannot be reused by another
-        object while cached; a length change (names added or removed) rebuilds the index.
-        """
-        key = id(collection)
-        with cls._cache_lock:
-            hit = cls._cache.get(key)
-            if hit is not None and hit[0] is collection and hit[1] == len(collection):
-                cls._cache.move_to_end(key)
-                return hit[2]
-        index = cls(collection)
-        with cls._cache_lock:
-            cls._cache[key] = (collection, len(collection), index)
-            cls._cache.move_to_end(key)
-            while len(cls._cache) > cls._CACHE_SIZE:
-                cls._cache.popitem(last=False)
-        return index
+
+class PrefixIndex:
+    """Names starting with a prefix, in sorted order, by binary search over the sorted names:
+    equal to `sorted({n for n in names if n.startswith(prefix)})[:limit]` without the scan.
+
+    Args:
+        names: The names (any iterable of str; duplicates are dropped, as the set above drops them).
+    """
+
+    def __init__(self, names: Iterable[str]) -> None:
+        self.names: list[str] = sorted(set(names))
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def starting_with(self, prefix: str, limit: int) -> list[str]:
+        out: list[str] = []
+        at = bisect.bisect_left(self.names, prefix)
+        while at < len(self.names) and len(out) < limit and self.names[at].startswith(prefix):
+            out.append(self.names[at])
+            at += 1
+        return out
+
+    @classmethod
+    def for_names(cls, collection: Any) -> "PrefixIndex":
+        """The index of a long-lived, read-only collection of names (see `_cached_index`)."""
+        return _cached_index(cls, collection)
+
+
+_CACHE: "OrderedDict[tuple[type, int], tuple[Any, int, Any]]" = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+_CACHE_SIZE = 32
+
+
+def _cached_index(kind: type, collection: Any) -> Any:
+    """`kind(collection)`, built once per collection object and reused while the same object is
+    passed with the same length (a database's name table lives for the process; its episodes
+    share it). The cache holds a reference to the collection, so its id cannot be reused by
+    another object while cached; a length change (names added or removed) rebuilds the index."""
+    key = (kind, id(collection))
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+        if hit is not None and hit[0] is collection and hit[1] == len(collection):
+            _CACHE.move_to_end(key)
+            return hit[2]
+    index = kind(collection)
+    with _CACHE_LOCK:
+        _CACHE[key] = (collection, len(collection), index)
+        _CACHE.move_to_end(key)
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return index
 
 
 class _LcsBound:
@@ -173,3 +208,9 @@ def close_matches(word: str, names: Any, n: int = 3, cutoff: float = 0.6) -> lis
     """`difflib.get_close_matches(word, names, n, cutoff)` through the cached index of `names`
     (a long-lived, read-only list or dict of names)."""
     return FuzzyIndex.for_names(names).close_matches(word, n=n, cutoff=cutoff)
+
+
+def names_starting_with(prefix: str, names: Any, limit: int) -> list[str]:
+    """`sorted({n for n in names if n.startswith(prefix)})[:limit]` through the cached sorted
+    index of `names` (a long-lived, read-only list or dict of names)."""
+    return PrefixIndex.for_names(names).starting_with(prefix, limit)

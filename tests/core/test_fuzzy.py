@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from envs.core.fuzzy import FuzzyIndex, _LcsBound, close_matches
+from envs.core.fuzzy import FuzzyIndex, PrefixIndex, _LcsBound, close_matches, names_starting_with
 
 
 def typo(rng: random.Random, name: str, edits: int) -> str:
@@ -94,3 +94,24 @@ def test_bad_arguments_are_named():
         index.close_matches(5)
     with pytest.raises(TypeError, match="name at position 1 is int"):
         FuzzyIndex(["a", 3])
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(names=st.lists(st.text(alphabet="abc é", max_size=6), max_size=40), prefix=st.text(alphabet="abc é", max_size=3),
+       limit=st.integers(1, 10))
+def test_prefix_suggestions_equal_the_sorted_scan(names, prefix, limit):
+    expected = sorted({n for n in names if n.startswith(prefix)})[:limit]
+    assert PrefixIndex(names).starting_with(prefix, limit) == expected
+    assert names_starting_with(prefix, {n: 1 for n in names}, limit) == expected
+
+
+def test_medical_qa_unknown_names_get_prefix_suggestions():
+    from envs.core.env import HealthcareGymEnv
+
+    env = HealthcareGymEnv(domain="medical_qa")
+    env.reset(seed=0)
+    kb = env.domain_env.toolkit.toolkits[0].kb
+    outcome = env.domain_env.toolkit.call("lookup_hpo_term", {"term": "seizzzz"})
+    expected = sorted({n for n in kb.term_by_name if n.startswith("seiz")})[:8]
+    assert expected and outcome.error_kind == "tool_error"
+    assert f"similar names: {', '.join(expected)}" in outcome.error

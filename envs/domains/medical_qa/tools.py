@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 from envs.core.common_tools import BaseDomainTools
+from envs.core.fuzzy import names_starting_with
 from envs.core.tools import ToolError, ToolType, is_tool
 from envs.domains.medical_qa.calculator_tools import calculator_method
 from envs.domains.medical_qa.data_model import EvidenceNote, MedicalQADB
@@ -40,9 +41,10 @@ class MedicalQATools(BaseDomainTools):
             raise ToolError("no question is loaded in this episode; read the task text instead")
         return self.db.question
 
-    def _suggest(self, names: list[str], text: str, kind: str) -> str:
+    def _suggest(self, names: dict[str, Any], text: str, kind: str) -> str:
         key = norm(text)[:4]
-        near = sorted({n for n in names if n.startswith(key)})[:8] if key else []
+        # a binary search over the cached sorted names, not a scan of tens of thousands per call
+        near = names_starting_with(key, names, 8) if key else []
         return f"{kind} {text!r} not found" + (f"; similar names: {', '.join(near)}" if near else "")
 
     def _drug_key(self, name: str) -> str:
@@ -50,21 +52,21 @@ class MedicalQATools(BaseDomainTools):
             raise ToolError("argument 'name' is empty: give a generic or brand drug name")
         key = self.kb.resolve_drug(name)
         if key is None:
-            raise ToolError(self._suggest(list(self.kb.drug_by_name), name, "drug") +
+            raise ToolError(self._suggest(self.kb.drug_by_name, name, "drug") +
                             " (the index covers drugs with an FDA Established Pharmacologic Class)")
         return key
 
     def _disease_ids(self, disease: str) -> list[str]:
         ids = self.kb.resolve_disease(disease)
         if not ids:
-            raise ToolError(self._suggest(list(self.kb.disease_by_name), disease, "disease") +
+            raise ToolError(self._suggest(self.kb.disease_by_name, disease, "disease") +
                             "; use an OMIM:/ORPHA: id or search_diseases")
         return ids
 
     def _term(self, text: str) -> str:
         tid = self.kb.resolve_term(text)
         if tid is None:
-            raise ToolError(self._suggest(list(self.kb.term_by_name), text, "HPO phenotype") +
+            raise ToolError(self._suggest(self.kb.term_by_name, text, "HPO phenotype") +
                             "; give an HP:xxxxxxx id or an HPO term name or synonym")
         return tid
 
@@ -396,7 +398,7 @@ class MedicalQATools(BaseDomainTools):
             raise ToolError("argument 'limit' must be between 1 and 300")
         found = self.kb.resolve_class(drug_class)
         if found is None:
-            raise ToolError(self._suggest(list(self.kb.class_by_name), drug_class, "drug class") +
+            raise ToolError(self._suggest(self.kb.class_by_name, drug_class, "drug class") +
                             " (FDA Established Pharmacologic Class or MoA names)")
         kind, label = found
         members = self.kb.class_members[label] if kind == "epc" else self.kb.moa_members[label]
