@@ -22,12 +22,16 @@ Example:
 
 from __future__ import annotations
 
+import math
+import os
 import re
+import types
+import typing
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Union
 
 import yaml
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
@@ -79,7 +83,7 @@ class SFTConfig(StrictModel):
 
     enabled: bool = False
     epochs: float = Field(default=3.0, gt=0)
-    lr: float = Field(default=3e-3, gt=0)
+    lr: float = Field(default=3e-3, gt=0, le=1)
     batch_size: int = Field(default=8, ge=1)
     max_tasks: int | None = Field(default=None, ge=1, description="gold replays from at most this many train tasks")
     weight_decay: float = Field(default=0.0, ge=0)
@@ -123,7 +127,7 @@ class RolloutConfig(RolloutLimits):
     # "env": the environment's system prompt (policy + JSON tool schemas); "compact": the call format
     # and one signature line per tool (tiny CPU models; see actors.agent_loop.compact_system_prompt).
     system_prompt: Literal["env", "compact"] = "env"
-    group_size: int = Field(default=3, ge=1, description="G rollouts per prompt")
+    group_size: int = Field(default=3, description="G rollouts per prompt (at least 2: GRPO)")
     num_env_actors: int = Field(default=2, ge=1)
     slots_per_env_actor: int = Field(default=8, ge=1)
     env_actor_max_restarts: int = Field(default=-1, ge=-1)
@@ -132,6 +136,16 @@ class RolloutConfig(RolloutLimits):
     # replays), e.g. {"HCGYM_EMBEDDINGS": "0"} to grade free text by token overlap instead of loading
     # a sentence-embedding model into every env process.
     env_vars: dict[str, str] = Field(default_factory=dict)
+
+    @field_validator("group_size")
+    @classmethod
+    def _group_of_two(cls, value: int) -> int:
+        if value < 2:
+            # Eq. 1: the advantage is the reward minus the group's mean; alone in its group every
+            # sample gets advantage 0, so the policy-gradient term would never train anything.
+            raise ValueError(f"GRPO needs at least 2 rollouts per prompt (advantages are relative to the group; "
+                             f"with {value} every advantage is 0)")
+        return value
 
 
 class GeneratorConfig(StrictModel):
@@ -302,6 +316,16 @@ class RunConfig(StrictModel):
         if abs(self.learner.temperature - self.generator.sampling.temperature) > 1e-9:
             raise ValueError(f"learner.temperature ({self.learner.temperature}) must equal "
                              f"generator.sampling.temperature ({self.generator.sampling.temperature})")
+        reward = self.reward
+        if reward.kind == "cosine" and reward.r_min > reward.r_max:
+            raise ValueError(f"reward.r_min: {reward.r_min} exceeds reward.r_max ({reward.r_max}); Eq. 4 pays "
+                             f"short correct answers r_max and long ones r_min")
+        hints = self.teacher.hints
+        if self.teacher.enabled and hints.enabled and hints.correctness_rule == "reward_above":
+            low, high = self.reward_range
+            if not low <= hints.reward_threshold < high:
+                raise ValueError(f"teacher.hints.reward_threshold: {hints.reward_threshold} is outside the "
+                                 f"{reward.kind} reward's range [{low}, {high}); every trajectory would get the same hint")
         grpo = self.learner.loss.grpo
         if self.trainer.max_staleness > 0 and "tis_cap" not in grpo.model_fields_set:
             # Tokens may come from an older policy: correct them by default (losses.py Eq. 1b).
@@ -316,10 +340,39 @@ class RunConfig(StrictModel):
     def cosine_max_length(self) -> int:
         return self.reward.max_length or self.rollout.max_response_tokens
 
+    @property
+    def reward_range(self) -> tuple[float, float]:
+        """(lowest, highest) RL reward: the 5D total lies in [0, 1] (envs/rewards/score.py); the
+        cosine reward of Eq. 4 in [min(r_penalty, -|r_min|), max(r_max, r_min)]."""
+        r = self.reward
+        if r.kind == "cosine":
+            return min(r.r_penalty, -abs(r.r_min)), max(r.r_max, r.r_min)
+        return 0.0, 1.0
+
 
 # ---------------------------------------------------------------------------------------------
 # YAML loading
 # ---------------------------------------------------------------------------------------------
+
+
+class _ConfigLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2 floats: `lr: 3e-4` is the number 0.0003, not the string
+    '3e-4' (YAML 1.1, which PyYAML follows, needs a dot and a signed exponent: `3.0e-4`)."""
+
+
+_ConfigLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                  |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                  |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                  |[-+]?\.(?:inf|Inf|INF)
+                  |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."),
+)
+
+
+def _yaml_load(text: str) -> Any:
+    return yaml.load(text, Loader=_ConfigLoader)  # noqa: S506 (a SafeLoader subclass)
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -336,11 +389,23 @@ def _read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict:
     if not path.exists():
         raise ConfigError(f"{path}: config file not found")
     try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the config file ({exc.strerror or exc})") from None
+    try:
+        text = data.decode("utf-8-sig")  # a BOM from a Windows editor is not part of the YAML
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(f"{path}: config file is not UTF-8 text (byte 0x{data[exc.start]:02x} at line {line}); "
+                          f"re-save it as UTF-8") from None
+    try:
+        raw = _yaml_load(text)
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" at line {where.line + 1}, column {where.column + 1}" if where else ""
         raise ConfigError(f"{path}: not valid YAML{at}: {getattr(exc, 'problem', exc)}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: config file is nested too deeply to parse") from None
     raw = raw or {}
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of sections, got {type(raw).__name__}")
@@ -373,15 +438,220 @@ def format_errors(exc: ValidationError) -> list[str]:
             continue
         got = err.get("input")
         shown = "" if isinstance(got, (dict, list)) or got is None else f" (got {got!r})"
-        lines.append(f"{path}: {err['msg']}{shown}")
+        message = err["msg"]
+        if err["type"] == "value_error":
+            # A section's own validator says which key it means ("teacher.hints.reward_threshold: ...");
+            # report it at that key instead of at the section ("(top level): Value error, ...").
+            named = _NAMED_KEY.match(message.removeprefix("Value error, "))
+            prefix = "" if path == "(top level)" else path + "."
+            if named and named["key"].startswith(prefix):
+                path, message, shown = named["key"], named["rest"], ""
+        lines.append(f"{path}: {message}{shown}")
     return lines
 
 
-def validate_config(data: dict, source: str = "<config>") -> RunConfig:
+_NAMED_KEY = re.compile(r"(?P<key>[a-z_]+(?:\.[a-z_0-9]+)+)(?::| (?=[a-z(]))\s*(?P<rest>.*)", re.S)
+
+
+# ---------------------------------------------------------------------------------------------
+# Checks pydantic's lax mode does not make: booleans and strings as numbers, non-finite numbers
+# ---------------------------------------------------------------------------------------------
+
+
+def _scalar_kinds(annotation: Any) -> set[type]:
+    """The scalar types (int, float, bool, str) a field annotation accepts; Literal[1, 2] counts as int."""
+    origin = typing.get_origin(annotation)
+    if origin in (Union, types.UnionType):
+        return set().union(*(_scalar_kinds(a) for a in typing.get_args(annotation)))
+    if origin is Literal:
+        return {type(v) for v in typing.get_args(annotation)}
+    if annotation is Any:
+        return {int, float, bool, str}
+    return {annotation} if annotation in (int, float, bool, str) else set()
+
+
+def _model_of(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model a field holds (`Model` or `Model | None`), else None."""
+    candidates = typing.get_args(annotation) if typing.get_origin(annotation) in (Union, types.UnionType) else (annotation,)
+    for candidate in candidates:
+        if isinstance(candidate, type) and issubclass(candidate, BaseModel):
+            return candidate
+    return None
+
+
+def _number_problems(annotation: Any, value: Any, path: str) -> list[str]:
+    """`path: problem` for a boolean or string given where a number is expected, and for NaN or
+    infinity anywhere a number is expected, descending into sections, lists and mappings."""
+    model = _model_of(annotation)
+    if model is not None:
+        if not isinstance(value, dict):
+            return []  # pydantic names the wrong type
+        problems: list[str] = []
+        for key, item in value.items():
+            field = model.model_fields.get(key) if isinstance(key, str) else None
+            if field is not None:  # unknown keys: pydantic reports them
+                problems += _number_problems(field.annotation, item, f"{path}.{key}" if path else key)
+        return problems
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin is dict and isinstance(value, dict) and len(args) == 2:
+        return [p for key, item in value.items() for p in _number_problems(args[1], item, f"{path}.{key}")]
+    if origin in (list, tuple) and isinstance(value, (list, tuple)) and args:
+        fixed = origin is tuple and not (len(args) == 2 and args[1] is Ellipsis)
+        problems = []
+        for index, item in enumerate(value):
+            if fixed and index >= len(args):
+                break  # pydantic names the wrong length
+            problems += _number_problems(args[index] if fixed else args[0], item, f"{path}[{index}]")
+        return problems
+    # Annotated[float, Field(...)] inside a tuple: the metadata is not a type, the first arg is.
+    if origin is typing.Annotated:
+        return _number_problems(args[0], value, path)
+    kinds = _scalar_kinds(annotation)
+    numeric = bool(kinds & {int, float})
+    if isinstance(value, bool):
+        if numeric and bool not in kinds:
+            wanted = "an integer" if float not in kinds else "a number"
+            return [f"{path}: expected {wanted}, got a boolean ({str(value).lower()})"]
+    elif isinstance(value, float) and not math.isfinite(value):
+        if numeric:
+            return [f"{path}: must be a finite number (got {value})"]
+    elif isinstance(value, str) and numeric and str not in kinds:
+        return [f"{path}: expected a number, got the string {value[:60]!r} (write it without quotes)"]
+    return []
+
+
+# ---------------------------------------------------------------------------------------------
+# References: domains, splits and local paths the config names
+# ---------------------------------------------------------------------------------------------
+
+
+def _runs_locally(cfg: RunConfig) -> bool:
+    """True when the driver starts its own Ray cluster on this machine. Configs for a remote
+    cluster name paths on its nodes (`~/.venv-vllm/bin/python`), which need not exist here."""
+    return cfg.ray.address in (None, "local") and not (cfg.ray.address is None and os.environ.get("RAY_ADDRESS"))
+
+
+def _domain_splits(name: str, module_path: str | None) -> set[str] | None:
+    """The split names a domain declares, or None when they cannot be known yet (data not built).
+
+    Raises:
+        ImportError: the domain's module fails to import.
+    """
+    import importlib
+
+    from envs import registry
+    from envs.core.db import DataFileError
+
+    module = importlib.import_module(module_path) if module_path else registry.domain_module(name)
+    if not hasattr(module, "get_splits"):
+        return None
     try:
-        return RunConfig.model_validate(data)
+        return set(module.get_splits())
+    except (DataFileError, FileNotFoundError):
+        return None  # not built yet: loading the tasks reports it, naming the files
+
+
+def _reference_problems(cfg: RunConfig) -> list[str]:
+    """`key.path: problem` for every domain, split or local path the config names that does not exist."""
+    import importlib.util
+
+    from envs import registry
+
+    problems: list[str] = []
+    data = cfg.data
+    for name, module in data.domain_modules.items():
+        registered = registry.DOMAINS.get(name)
+        if registered is not None and registered != module:
+            problems.append(f"data.domain_modules.{name}: {name!r} is already the registered domain module "
+                            f"{registered!r}, not {module!r}")
+            continue
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            problems.append(f"data.domain_modules.{name}: module {module!r} not found")
+    splits_needed = [("data.train_split", data.train_split)]
+    if cfg.trainer.val_interval or cfg.trainer.val_at_start:
+        splits_needed.append(("data.val_split", data.val_split))
+    for index, name in enumerate(data.domains):
+        key = f"data.domains[{index}]"
+        if name in data.domain_modules:
+            if any(p.startswith(f"data.domain_modules.{name}:") for p in problems):
+                continue
+            module_path = data.domain_modules[name]
+        elif name in registry.DOMAINS:
+            module_path = None
+        else:
+            problems.append(f"{key}: unknown domain {name!r}; registered domains: {', '.join(registry.list_domains())} "
+                            f"(or map it to its module in data.domain_modules)")
+            continue
+        try:
+            declared = _domain_splits(name, module_path)
+        except Exception as exc:  # ImportError, DomainLoadError, a domain module's own failure
+            problems.append(f"{key}: domain {name!r} failed to load: {type(exc).__name__}: {str(exc)[:300]}")
+            continue
+        for split_key, split in splits_needed:
+            if declared is not None and split not in declared:
+                problems.append(f"{split_key}: domain {name!r} has no split {split!r} (it has: {', '.join(sorted(declared))})")
+    if _runs_locally(cfg):
+        problems += _local_path_problems(cfg)
+    return problems
+
+
+def _local_path_problems(cfg: RunConfig) -> list[str]:
+    problems = []
+    model = cfg.model
+    if model.kind == "pretrained" and model.path:
+        from learner.hf_checkpoint import is_hub_id
+
+        local = Path(model.path).expanduser()
+        if local.exists():
+            if not (local / "config.json").is_file():
+                problems.append(f"model.path: {model.path!r} has no config.json (not a Hugging Face checkpoint folder)")
+        elif not is_hub_id(model.path):
+            problems.append(f"model.path: {model.path!r} does not exist and is not a hub id of the form 'org/name'")
+        # A hub id is resolved in the cache when the run starts (`hcgym model fetch ID` fills it).
+    reference = cfg.learner.reference_model_dir
+    if reference is not None and not (Path(reference).expanduser() / "config.json").is_file():
+        problems.append(f"learner.reference_model_dir: {reference!r} is not a checkpoint folder with a config.json")
+    if cfg.kb.path is not None and not Path(cfg.kb.path).expanduser().is_dir():
+        problems.append(f"kb.path: {cfg.kb.path!r} is not a directory (build one with `hcgym kb build`)")
+    python = cfg.generator.python_executable
+    if python not in (None, "auto"):
+        path = Path(python).expanduser()
+        if not (path.is_file() and os.access(path, os.X_OK)):
+            problems.append(f"generator.python_executable: {python!r} is not an executable file")
+    output = Path(cfg.output_dir).expanduser()
+    if output.exists() and not output.is_dir():
+        problems.append(f"output_dir: {cfg.output_dir!r} exists and is not a directory")
+    return problems
+
+
+def validate_config(data: dict, source: str = "<config>", *, check_references: bool = True) -> RunConfig:
+    """Validate a config mapping into a `RunConfig`.
+
+    Beyond the models' own rules: booleans or strings where numbers belong and non-finite numbers
+    are refused; with `check_references`, so are unknown domains, splits a domain does not declare
+    and (for a run on this machine) local paths that do not exist.
+
+    Raises:
+        ConfigError: naming `source` and the key path of every problem.
+    """
+    problems = _number_problems(RunConfig, data, "") if isinstance(data, dict) else []
+    # One line per key: pydantic's own message for a key flagged above adds nothing (its paths
+    # write list indices as `.1` where ours write `[1]`).
+    flagged = {re.sub(r"\[(\d+)\]", r".\1", line.split(": ", 1)[0]) for line in problems}
+    config = None
+    try:
+        config = RunConfig.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(format_errors(exc))) from None
+        problems += [line for line in format_errors(exc) if line.split(": ", 1)[0] not in flagged]
+    if config is not None and not problems and check_references:
+        problems = _reference_problems(config)
+    if problems:
+        raise ConfigError(f"{source}: invalid config\n  " + "\n  ".join(problems))
+    return config
 
 
 def load_config(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> RunConfig:
@@ -397,7 +667,7 @@ def load_config(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -
             raise ConfigError(f"override {item!r}: expected key.path=value")
         key, _, text = item.partition("=")
         try:
-            value = yaml.safe_load(text)
+            value = _yaml_load(text)
         except yaml.YAMLError:
             value = text
         _set_path(data, key.strip(), value)

@@ -7,7 +7,7 @@ Defaults are the paper's (Appendix D, Table "Training hyperparameters") where it
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -24,7 +24,7 @@ OFFPOLICY_TIS_CAP = 2.0
 class GRPOConfig(StrictModel):
     """Eq. 1: clipped group-relative policy gradient plus a KL penalty to a frozen reference."""
 
-    clip_eps_low: float = Field(default=0.2, ge=0, description="lower clip range: ratio >= 1 - eps")
+    clip_eps_low: float = Field(default=0.2, ge=0, lt=1, description="lower clip range: ratio >= 1 - eps")
     clip_eps_high: float = Field(default=0.2, ge=0, description="upper clip range: ratio <= 1 + eps")
     kl_beta: float = Field(default=0.01, ge=0, description="weight of KL(pi_theta || pi_ref); 0 = no reference model")
     kl_estimator: KLEstimator = "k3"
@@ -92,10 +92,12 @@ class LossConfig(StrictModel):
 
 
 class OptimConfig(StrictModel):
-    lr: float = Field(default=5e-7, gt=0)
-    weight_decay: float = Field(default=0.0, ge=0)
-    betas: tuple[float, float] = (0.9, 0.999)
-    eps: float = Field(default=1e-8, gt=0)
+    # Upper bounds catch typos (`lr: 5e7` for 5e-7): Adam steps of size ~lr per weight, so past 1 a
+    # single update rewrites the model.
+    lr: float = Field(default=5e-7, gt=0, le=1)
+    weight_decay: float = Field(default=0.0, ge=0, le=1)
+    betas: tuple[Annotated[float, Field(ge=0, lt=1)], Annotated[float, Field(ge=0, lt=1)]] = (0.9, 0.999)
+    eps: float = Field(default=1e-8, gt=0, le=1)
     max_grad_norm: float = Field(default=1.0, gt=0)
     micro_batch_size: int = Field(default=1, ge=1, description="samples per forward/backward")
     updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
@@ -158,6 +160,7 @@ class HintConfig(StrictModel):
     # Which trajectories count as correct: the sample's `correct` flag (set by the driver from the
     # grader), or the reference's rule "reward > threshold".
     correctness_rule: Literal["correct_flag", "reward_above"] = "correct_flag"
+    # Must lie inside the run's reward range (checked by RunConfig), else every trajectory gets the same hint.
     reward_threshold: float = 0.0
 
     @model_validator(mode="after")
