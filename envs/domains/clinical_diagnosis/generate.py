@@ -1,7 +1,10 @@
 """Generated clinical-diagnosis tasks with exact oracles.
 
-* rare-disease diagnosis: 5-8 phenotypes sampled (weighted by annotation frequency) from one HPO
-  disease; the options are that disease and four distractors from the same source that share
+* rare-disease diagnosis: 5-8 phenotypes sampled (weighted by annotation frequency) from the
+  features an HPO disease annotates as at least "frequent" (>= 30 %: frequent, very frequent,
+  obligate), so the vignette is typical of the disease; kept only when the domain's own
+  differential tool (`generate_ddx`, scope "rare") ranks the disease in its top 3 for those
+  features. The options are that disease and four distractors from the same source that share
   phenotypes but score lower under the differential engine (so the item is answerable), never a
   numbered subtype of the same disease;
 * ICD-10-CM coding: a billable code described by its title or one of its inclusion terms; the
@@ -32,12 +35,35 @@ SOURCE_ICD = {"package": "simple-icd-10-cm", "version": "1.5.0", "license": "MIT
               "data": "ICD-10-CM tabular April 2026"}
 
 
+HPO_GUIDELINE = ("Human Phenotype Ontology disease annotations (phenotype.hpoa 2025-01-16; Kohler et al., Nucleic Acids Res "
+                 "2021) with OMIM/Orphanet disease definitions")
+
+
 def _stem(name: str) -> str:
     """Disease name without subtype numbering ("Noonan syndrome 3" -> "noonan syndrome")."""
     text = re.sub(r"[,;].*$", "", name.lower())
     text = re.sub(r"\b(type|group|class|form)\s+[0-9a-z]+\b", " ", text)
     text = re.sub(r"\b\d+[a-z]?\b|\b[ivx]+\b", " ", text)
     return re.sub(r"[^a-z]+", " ", text).strip()
+
+
+# HPO frequency classes "frequent" (30-79 %), "very frequent" and "obligate": features typical
+# enough of a disease to build its vignette from ("occasional" ones make it read as another disease).
+MIN_FEATURE_FREQUENCY = 0.30
+# The gold must rank within this many places of the domain's differential tool (generate_ddx).
+DDX_TOP = 3
+DDX_SOURCES = {"OMIM", "ORPHA", "DECIPHER"}  # generate_ddx scope "rare"
+
+
+def typical_phenotypes(index: PhenotypeIndex, did: str) -> list[tuple[str, float]]:
+    """A disease's informative (IC >= 2) phenotypes annotated at least "frequent"."""
+    return [(h, f) for h, f in index.diseases[did]["phenotypes"] if f is not None and f >= MIN_FEATURE_FREQUENCY and index.ic(h) >= 2.0]
+
+
+def ddx_rank(index: PhenotypeIndex, findings: list[str], disease_id: str, limit: int = DDX_TOP) -> int | None:
+    """1-based rank of a disease in generate_ddx(findings, scope="rare"), None if below `limit`."""
+    ranked = [r["disease_id"] for r in index.rank(findings, limit=limit, sources=DDX_SOURCES)]
+    return ranked.index(disease_id) + 1 if disease_id in ranked else None
 
 
 def rare_disease_tasks(index: PhenotypeIndex, n: int, seed: int = 11) -> list[Task]:
@@ -47,8 +73,7 @@ def rare_disease_tasks(index: PhenotypeIndex, n: int, seed: int = 11) -> list[Ta
         d = index.diseases[did]
         if d["source"] not in ("OMIM", "ORPHA"):
             continue
-        usable = [(h, f) for h, f in d["phenotypes"] if f is not None and f > 0 and index.ic(h) >= 2.0]
-        if len(usable) >= 8:
+        if len(typical_phenotypes(index, did)) >= 6:
             eligible.append(did)
     rng.shuffle(eligible)
     tasks: list[Task] = []
@@ -60,7 +85,7 @@ def rare_disease_tasks(index: PhenotypeIndex, n: int, seed: int = 11) -> list[Ta
         stem = _stem(d["name"])
         if stem in seen_stems or not stem:
             continue
-        pool = [(h, f) for h, f in d["phenotypes"] if f is not None and f > 0 and index.ic(h) >= 2.0]
+        pool = typical_phenotypes(index, did)
         k = rng.randint(5, 8)
         chosen: list[str] = []
         candidates = list(pool)
@@ -96,6 +121,9 @@ def rare_disease_tasks(index: PhenotypeIndex, n: int, seed: int = 11) -> list[Ta
                 break
         if len(distractors) < 4:
             continue
+        rank = ddx_rank(index, chosen, did)
+        if rank is None:  # the features do not identify the disease under the domain's own tool
+            continue
         seen_stems.add(stem)
         options_ids = distractors + [did]
         rng.shuffle(options_ids)
@@ -109,12 +137,13 @@ def rare_disease_tasks(index: PhenotypeIndex, n: int, seed: int = 11) -> list[Ta
             answer_type="choice",
             description={"purpose": "phenotype-driven rare-disease diagnosis", "difficulty": "hard",
                          "source": "hpo_annotations", "category": "rare_disease", "task_type": "rare_disease_dx",
-                         "provenance": {**SOURCE_HPO, "disease_id": did}},
+                         "provenance": {**SOURCE_HPO, "disease_id": did, "guideline": HPO_GUIDELINE}},
             evaluation_criteria={"actions": [
                 {"action_id": "ddx", "name": "generate_ddx", "arguments": {"findings": chosen, "scope": "rare"},
                  "compare_args": [], "info": "rank candidate diseases from the phenotypes"}],
                 "reward_basis": ["ACTION", "ANSWER"]},
-            metadata={"disease_id": did, "phenotypes": chosen,
+            answer_aliases=[index.diseases[did]["name"]],
+            metadata={"disease_id": did, "phenotypes": chosen, "ddx_rank": rank,
                       "phenotype_frequencies": {t: frequency_label(dict(d["phenotypes"])[t]) for t in chosen},
                       "option_ids": dict(zip(LETTERS, options_ids))},
         ))
@@ -161,7 +190,8 @@ def icd_coding_tasks(index: ICD10Index, n: int, seed: int = 13, exact_fraction: 
         base = dict(
             description={"purpose": "ICD-10-CM coding", "difficulty": "medium", "source": "icd10cm",
                          "category": "coding", "task_type": "icd10_coding",
-                         "provenance": {**SOURCE_ICD, "code": code, "described_by": described_by}},
+                         "provenance": {**SOURCE_ICD, "code": code, "described_by": described_by,
+                                        "guideline": "ICD-10-CM tabular list and Official Guidelines for Coding and Reporting (CMS/NCHS)"}},
             metadata={"code": code, "chapter": item["chapter"], "block": item["block"], "phrase": phrase},
         )
         lookup = {"action_id": "lookup", "name": "lookup_icd10", "arguments": {"query": phrase}, "compare_args": [],
@@ -252,7 +282,9 @@ def lab_interpretation_tasks(catalog: LabCatalog, n: int, seed: int = 17) -> lis
                          "source": "lab_reference_ranges", "category": "lab_interpretation",
                          "task_type": "lab_interpretation",
                          "provenance": {"ranges": "authored (project reference intervals)",
-                                        "units": "labunits 0.2.1" if unit != a["unit"] else "authored"}},
+                                        "units": "labunits 0.2.1" if unit != a["unit"] else "authored",
+                                        "guideline": "CLSI EP28-A3c (2010) reference-interval interpretation; adult intervals and "
+                                                     "critical limits as published by US hospital laboratories (authored catalogue)"}},
             evaluation_criteria={"actions": [
                 {"action_id": "interpret", "name": "interpret_lab_value",
                  "arguments": {"test": key, "value": shown, "sex": sex, "age": age,

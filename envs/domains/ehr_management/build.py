@@ -70,13 +70,25 @@ def _act(aid: str, name: str, args: dict, compare: list[str]) -> dict:
     return {"action_id": aid, "name": name, "arguments": args, "compare_args": compare}
 
 
+# The score definition or coding standard each generated task type's gold follows.
+GUIDELINES = {
+    "news2_from_record": "National Early Warning Score 2 (Royal College of Physicians, London 2017)",
+    "sofa_from_record": "SOFA score (Vincent et al., Intensive Care Med 1996;22:707-710)",
+    "apache_from_record": "APACHE II (Knaus et al., Crit Care Med 1985;13:818-829)",
+    "lab_trend": "arithmetic from the charted results (first, last, delta, extremes, least-squares slope); no clinical guideline",
+    "icd10_admission_coding": "ICD-10-CM tabular list and Official Guidelines for Coding and Reporting (CMS/NCHS), principal diagnosis",
+    "admission_summary": "the admission's charted record (diagnoses, stays, results); no clinical guideline",
+}
+
+
 def _task(tid: str, kind: str, ticket: str, answer: str, answer_type: str, actions: list[dict], pid: str,
           tol: float | None = None, unit: str | None = None, options: dict | None = None, **extra) -> Task:
     return Task(id=tid, ticket=ticket, correct_answer=answer, answer_type=answer_type, answer_tolerance=tol,
                 answer_unit=unit, options=options, patient_id=pid,
                 description={"purpose": kind.replace("_", " "), "difficulty": "medium", "source": "ehr_authored_icu",
                              "category": kind, "task_type": kind,
-                             "provenance": {"patients": "authored synthetic ICU scenarios", "oracle": "computed from the record"}},
+                             "provenance": {"patients": "authored synthetic ICU scenarios", "oracle": "computed from the record",
+                                            "guideline": GUIDELINES[kind]}},
                 evaluation_criteria={"actions": actions, "reward_basis": ["ACTION", "ANSWER"]}, **extra)
 
 

@@ -56,7 +56,9 @@ def _task(tid: str, kind: str, pid: str, ticket: str, answer: str, answer_type: 
     return Task(id=tid, ticket=ticket, correct_answer=answer, answer_type=answer_type, patient_id=pid,
                 description={"purpose": f"longitudinal record: {kind.replace('_', ' ')}", "difficulty": "medium",
                              "source": "synthea_omop", "category": "ehr_timeline", "task_type": f"timeline_{kind}",
-                             "provenance": {**provenance, "oracle": action["name"]}},
+                             "provenance": {**provenance, "oracle": action["name"],
+                                            "guideline": "OMOP CDM v5.4 record conventions (OHDSI); counts and dates computed from the "
+                                                         "Synthea-generated record"}},
                 evaluation_criteria={"actions": [action], "reward_basis": ["ACTION", "ANSWER"]}, **extra)
 
 

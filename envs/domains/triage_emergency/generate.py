@@ -78,7 +78,8 @@ def esi_handbook_tasks(cases: list[dict], source: dict) -> list[Task]:
             emergency=_handbook_emergency(case),
             description={"purpose": "ESI triage of a handbook case", "difficulty": "medium", "source": "medeval_esi",
                          "category": "esi_triage", "task_type": "esi_handbook",
-                         "provenance": {**source, "case_id": pid, "handbook_source": case.get("source", "")}},
+                         "provenance": {**source, "case_id": pid, "handbook_source": case.get("source", ""),
+                                        "guideline": ESI_GUIDELINE}},
             evaluation_criteria={"actions": [
                 {"action_id": "present", "name": "get_patient_presentation", "arguments": {"patient_id": pid},
                  "compare_args": ["patient_id"]},
@@ -120,17 +121,103 @@ TEMPLATES: list[tuple[str, bool, bool, bool, bool, str, int, tuple[int, int]]] =
 ]
 
 
-def _vitals(rng: random.Random, age: int, danger: bool) -> dict:
+# Vital-sign ranges each complaint implies (ESI v4 Implementation Handbook, Gilboy et al., AHRQ 2012,
+# chapters 3-4 and its case examples; fever is T >= 38.0 C). Each field is (low, high) or None when
+# it cannot be measured (no pulse or blood pressure in cardiac arrest). "danger" is an optional
+# overlay drawn for some vignettes of complaints in which danger-zone vital signs (decision D:
+# HR > 100, RR > 20, SpO2 < 92 % in adults) plausibly occur; it stays within the complaint's physiology.
+Range = tuple[float, float] | None
+NORMAL: dict[str, Range] = {"heart_rate": (62, 98), "respiratory_rate": (12, 20), "spo2": (96, 100), "systolic_bp": (108, 148),
+                            "diastolic_bp": (62, 90), "temperature_c": (36.2, 37.5)}
+VITAL_PROFILES: dict[str, dict] = {
+    "cardiac arrest with CPR in progress": {
+        "base": {"heart_rate": None, "systolic_bp": None, "diastolic_bp": None, "respiratory_rate": (0, 0), "spo2": None,
+                 "temperature_c": (34.8, 36.4)}, "assisted_ventilation": True},
+    "apnoeic after an opioid overdose, pinpoint pupils": {
+        "base": {"heart_rate": (48, 72), "respiratory_rate": (0, 6), "spo2": (68, 86), "systolic_bp": (88, 118), "diastolic_bp": (50, 72),
+                 "temperature_c": (35.6, 36.8)}},
+    "massive haematemesis and pale, clammy": {
+        "base": {"heart_rate": (118, 145), "respiratory_rate": (22, 30), "spo2": (93, 99), "systolic_bp": (70, 92), "diastolic_bp": (38, 58),
+                 "temperature_c": (35.6, 36.8)}},
+    "anaphylaxis with stridor after a bee sting": {
+        "base": {"heart_rate": (115, 140), "respiratory_rate": (26, 36), "spo2": (86, 93), "systolic_bp": (72, 96), "diastolic_bp": (40, 60),
+                 "temperature_c": (36.4, 37.4)}},
+    "chest pain typical of acute coronary syndrome": {
+        "base": {"heart_rate": (62, 104), "respiratory_rate": (14, 22), "spo2": (94, 99), "systolic_bp": (104, 168), "diastolic_bp": (64, 98),
+                 "temperature_c": (36.3, 37.3)}},
+    "sudden severe headache, 'worst ever'": {
+        "base": {"heart_rate": (58, 100), "respiratory_rate": (12, 20), "spo2": (96, 100), "systolic_bp": (132, 188),
+                 "diastolic_bp": (78, 108), "temperature_c": (36.3, 37.4)}},
+    "new confusion and fever in an elderly patient": {
+        "base": {"heart_rate": (92, 118), "respiratory_rate": (18, 24), "spo2": (92, 97), "systolic_bp": (96, 140), "diastolic_bp": (54, 84),
+                 "temperature_c": (38.0, 39.4)},
+        "danger": {"heart_rate": (112, 130), "respiratory_rate": (24, 30), "spo2": (88, 91)}},
+    "kidney stone pain, writhing, pain 9/10": {
+        "base": {"heart_rate": (84, 112), "respiratory_rate": (16, 22), "spo2": (96, 100), "systolic_bp": (122, 165), "diastolic_bp": (74, 98),
+                 "temperature_c": (36.4, 37.6)}},
+    "cough and fever, likely pneumonia": {
+        "base": {"heart_rate": (86, 108), "respiratory_rate": (18, 24), "spo2": (92, 97), "systolic_bp": (104, 140), "diastolic_bp": (60, 88),
+                 "temperature_c": (38.0, 39.6)},
+        "danger": {"heart_rate": (112, 130), "respiratory_rate": (24, 32), "spo2": (88, 91)}},
+    "asthma, wheezy, needs several nebulisers": {
+        "base": {"heart_rate": (88, 110), "respiratory_rate": (20, 26), "spo2": (92, 97), "temperature_c": (36.3, 37.5)},
+        "danger": {"heart_rate": (112, 130), "respiratory_rate": (26, 32), "spo2": (88, 91)}},
+    "abdominal pain and vomiting for a day": {
+        "base": {"heart_rate": (72, 100), "temperature_c": (36.3, 37.8)},
+        "danger": {"heart_rate": (104, 124)}},
+    "cellulitis of the leg needing IV antibiotics": {
+        "base": {"heart_rate": (68, 100), "temperature_c": (36.5, 37.9)},
+        "danger": {"heart_rate": (104, 120), "temperature_c": (38.0, 38.9)}},
+    "testicular pain of sudden onset in an adolescent": {"base": {"heart_rate": (72, 104)}},
+    "suicidal ideation with a plan": {"base": {}},
+    "forearm deformity after a fall (suspected fracture needing reduction)": {"base": {"heart_rate": (70, 104)}},
+    "ankle injury after a twist, able to bear weight with a limp": {"base": {}},
+    "simple laceration of the forearm needing sutures": {"base": {}},
+    "dysuria and frequency in a young woman": {"base": {"temperature_c": (36.4, 37.6)}},
+    "sore throat for 2 days": {"base": {"temperature_c": (36.4, 37.8)}},
+    "request for a repeat prescription": {"base": {}},
+    "insect bite with local redness, no systemic symptoms": {"base": {}},
+    "splinter in the finger": {"base": {}},
+}
+# Normal ranges of a school-age child (5-11 years; PALS / ESI handbook paediatric vital signs).
+CHILD_NORMAL: dict[str, Range] = {"heart_rate": (76, 118), "respiratory_rate": (18, 25), "spo2": (96, 100), "systolic_bp": (96, 116),
+                                  "diastolic_bp": (56, 76), "temperature_c": (36.2, 37.5)}
+DANGER_PROBABILITY = 0.35
+
+
+def vital_ranges(complaint: str, danger: bool, age: int) -> dict[str, Range]:
+    """The (low, high) range of each vital sign for a complaint; None where it cannot be measured."""
+    profile = VITAL_PROFILES[complaint]
+    ranges = {**(CHILD_NORMAL if age < 12 else NORMAL), **profile["base"]}
     if danger:
-        hr = rng.choice([rng.randint(112, 135), None])
-        rr = rng.randint(24, 32) if hr is None or rng.random() < 0.5 else rng.randint(14, 20)
-        spo2 = rng.choice([rng.randint(88, 91), rng.randint(95, 99)]) if hr is not None or rr > 20 else rng.randint(88, 91)
-        hr = hr or rng.randint(80, 98)
-    else:
-        hr, rr, spo2 = rng.randint(64, 96), rng.randint(12, 20), rng.randint(95, 100)
-    sbp = rng.randint(108, 150)
-    return {"heart_rate": hr, "respiratory_rate": rr, "spo2": spo2, "systolic_bp": sbp,
-            "diastolic_bp": rng.randint(62, 92), "temperature_c": round(rng.uniform(36.2, 38.4), 1)}
+        ranges.update(profile.get("danger", {}))
+    return ranges
+
+
+def _vitals(rng: random.Random, complaint: str, age: int) -> tuple[dict, bool]:
+    profile = VITAL_PROFILES[complaint]
+    danger = "danger" in profile and rng.random() < DANGER_PROBABILITY
+    out: dict = {}
+    for name, r in vital_ranges(complaint, danger, age).items():
+        if r is None:
+            out[name] = None
+        elif name == "temperature_c":
+            out[name] = round(rng.uniform(*r), 1)
+        else:
+            out[name] = rng.randint(int(r[0]), int(r[1]))
+    return out, danger
+
+
+def _vitals_text(v: dict, assisted: bool) -> str:
+    hr = "no palpable pulse" if v["heart_rate"] is None else f"HR {v['heart_rate']}"
+    bp = "BP unrecordable" if v["systolic_bp"] is None else f"BP {v['systolic_bp']}/{v['diastolic_bp']}"
+    rr = (f"RR {v['respiratory_rate']} (apnoeic, bag-valve-mask ventilation)" if assisted
+          else f"RR {v['respiratory_rate']}" + (" (apnoeic)" if v["respiratory_rate"] <= 6 else ""))
+    spo2 = "SpO2 unrecordable" if v["spo2"] is None else f"SpO2 {v['spo2']}% on room air"
+    return f"{hr}, {bp}, {rr}, {spo2}, T {v['temperature_c']} C"
+
+
+ESI_GUIDELINE = "Emergency Severity Index v4 Implementation Handbook (Gilboy et al., AHRQ Publication 12-0014, 2012)"
 
 
 def esi_vignette_tasks(n: int, seed: int = 41) -> list[Task]:
@@ -140,16 +227,19 @@ def esi_vignette_tasks(n: int, seed: int = 41) -> list[Task]:
         complaint, a, b, conf, pain, res_text, res, (lo, hi) = rng.choice(TEMPLATES)
         age = rng.randint(lo, hi)
         sex = rng.choice(["man", "woman"])
-        v = _vitals(rng, age, danger=rng.random() < 0.35)
+        sex = "woman" if "woman" in complaint else "man" if "testicular" in complaint else sex  # the complaint fixes the sex
+        if age < 16:
+            sex = {"man": "boy", "woman": "girl"}[sex]
+        v, danger = _vitals(rng, complaint, age)
         result = calculate_esi_level(a, b, conf, pain, res, age, v["heart_rate"], v["respiratory_rate"], v["spo2"])
         key = (complaint, age, sex, tuple(sorted(v.items())))
         if key in seen:
             continue
         seen.add(key)
         pain_text = " Pain is 9/10 and the patient is in obvious distress." if pain else ""
-        ticket = (f"A {age}-year-old {sex} presents to triage with {complaint}.{pain_text} Vital signs: HR {v['heart_rate']}, "
-                  f"BP {v['systolic_bp']}/{v['diastolic_bp']}, RR {v['respiratory_rate']}, SpO2 {v['spo2']}% on room air, "
-                  f"T {v['temperature_c']} C. Anticipated ED resources: {res_text}. Assign the ESI v4 level (1-5), "
+        assisted = bool(VITAL_PROFILES[complaint].get("assisted_ventilation"))
+        ticket = (f"A {age}-year-old {sex} presents to triage with {complaint}.{pain_text} Vital signs: {_vitals_text(v, assisted)}. "
+                  f"Anticipated ED resources: {res_text}. Assign the ESI v4 level (1-5), "
                   f"applying the danger-zone vital signs at decision point D. Answer with the level.")
         args = {"requires_immediate_lifesaving_intervention": a, "high_risk_situation": b,
                 "confused_lethargic_or_disoriented": conf, "severe_pain_or_distress": pain, "expected_resources": res,
@@ -157,16 +247,33 @@ def esi_vignette_tasks(n: int, seed: int = 41) -> list[Task]:
         tasks.append(Task(
             id=f"tr_esi_vignette_{len(tasks):03d}", ticket=ticket, answer_type="numeric", correct_answer=str(result.score),
             answer_tolerance=0.0, answer_unit="ESI level",
+            answer_aliases=[f"ESI {result.score}", f"ESI level {result.score}"],
             emergency="other" if result.score == 1 else None,
             description={"purpose": "ESI triage vignette", "difficulty": "medium", "source": "generated_esi",
                          "category": "esi_triage", "task_type": "esi_vignette",
-                         "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": "calculate_esi_level"}},
+                         "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": "calculate_esi_level",
+                                        "guideline": ESI_GUIDELINE}},
             evaluation_criteria={"actions": [{"action_id": "esi", "name": "calculate_esi_level", "arguments": args,
                                               "compare_args": ["expected_resources"]}],
                                  "reward_basis": ["ACTION", "ANSWER"]},
-            metadata={"inputs": args, "category": result.category},
+            metadata={"inputs": args, "category": result.category, "complaint": complaint, "vitals": v, "danger_zone_draw": danger,
+                      "assisted_ventilation": assisted},
         ))
     return tasks
+
+
+# The publication each calculator task's gold follows.
+CALCULATOR_GUIDELINES = {
+    "gcs": "Glasgow Coma Scale (Teasdale & Jennett, Lancet 1974; Teasdale et al., Lancet Neurol 2014)",
+    "qsofa": "qSOFA, Sepsis-3 (Singer et al., JAMA 2016;315:801-810)",
+    "news2": "National Early Warning Score 2 (Royal College of Physicians, London 2017)",
+    "heart": "HEART score (Six et al., Neth Heart J 2008;16:191-196)",
+    "curb65": "CURB-65 (Lim et al., Thorax 2003;58:377-382; BTS community-acquired pneumonia guideline 2009)",
+    "rts": "Revised Trauma Score (Champion et al., J Trauma 1989;29:623-629)",
+    "parkland": "Parkland formula (Baxter & Shires 1968; ABA Advanced Burn Life Support course 2018)",
+    "shock_index": "Shock index HR/SBP (Allgower & Burri 1967)",
+    "centor": "Centor criteria (Centor et al., Med Decis Making 1981;1:239-246)",
+}
 
 
 def _task(kind: str, idx: int, ticket: str, tool: str, args: dict, value: float, tol: float, unit: str,
@@ -176,7 +283,8 @@ def _task(kind: str, idx: int, ticket: str, tool: str, args: dict, value: float,
         answer_tolerance=tol, answer_unit=unit,
         description={"purpose": f"{kind} calculation", "difficulty": "easy", "source": "generated_calculator",
                      "category": "calculator", "task_type": f"calc_{kind}",
-                     "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": f"envs.calculators.{tool}"}},
+                     "provenance": {"generator": "envs.domains.triage_emergency.generate", "oracle": f"envs.calculators.{tool}",
+                                    "guideline": CALCULATOR_GUIDELINES[kind]}},
         evaluation_criteria={"actions": [{"action_id": kind, "name": tool, "arguments": args, "compare_args": compare}],
                              "reward_basis": ["ACTION", "ANSWER"]},
         metadata={"inputs": args},

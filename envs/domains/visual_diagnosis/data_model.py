@@ -18,6 +18,16 @@ class _Record(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+# Management of a nodule in a patient with a known primary cancer: Fleischner 2017 (MacMahon et al.,
+# Radiology 2017) excludes these patients; the nodule is followed within the cancer's staging and
+# surveillance imaging (e.g. NCCN Colon Cancer: chest CT at staging and surveillance).
+KNOWN_MALIGNANCY_MANAGEMENT = "oncologic staging follow-up"
+KNOWN_MALIGNANCY_ALIASES = ["Fleischner not applicable (known malignancy)", "follow-up within the oncologic staging and surveillance protocol",
+                            "Fleischner guidelines do not apply"]
+KNOWN_MALIGNANCY_GUIDELINE = ("Fleischner Society 2017 (MacMahon et al., Radiology 2017;284:228-243), scope: excludes patients with "
+                              "known malignancy; NCCN Guidelines Colon Cancer (staging and surveillance chest CT)")
+
+
 class PatientInfo(_Record):
     age: int
     sex: Literal["female", "male"]
@@ -25,6 +35,8 @@ class PatientInfo(_Record):
     smoking_pack_years: float = 0
     lung_cancer_risk: Literal["low", "high"] = "low"
     symptoms: list[str] = Field(default_factory=list)
+    # A known primary cancer (e.g. a CT done for staging): Fleischner 2017 excludes these patients.
+    known_malignancy: str | None = None
 
 
 class Study(_Record):

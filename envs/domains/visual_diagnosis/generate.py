@@ -20,7 +20,8 @@ from scipy import ndimage
 from envs.calculators import CALCULATORS
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import render as R
-from envs.domains.visual_diagnosis.data_model import ArchivedCase, PatientInfo, Study
+from envs.domains.visual_diagnosis.data_model import (KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT,
+                                                     ArchivedCase, PatientInfo, Study)
 from envs.domains.visual_diagnosis.png import write_png
 
 PROVENANCE = {"source": "authored", "generator": "envs.domains.visual_diagnosis.generate", "license": "project (ours)"}
@@ -155,6 +156,11 @@ def ct_agrees(out: dict, nodules: list[dict]) -> bool:
     return True
 
 
+# (indication, known primary cancer) of a CT without a prior: a staging CT means a known malignancy.
+CT_INDICATIONS = [("staging CT for colorectal cancer", "colorectal adenocarcinoma"), ("trauma", None), ("chronic cough", None),
+                  ("pre-operative assessment", None)]
+
+
 def make_ct(sid: str, rng: random.Random, image_dir: Path, plan: list[tuple[str, float]], smoker: bool | None = None,
             prior_plan: list[float | None] | None = None) -> tuple[Study, dict, Study | None]:
     """plan: [(type, mean_mm)] for the current image; prior_plan: per nodule the prior mean (None: absent)."""
@@ -192,10 +198,11 @@ def make_ct(sid: str, rng: random.Random, image_dir: Path, plan: list[tuple[str,
                                 width=R.SIZE, height=R.SIZE, pixel_spacing_mm=R.CT_SPACING_MM, orientation=ORIENT_CT,
                                 indication="nodule surveillance", acquired="12 months ago", patient=patient, provenance=PROVENANCE)
         write_png(image_dir / f"{sid}.png", img)
+        indication, cancer = ("nodule surveillance", None) if prior_plan is not None else rng.choice(CT_INDICATIONS)
+        if cancer:  # a staging CT: the patient has a known primary cancer (outside Fleischner 2017)
+            patient = patient.model_copy(update={"known_malignancy": cancer, "history": f"{cancer} diagnosed this month, staging in progress"})
         study = Study(study_id=sid, modality="CT", body_part="chest", view="axial", image_file=f"images/{sid}.png", width=R.SIZE,
-                      height=R.SIZE, pixel_spacing_mm=R.CT_SPACING_MM, orientation=ORIENT_CT,
-                      indication="nodule surveillance" if prior_plan is not None else rng.choice(
-                          ["staging CT for colorectal cancer", "trauma", "chronic cough", "pre-operative assessment"]),
+                      height=R.SIZE, pixel_spacing_mm=R.CT_SPACING_MM, orientation=ORIENT_CT, indication=indication,
                       acquired="today", patient=patient, prior_study_id=prior_study.study_id if prior_study else None,
                       provenance=PROVENANCE)
         return study, {"nodules": nodules, "prior_nodules": prior_nodules, "seed": seed}, prior_study
@@ -240,14 +247,34 @@ def act(name: str, arguments: dict, compare: list[str] | None = None) -> dict:
     return {"name": name, "arguments": arguments, "compare_args": list(arguments) if compare is None else compare}
 
 
+# The reference each generated task type's gold follows (in the task's provenance).
+_GLOSSARY = "Fleischner Society Glossary of Terms for Thoracic Imaging (Hansell et al., Radiology 2008;246:697-722)"
+_MEASURE = "Fleischner Society recommendations for measuring pulmonary nodules at CT (Bankier et al., Radiology 2017;285:584-600)"
+GUIDELINES = {
+    "cxr_principal_finding": _GLOSSARY, "cxr_laterality": _GLOSSARY, "cxr_zone": _GLOSSARY,
+    "cxr_lesion_size": _GLOSSARY + " (nodule <= 3 cm, mass > 3 cm)",
+    "cxr_cardiothoracic_ratio": "Cardiothoracic ratio on a PA radiograph, > 0.50 = cardiomegaly (Danzer 1919; " + _GLOSSARY + ")",
+    "ct_nodule_count": _MEASURE, "ct_nodule_size": _MEASURE, "ct_nodule_type": _MEASURE,
+    "ct_interval_change": _MEASURE + " (change in mean diameter)",
+    "ct_fleischner": "Fleischner Society 2017 guidelines for incidental pulmonary nodules (MacMahon et al., Radiology 2017;284:228-243)",
+}
+# Equivalent phrasings of the Fleischner 2017 intervals.
+FLEISCHNER_ALIASES = {"CT at 6-12 months": ["CT in 6 to 12 months", "follow-up CT at 6-12 months"],
+                      "CT at 3-6 months": ["CT in 3 to 6 months", "follow-up CT at 3-6 months"],
+                      "optional CT at 12 months": ["CT at 12 months (optional)"],
+                      "no routine follow-up": ["no routine follow-up required"]}
+
+
 def task_dict(task_id: str, ticket: str, study: Study, image_root: Path, *, answer: str, answer_type: str, task_type: str,
               actions: list[dict], category: str, options: dict | None = None, unit: str | None = None,
-              tolerance: float | None = None, metadata: dict | None = None, aliases: list[str] | None = None) -> dict:
+              tolerance: float | None = None, metadata: dict | None = None, aliases: list[str] | None = None,
+              guideline: str | None = None) -> dict:
     t: dict[str, Any] = {
         "id": task_id, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type,
         "image_path": str(image_root / study.image_file),
         "description": {"purpose": f"Image interpretation: {category}.", "difficulty": "medium", "source": "generated",
-                        "category": category, "task_type": task_type, "provenance": PROVENANCE},
+                        "category": category, "task_type": task_type,
+                        "provenance": {**PROVENANCE, "guideline": guideline or GUIDELINES[task_type]}},
         "evaluation_criteria": {"actions": actions, "reward_basis": ["ACTION", "ANSWER"]},
         "metadata": {"study_id": study.study_id, **(metadata or {})},
     }
@@ -391,11 +418,23 @@ def generate(seed: int, build_dir: Path) -> tuple[list[Study], dict[str, Archive
         studies.append(s)
         res = CALCULATORS["fleischner_recommendation"](nodule_type=typ, size_mm=mean, multiple=count > 1,
                                                        risk="high" if smoker else "low")
+        actions = [act("analyze_medical_image", {"study_id": sid}), act("get_clinical_history", {"study_id": sid}),
+                   act("fleischner_recommendation", {"study_id": sid}, ["study_id"])]
+        if s.patient.known_malignancy:
+            # Fleischner 2017 excludes known malignancy: the gold is oncologic follow-up and the
+            # question does not presume the guideline applies.
+            ticket = _intro(s) + (" What follow-up is appropriate for the nodule? If a guideline does not apply to this patient, "
+                                  "say so and give the management that does.")
+            tasks.append(task_dict(f"vis_ct_fleischner_{sid}", ticket, s, build_dir, answer=KNOWN_MALIGNANCY_MANAGEMENT, answer_type="exact",
+                                   task_type="ct_fleischner", category="nodule in known malignancy", actions=actions,
+                                   aliases=KNOWN_MALIGNANCY_ALIASES, guideline=KNOWN_MALIGNANCY_GUIDELINE,
+                                   metadata={"truth": truth, "size_mm": mean, "multiple": count > 1, "smoker": smoker,
+                                             "known_malignancy": s.patient.known_malignancy}))
+            continue
         ticket = _intro(s) + " This is an incidental finding. What follow-up does the Fleischner Society 2017 guideline recommend?"
         tasks.append(task_dict(f"vis_ct_fleischner_{sid}", ticket, s, build_dir, answer=res.category, answer_type="exact",
-                               task_type="ct_fleischner", category="incidental nodule management",
-                               actions=[act("analyze_medical_image", {"study_id": sid}), act("get_clinical_history", {"study_id": sid}),
-                                        act("fleischner_recommendation", {"study_id": sid}, ["study_id"])],
+                               task_type="ct_fleischner", category="incidental nodule management", actions=actions,
+                               aliases=FLEISCHNER_ALIASES.get(res.category),
                                metadata={"truth": truth, "size_mm": mean, "multiple": count > 1, "smoker": smoker}))
     for i in range(30):  # growth against the prior
         sid = new_id()

@@ -16,7 +16,7 @@ from envs.calculators import CALCULATORS
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 from envs.domains.visual_diagnosis import analysis as A
-from envs.domains.visual_diagnosis.data_model import CriticalEscalation, RecordedFinding, Study, VisualDB
+from envs.domains.visual_diagnosis.data_model import KNOWN_MALIGNANCY_MANAGEMENT, CriticalEscalation, RecordedFinding, Study, VisualDB
 from envs.domains.visual_diagnosis.png import read_png
 
 FINDINGS = ("nodule", "mass", "consolidation", "pleural effusion", "pneumothorax", "cardiomegaly", "normal")
@@ -237,6 +237,10 @@ class VisualTools(BaseDomainTools):
         if not 1 <= nodule_index <= len(nodules):
             raise ToolError(f"nodule_index must be between 1 and {len(nodules)}")
         n = nodules[nodule_index - 1]
+        if s.patient.known_malignancy:  # outside the guideline's population (MacMahon et al., Radiology 2017)
+            return {"study_id": s.study_id, "nodule": n, "applicable": False, "category": KNOWN_MALIGNANCY_MANAGEMENT,
+                    "reason": f"Fleischner 2017 excludes patients with known malignancy ({s.patient.known_malignancy}); "
+                              "follow the nodule within the cancer's staging and surveillance imaging"}
         size = min(max(n["mean_diameter_mm"], 1.0), 30.0)
         res = CALCULATORS["fleischner_recommendation"](nodule_type=n["type"], size_mm=size, multiple=len(nodules) > 1,
                                                        risk=s.patient.lung_cancer_risk)
