@@ -48,7 +48,15 @@ _CLASS_GROUPS: dict[tuple[str, ...], str] = {
     ("cardiac glycosides",): "digoxin",
     ("antiarrhythmics",): "amiodarone",
     ("antimetabolites",): "methotrexate",
-    ("retinoids",): "isotretinoin",
+    ("retinoids",): "isotretinoin acitretin",
+    ("bisphosphonates",): "alendronate risedronate ibandronate",
+    ("glp-1 receptor agonists",): "dulaglutide",
+    ("prostaglandin analogues",): "misoprostol",
+    ("immunomodulatory imides",): "thalidomide lenalidomide",
+    ("pyrimidine synthesis inhibitors",): "leflunomide",
+    ("nucleoside analogues",): "ribavirin",
+    ("5-alpha reductase inhibitors",): "finasteride dutasteride",
+    ("endothelin receptor antagonists",): "bosentan ambrisentan macitentan",
     ("biguanides",): "metformin",
     ("insulins",): "insulin",
     ("analgesics",): "acetaminophen",
@@ -90,6 +98,11 @@ BRANDS: dict[str, str] = {
     "isosorbide dinitrate": "isosorbide-dinitrate", "amoxicillin clavulanate": "amoxicillin-clavulanate",
     "trimethoprim sulfamethoxazole": "trimethoprim-sulfamethoxazole", "valproic acid": "valproate",
     "piperacillin tazobactam": "piperacillin-tazobactam",
+    "fosamax": "alendronate", "actonel": "risedronate", "atelvia": "risedronate", "boniva": "ibandronate",
+    "trulicity": "dulaglutide", "trexall": "methotrexate", "otrexup": "methotrexate", "rasuvo": "methotrexate",
+    "xatmep": "methotrexate", "cytotec": "misoprostol", "thalomid": "thalidomide", "revlimid": "lenalidomide",
+    "arava": "leflunomide", "proscar": "finasteride", "propecia": "finasteride", "tracleer": "bosentan",
+    "soriatane": "acitretin", "absorica": "isotretinoin", "claravis": "isotretinoin",
 }
 
 #: (drug-or-class, drug-or-class, severity, description); looked up both ways.
@@ -132,11 +145,56 @@ MAX_SINGLE_DOSE_MG: dict[str, dict[str, float]] = {
     "warfarin": {"*": 10.0},
 }
 
+#: Pregnancy contraindications from US labelling: drug or class -> the label section that states it.
+#: The fallback when a domain's own pregnancy data (drugdose's FDA category, 49 drugs) has nothing.
+#: Statins are not listed: in 2021 the FDA asked for the pregnancy contraindication to be removed
+#: from every statin label (FDA Drug Safety Communication, 20 July 2021).
+PREGNANCY_CONTRAINDICATED: dict[str, str] = {
+    "isotretinoin": "isotretinoin labels (Absorica, Claravis): boxed warning and 4 CONTRAINDICATIONS (pregnancy); iPLEDGE REMS",
+    "acitretin": "Soriatane label: boxed warning and 4 CONTRAINDICATIONS (pregnancy)",
+    "warfarin": "Coumadin label: 4 CONTRAINDICATIONS (pregnancy, except women with mechanical heart valves at high thromboembolic risk)",
+    "ace inhibitors": "ACE-inhibitor labels (e.g. Zestril): boxed warning FETAL TOXICITY (discontinue when pregnancy is detected); ACOG Practice Bulletin 203",
+    "arbs": "ARB labels (e.g. Cozaar): boxed warning FETAL TOXICITY (discontinue when pregnancy is detected); ACOG Practice Bulletin 203",
+    "methotrexate": "methotrexate labels: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS (pregnancy, non-neoplastic diseases)",
+    "valproate": "Depakote label: boxed warning FETAL RISK and 4 CONTRAINDICATIONS (pregnancy, migraine prophylaxis)",
+    "misoprostol": "Cytotec label: boxed warning and 4 CONTRAINDICATIONS (pregnancy, NSAID-ulcer prevention)",
+    "thalidomide": "Thalomid label: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS; REMS",
+    "lenalidomide": "Revlimid label: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS; REMS",
+    "leflunomide": "Arava label: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS (pregnancy)",
+    "ribavirin": "ribavirin labels (e.g. Copegus): boxed warning and 4 CONTRAINDICATIONS (pregnant women and their male partners)",
+    "finasteride": "Proscar label: 4 CONTRAINDICATIONS (pregnancy)",
+    "dutasteride": "Avodart label: 4 CONTRAINDICATIONS (pregnancy)",
+    "endothelin receptor antagonists": "bosentan, ambrisentan, macitentan labels: boxed warning EMBRYO-FETAL TOXICITY, 4 CONTRAINDICATIONS; REMS",
+}
+
+#: Label-stated exceptions to a pregnancy contraindication: drug -> regex over the task text.
+PREGNANCY_EXCEPTIONS: dict[str, str] = {
+    # ACOG Practice Bulletin 193: methotrexate is the medical treatment of tubal ectopic pregnancy
+    "methotrexate": r"\bectopic\b",
+    # Coumadin label 4: the contraindication excepts mechanical heart valves at high thromboembolic risk
+    "warfarin": r"mechanical (?:heart |mitral |aortic )?valve",
+}
+
 #: Conditions (lower case) in which a drug or class is contraindicated.
 CONTRAINDICATED_CONDITIONS: dict[str, list[str]] = {
-    "isotretinoin": ["pregnancy"], "warfarin": ["pregnancy"], "methotrexate": ["pregnancy"],
-    "valproate": ["pregnancy"], "ace inhibitors": ["pregnancy"], "arbs": ["pregnancy"], "statins": ["pregnancy"],
+    **{drug: ["pregnancy"] for drug in PREGNANCY_CONTRAINDICATED},
     "nsaids": ["active gi bleeding"], "metformin": ["severe renal impairment"],
+}
+
+#: Drugs dosed weekly (or monthly) whose daily use is a known fatal or serious error:
+#: drug -> (highest dose in mg that has a daily regimen in the label, 0 when none; routes where a
+#: daily regimen of any dose is legitimate; the label section). A daily frequency at a dose above
+#: the daily maximum is `dose.frequency_error`.
+WEEKLY_DOSED: dict[str, tuple[float, tuple[str, ...], str]] = {
+    "methotrexate": (0.0, ("iv", "intravenous", "intrathecal", "it"),
+                     "methotrexate tablets/injection labels (Trexall, Otrexup, Xatmep): boxed warning and 2 DOSAGE AND "
+                     "ADMINISTRATION, once weekly for RA/pJIA/psoriasis, fatal toxicity from daily dosing; ISMP Best Practice 2"),
+    "alendronate": (40.0, (), "Fosamax label 2 DOSAGE AND ADMINISTRATION: 70 mg once weekly or 10 mg daily (osteoporosis), "
+                              "40 mg daily for 6 months (Paget's disease)"),
+    "risedronate": (30.0, (), "Actonel label 2 DOSAGE AND ADMINISTRATION: 5 mg daily, 35 mg once weekly, 150 mg once monthly; "
+                              "30 mg daily for 2 months (Paget's disease)"),
+    "ibandronate": (2.5, (), "Boniva label 2 DOSAGE AND ADMINISTRATION: 2.5 mg daily or 150 mg once monthly (oral)"),
+    "dulaglutide": (0.0, (), "Trulicity label 2 DOSAGE AND ADMINISTRATION: 0.75-4.5 mg subcutaneously once weekly"),
 }
 
 #: Allergy labels that name a class by a short or lay name.

@@ -47,3 +47,20 @@ def test_docs_list_every_pattern():
 
     docs = (Path(__file__).resolve().parents[2] / "docs" / "rewards.md").read_text(encoding="utf-8")
     assert markdown_table() in docs, "regenerate the table: python -c 'from envs.rewards.safety_patterns import markdown_table; print(markdown_table())'"
+
+
+def test_every_pattern_names_its_source():
+    """Issue 14 item 6: each pattern names the guideline, label section or standard it follows, and
+    a pattern registered without one is refused (naming the pattern)."""
+    from envs.rewards import Pattern, register_pattern
+    from envs.rewards.safety_patterns import EMERGENCY_SOURCES, EMERGENCY_TYPES
+
+    missing = sorted(p.id for p in PATTERNS.values() if len(p.source.strip()) < 12)
+    assert missing == []
+    assert set(EMERGENCY_SOURCES) == set(EMERGENCY_TYPES)
+    # the pathway patterns cite the guideline that sets their time targets
+    assert "door-to-balloon" in PATTERNS["missed_emergency.stemi"].source
+    assert "Surviving Sepsis" in PATTERNS["missed_emergency.sepsis"].source
+    with pytest.raises(ValueError, match="demo.unsourced.*source"):
+        register_pattern(Pattern("demo.unsourced", 2, "style", "justice", "a pattern with no source", " "))
+    assert "demo.unsourced" not in PATTERNS
