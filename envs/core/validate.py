@@ -64,22 +64,49 @@ def gold_replay(task: Task, domain: str, max_turns: int | None = None) -> tuple[
     return env.trajectory(), info
 
 
-def validate_task(task: Task, domain: str, toolkit_definitions: dict, *, replay: bool = True) -> TaskReport:
-    report = TaskReport(task_id=task.id, domain=domain)
-    for index, action in enumerate(task.evaluation_criteria.actions):
+# Why a task is rejected at import (`hcgym tasks import`), as the per-domain table names them.
+UNKNOWN_TOOL = "unknown tool"
+EMPTY_REQUIRED = "empty required arguments"
+BAD_ARGUMENTS = "invalid arguments"
+NO_GOLD = "no gold answer"
+NOTHING_TO_GRADE = "nothing to grade"
+
+
+def static_problems(task: Task, domain: str, toolkit_definitions: dict) -> list[tuple[str, str]]:
+    """(reason, message) for everything that makes a task ungradeable without running it: expected actions
+    naming tools the domain lacks, arguments that do not fit the tool (required ones missing or empty), no
+    gold answer. Reasons are the constants above; `hcgym tasks import` counts them per domain."""
+    problems: list[tuple[str, str]] = []
+    crit = task.evaluation_criteria
+    for index, action in enumerate(crit.actions):
         where = f"expected action #{index} {action.name!r}"
-        if action.name not in toolkit_definitions:
-            report.problems.append(f"{where}: no such tool in domain {domain!r}")
+        definition = toolkit_definitions.get(action.name)
+        if definition is None:
+            problems.append((UNKNOWN_TOOL, f"{where}: no such tool in domain {domain!r}"))
             continue
         try:
-            toolkit_definitions[action.name].validate(action.arguments)
+            definition.validate(action.arguments)
         except ToolArgumentError as exc:
-            report.problems.append(f"{where}: {exc}")
+            reason = EMPTY_REQUIRED if "missing required argument" in str(exc) else BAD_ARGUMENTS
+            problems.append((reason, f"{where}: {exc}"))
+        else:
+            required = definition.parameters.get("required", [])
+            empty = [k for k in required if action.arguments.get(k) in ("", None, [], {})]
+            if empty:
+                problems.append((EMPTY_REQUIRED, f"{where}: required argument(s) {empty} are empty"))
         for key in action.compare_args or []:
             if key not in action.arguments:
-                report.problems.append(f"{where}: compare_args names {key!r}, which is not among its arguments")
-    if not (task.has_gold_answer or task.evaluation_criteria.rubric):
-        report.problems.append("no gradeable gold answer (correct_answer with answer_type, or a rubric)")
+                problems.append((BAD_ARGUMENTS, f"{where}: compare_args names {key!r}, which is not among its "
+                                                f"arguments"))
+    if not (task.has_gold_answer or crit.rubric):
+        reason = NO_GOLD if (crit.actions or crit.nl_assertions) else NOTHING_TO_GRADE
+        problems.append((reason, "no gradeable gold answer (correct_answer with answer_type, or a rubric)"))
+    return problems
+
+
+def validate_task(task: Task, domain: str, toolkit_definitions: dict, *, replay: bool = True) -> TaskReport:
+    report = TaskReport(task_id=task.id, domain=domain)
+    report.problems.extend(message for _, message in static_problems(task, domain, toolkit_definitions))
     if report.problems or not replay:
         return report
     trajectory, info = gold_replay(task, domain)
