@@ -2,12 +2,20 @@
 
 The context reads the toolkit's *current* database (a failed WRITE restores a snapshot, so the
 object changes during an episode), so facts reflect the state at the end of the episode.
+
+Pregnancy: the database's only pregnancy source is drugdose 0.1.2 (MIT), whose FDA letter
+category covers 49 emergency drugs; category X is a contraindication. For a drug it does not
+cover, the reward lexicon's table of US-label pregnancy contraindications answers
+(`safety_lexicon.PREGNANCY_CONTRAINDICATED`: boxed warnings and section 4 of the labels, each
+entry citing its label), by drug and by class (ACE inhibitors, ARBs), so lisinopril, warfarin
+or isotretinoin in a pregnant patient are caught although drugdose has no category for them.
 """
 
 from __future__ import annotations
 
 from typing import Callable
 
+from envs.rewards import safety_lexicon as lex
 from envs.rewards.safety import BaseSafetyContext
 
 from . import logic as L
@@ -136,6 +144,16 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
         if hepatic["recommendation"] == "avoid_or_specialist_review":
             out.append("child-pugh c")
         pregnancy = L.pregnancy_assessment(self.db, d)
-        if pregnancy["recommendation"] == "contraindicated":
+        if pregnancy["recommendation"] == "contraindicated" or (
+                pregnancy["recommendation"] == "no_data" and self.label_pregnancy_contraindication(drug)):
             out.append("pregnancy")
         return out
+
+    def label_pregnancy_contraindication(self, drug: str) -> str | None:
+        """The US-label citation when the drug or one of its classes is contraindicated in pregnancy
+        (the fallback for drugs without a drugdose category), else None."""
+        d = self._drug(drug)
+        if d is None:
+            return None
+        names = [d.id, lex.BRANDS.get(d.id, ""), lex.BRANDS.get(d.id.replace(" ", "-"), ""), *self.drug_classes(drug)]
+        return next((lex.PREGNANCY_CONTRAINDICATED[n] for n in names if n in lex.PREGNANCY_CONTRAINDICATED), None)
