@@ -1,10 +1,14 @@
 """Coherence: a clear conclusion that agrees with the reasoning, without self-contradiction.
 
-    coherence = 0.4 * conclusion + 0.4 * agreement + 0.2 * consistency
+    coherence = 0.4 * conclusion + 0.4 * agreement + 0.2 * consistency     with a real attempt
+    coherence = 0                                                          without one
 
-* conclusion: 1 for a committed answer (an option letter for choice tasks; otherwise a
-  conclusion of more than 10 characters without hedging language such as "not sure" or "cannot
-  determine", which halves it); 0.25 for an uncommitted answer to a choice task; 0 for none.
+A real attempt at an answer is `format.real_attempt` (an empty answer, no submission, a list of
+every option, a copy of the task or, for a choice task, no single committed option is none):
+agreeing with oneself about nothing earns nothing (issue 13).
+
+* conclusion: 1 for a committed answer, halved by hedging language in the conclusion such as
+  "not sure" or "cannot determine" (not for choice tasks, whose committed letter is the answer).
 * agreement: 0 when the reasoning's last explicit conclusion differs from the submitted answer
   ("I conclude A" then submitting C; "ESI 2" in the reasoning, "ESI 3" submitted), else 1.
 * consistency: 1 - 0.5 per contradiction between turns about the same fact (allergies present vs
@@ -19,7 +23,7 @@ from typing import Any
 
 from envs.rewards.accuracy import esi_levels
 from envs.rewards.choice import extract_choice
-from envs.rewards.format import has_conclusion
+from envs.rewards.format import real_attempt
 from envs.rewards.view import EpisodeView
 
 CONCLUSION_W, AGREEMENT_W, CONSISTENCY_W = 0.4, 0.4, 0.2
@@ -100,14 +104,12 @@ def _stated_conclusions(view: EpisodeView) -> tuple[Any, Any]:
 
 
 def coherence_score(view: EpisodeView) -> tuple[float, dict[str, Any]]:
-    task = view.task
-    if task.answer_type == "choice":
-        committed = extract_choice(view.answer_text, task.options) is not None
-        conclusion = 1.0 if committed else (0.25 if view.answer_text.strip() else 0.0)
-    else:
-        conclusion = 1.0 if has_conclusion(view) else 0.0
-        if conclusion and _HEDGE.search(view.final_text):
-            conclusion = 0.5
+    attempted, why_not = real_attempt(view)
+    if not attempted:
+        return 0.0, {"conclusion": 0.0, "agreement": None, "consistency": None, "no_attempt": why_not}
+    conclusion = 1.0
+    if view.task.answer_type != "choice" and _HEDGE.search(view.final_text):
+        conclusion = 0.5
     stated, submitted = _stated_conclusions(view)
     agreement = 0.0 if (stated is not None and submitted is not None and stated != submitted) else 1.0
     found = contradictions(view)

@@ -14,19 +14,29 @@ A call the environment rejected as malformed (unknown tool, arguments that do no
 signature) scores 0.5, "partial structure"; a clinical tool error (patient not found) is not a
 format problem. A turn scores the mean of its calls, capped at 0.5 when it also has parse
 errors; a turn with parse errors and no call scores 0.5; a plain-text turn without any call
-scores 0, except the final turn when its text is a conclusion (that is how a chat answer ends).
+scores 0, except the final turn when it is the answer (that is how a chat answer ends).
 
-    format = 0.8 * mean(turn scores) + 0.2 * conclusion
+    format = 0.8 * mean(turn scores) + 0.2     with a real attempt at an answer
+    format = 0                                 without one
 
-`conclusion` is 1 when the final answer/message has more than 10 characters, or commits to the
-structured value the task asks for (an option letter for choice, a number for numeric, any
-non-empty value for exact and category answers such as "ESI 2" or a drug name).
+Format (and coherence) credit needs a *real attempt at an answer* (`real_attempt`): well-formed
+calls that lead nowhere earn nothing, so an empty answer, an episode that never submits, or an
+answer that lists every option cannot collect the format and coherence weights (issue 13). A real
+attempt commits to the value the task asks for, as its accuracy grader reads it:
+
+* no answer at all (empty, whitespace, or a truncated episode without a submission): none;
+* an answer that copies the task's text (`accuracy.copies_question`): none;
+* choice: `extract_choice` finds one option (a list of options, a hedge "A or C" or no letter: none);
+* numeric: a number is stated (`accuracy.stated_number`);
+* category: exactly one value of the family when the gold belongs to one (one ESI level, one
+  interaction severity, one BI-RADS category; "ESI 1, ESI 2, ESI 3" is none), else any value;
+* exact: a non-empty value; free text and tasks without a gold answer: more than 10 characters.
 """
 
 from __future__ import annotations
 
 from envs.core.trajectory import ToolCallRecord, TurnRecord
-from envs.rewards.accuracy import stated_number
+from envs.rewards.accuracy import answer_accuracy, copies_question, gold_answers, stated_number, strip_answer_prefix
 from envs.rewards.choice import extract_choice
 from envs.rewards.view import EpisodeView
 
@@ -57,28 +67,49 @@ def turn_score(turn: TurnRecord, *, final: bool, has_conclusion: bool) -> float:
     return 0.0
 
 
-def has_conclusion(view: EpisodeView) -> bool:
-    text = view.final_text.strip()
-    if len(text) > MIN_CONCLUSION_CHARS:
-        return True
+def real_attempt(view: EpisodeView) -> tuple[bool, str]:
+    """(whether the episode ends in a real attempt at an answer, why not when it does not)."""
     task = view.task
     answer = view.answer_text
+    stripped = strip_answer_prefix(answer)
+    if not stripped:
+        return False, "no answer"
+    golds = gold_answers(task)
+    if task.answer_type != "choice" and copies_question(stripped, task.ticket + " " + (task.raw_question or ""),
+                                                        golds[0] if golds else ""):
+        return False, "the answer copies the task"
     if task.answer_type == "choice":
-        return extract_choice(answer, task.options) is not None
+        if extract_choice(answer, task.options) is None:
+            return False, "no single option committed to"
+        return True, ""
     if task.answer_type == "numeric":
-        return stated_number(answer, task.answer_unit) is not None
+        return (True, "") if stated_number(answer, task.answer_unit) is not None else (False, "no number stated")
+    if task.answer_type == "category" and golds:
+        result = answer_accuracy(answer, task)
+        stated = result.details.get("stated") if result is not None else None
+        if stated is not None and len(stated) != 1:
+            family = result.details.get("family", "category")  # type: ignore[union-attr]
+            return False, f"{len(stated)} {family} values stated, not one"
+        return True, ""
     if task.answer_type in ("category", "exact"):
-        return bool(answer.strip())  # a short categorical or exact value is the conclusion asked for
-    return False
+        return True, ""  # a short categorical or exact value ("ESI 2", a drug name) is what was asked for
+    if len(view.final_text.strip()) > MIN_CONCLUSION_CHARS:
+        return True, ""
+    return False, f"a conclusion of at most {MIN_CONCLUSION_CHARS} characters"
+
+
+def has_conclusion(view: EpisodeView) -> bool:
+    """The episode ends in a real attempt at an answer (`real_attempt`)."""
+    return real_attempt(view)[0]
 
 
 def format_score(view: EpisodeView) -> tuple[float, dict]:
     turns = view.trajectory.turns
     if not turns:
-        return 0.0, {"turns": [], "conclusion": False}
-    conclusion = has_conclusion(view)
-    scores = [turn_score(t, final=(i == len(turns) - 1), has_conclusion=conclusion) for i, t in enumerate(turns)]
-    mean = sum(scores) / len(scores)
-    return TURNS_W * mean + CONCLUSION_W * (1.0 if conclusion else 0.0), {
-        "turn_scores": [round(s, 3) for s in scores], "conclusion": conclusion,
-    }
+        return 0.0, {"turns": [], "conclusion": False, "no_attempt": "no turns"}
+    attempted, why_not = real_attempt(view)
+    scores = [turn_score(t, final=(i == len(turns) - 1), has_conclusion=attempted) for i, t in enumerate(turns)]
+    details = {"turn_scores": [round(s, 3) for s in scores], "conclusion": attempted}
+    if not attempted:
+        return 0.0, {**details, "no_attempt": why_not}
+    return TURNS_W * (sum(scores) / len(scores)) + CONCLUSION_W, details

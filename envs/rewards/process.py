@@ -1,16 +1,26 @@
-"""Process quality: did the agent do the expected work, without padding it?
+"""Process quality: did the agent do the work the task needs, without padding it?
 
     base = 0.6 * coverage + 0.2 * diversity + 0.2 * thoroughness
     process = 0.3 * base + 0.7 * rubric        (when the task has a rubric)
 
-* coverage: the fraction of `evaluation_criteria.actions` matched by a *successful* logged call
-  with the same name whose `compare_args` (all expected arguments when None) are equal after
-  normalising case, whitespace and number formatting; each logged call matches at most one
-  expected action, so repeating a call cannot cover more.
-* diversity: distinct call signatures (name + normalised arguments) / calls, submit excluded
-  (0 with no calls); repeats lower it.
-* thoroughness: distinct tools used successfully (submit and think excluded) / the number of
-  distinct tools the expected actions use (3 when there are none), capped at 1.
+Only *needed* calls earn anything. A call is needed when it succeeded and is either
+  * a call of a tool the task's expected actions use (`evaluation_criteria.actions`, submit and think
+    excluded), or
+  * a call of a READ tool (`ToolCallRecord.tool_type == "read"`) about the task: one of its argument
+    values equals, after normalisation, an argument value of an expected action (the same patient id,
+    drug, lab, code...), so looking the patient up with a second chart tool counts while calling every
+    tool of the domain with junk arguments does not. A task without expected actions has nothing to
+    judge relevance by: every successful READ call is needed.
+Failed calls, `think` calls, other tools' calls and repeats earn nothing.
+
+* coverage: the fraction of expected actions matched by a *successful* logged call with the same name
+  whose `compare_args` (all expected arguments when None) are equal after normalising case,
+  whitespace and number formatting; each logged call matches at most one expected action, so
+  repeating a call cannot cover more.
+* diversity: distinct needed call signatures (name + normalised arguments) / calls, submit and think
+  excluded from both (0 with no calls): every failed, irrelevant or repeated call lowers it.
+* thoroughness: distinct tools among the needed calls / the number of distinct tools the expected
+  actions use (3 when there are none), capped at 1.
 * rubric: see `envs/rewards/assertions.py` (`grade_rubric`).
 
 Without expected actions, coverage's weight is shared by diversity and thoroughness
@@ -25,7 +35,7 @@ from typing import Any
 
 from envs.core.task import ExpectedAction
 from envs.rewards.text import norm_value, signature
-from envs.rewards.view import EpisodeView
+from envs.rewards.view import CallRef, EpisodeView
 
 COVERAGE_W, DIVERSITY_W, THOROUGHNESS_W = 0.6, 0.2, 0.2
 RUBRIC_SHARE = 0.7
@@ -88,19 +98,55 @@ def action_coverage(view: EpisodeView) -> tuple[float | None, list[str], list[st
     return len(matched) / len(expected), matched, missing
 
 
+def expected_tools(view: EpisodeView) -> set[str]:
+    """Tools (lower case) the expected actions use, submit and think excluded."""
+    return {a.name.lower() for a in view.task.evaluation_criteria.actions
+            if not ({"submit", "think"} & view.conv.families(a.name))}
+
+
+def _task_values(view: EpisodeView) -> set[Any]:
+    """Normalised argument values of the expected actions: what the task is about."""
+    values: set[Any] = set()
+    for action in view.task.evaluation_criteria.actions:
+        for value in action.arguments.values():
+            if isinstance(value, bool) or value is None or value == "" or value == [] or value == {}:
+                continue  # flags and empty values say nothing about what the task is about
+            values.add(norm_value(value))
+    return values
+
+
+def _is_read(call: CallRef) -> bool:
+    return (call.call.tool_type or "").lower() in ("read", "tooltype.read")
+
+
+def counted_calls(view: EpisodeView) -> tuple[list[CallRef], list[CallRef]]:
+    """(the calls diversity divides by: every call but submit and think, the needed calls among them)."""
+    calls = [c for c in view.work_calls if "think" not in c.families]
+    tools = expected_tools(view)
+    values = _task_values(view) if view.task.evaluation_criteria.actions else None
+    needed = []
+    for ref in calls:
+        if not ref.call.ok:
+            continue
+        if ref.name.lower() in tools:
+            needed.append(ref)
+        elif _is_read(ref) and (values is None or any(norm_value(v) in values for v in ref.args.values()
+                                                      if not isinstance(v, bool))):
+            needed.append(ref)
+    return calls, needed
+
+
 def diversity(view: EpisodeView) -> float:
-    calls = view.work_calls
+    calls, needed = counted_calls(view)
     if not calls:
         return 0.0
-    return len({signature(c.name, c.args) for c in calls}) / len(calls)
+    return len({signature(c.name, c.args) for c in needed}) / len(calls)
 
 
 def thoroughness(view: EpisodeView) -> float:
-    used = {c.name.lower() for c in view.work_calls if c.call.ok and "think" not in c.families}
-    expected = {a.name.lower() for a in view.task.evaluation_criteria.actions
-                if not ({"submit", "think"} & view.conv.families(a.name))}
-    target = len(expected) or DEFAULT_TOOL_TARGET
-    return min(1.0, len(used) / target)
+    _, needed = counted_calls(view)
+    target = len(expected_tools(view)) or DEFAULT_TOOL_TARGET
+    return min(1.0, len({c.name.lower() for c in needed}) / target)
 
 
 def process_score(view: EpisodeView, rubric: float | None = None) -> ProcessResult:

@@ -128,7 +128,9 @@ def test_coherence_submit_reasoning_counts_and_hedges_lose():
     assert coherence_score(v)[1]["agreement"] == 0.0
     hedge = view(task, answer="A or C")
     score, details = coherence_score(hedge)
-    assert details["conclusion"] == 0.25 and score == pytest.approx(0.4 * 0.25 + 0.4 + 0.2)
+    # a hedge commits to no option: no real attempt at an answer, so no coherence credit at all
+    # (it was 0.4 * 0.25 + 0.4 + 0.2 = 0.7 before issue 13)
+    assert score == 0.0 and details["no_attempt"] == "no single option committed to"
 
 
 def test_coherence_contradictions_between_turns():

@@ -32,9 +32,10 @@ def test_total_is_a_normalised_weighted_sum_over_applicable_dimensions():
                 evaluation_criteria={"actions": [{"name": "check_interaction", "arguments": {"drug_a": "warfarin", "drug_b": "ibuprofen"}}]})
     traj = episode(task, turn(call("think", {"thought": "need a check"})), answer="major")
     b = score_episode(traj, task)
-    # accuracy 1; process: coverage 0, diversity 1, thoroughness 1/1 (think excluded) -> 0.2*1 + 0.2*0 = 0.2
-    assert b.accuracy == 1.0 and b.process == pytest.approx(0.2)
-    expected = (0.25 * 1.0 + 0.20 * 0.2 + 0.20 * b.safety + 0.10 * b.format + 0.10 * b.coherence) / 0.85
+    # accuracy 1; process: coverage 0, and a `think` call earns neither diversity nor thoroughness
+    # (issue 13; it earned diversity 1 -> process 0.2 before) -> 0
+    assert b.accuracy == 1.0 and b.process == 0.0
+    expected = (0.25 * 1.0 + 0.20 * 0.0 + 0.20 * b.safety + 0.10 * b.format + 0.10 * b.coherence) / 0.85
     assert b.base_total == pytest.approx(expected) and b.total == pytest.approx(expected)
     assert sum(b.weights.values()) == pytest.approx(1.0)
     # scaling every weight leaves the total unchanged (normalisation)
