@@ -11,8 +11,9 @@ Example:
 from __future__ import annotations
 
 import json
+import math
 import time
-from typing import Any, SupportsFloat
+from typing import Any, Callable, SupportsFloat
 
 import gymnasium as gym
 
@@ -29,6 +30,12 @@ MAX_TOOL_RESULT_CHARS = 50_000
 # Tool calls executed per action; the rest are refused with an error observation. A real turn
 # needs a handful of calls; without a cap one 99 KB action of 3,300 unknown-drug lookups took ~40 s.
 MAX_CALLS_PER_ACTION = 32
+# Wall-clock seconds one action's tool calls may take. Checked before each call (a running call is
+# never interrupted): once spent, the action's remaining calls are refused with an error
+# observation, except a submit, so the episode still ends (and is scored) when the agent answered.
+# Sized far above any real action (32 warm calls take well under a second; a knowledge index's
+# first load a few seconds), so it only cuts actions built to be slow. None disables it.
+STEP_TIME_BUDGET_S = 10.0
 
 CALL_FORMAT_HELP = (
     "To call a tool, write <tool_call>{\"name\": \"<tool>\", \"arguments\": {...}}</tool_call> "
@@ -82,19 +89,32 @@ class HealthcareGymEnv(gym.Env[str, str]):
         max_turns: Agent turns before the episode is truncated.
         render_mode: "ansi" (render returns the transcript) or "human" (prints it).
         reward_weights: Optional weights for the 5D reward (`envs.rewards.RewardWeights` fields).
+        step_time_budget_s: Seconds an action's tool calls may take before the rest are refused
+            (`STEP_TIME_BUDGET_S`); None for no budget.
+
+    Attributes:
+        clock: The monotonic clock the step budget reads (`time.perf_counter`); tests inject one.
     """
 
     metadata = {"render_modes": ["ansi", "human"]}
 
     def __init__(self, domain: str = "drug_interaction", task_id: str | None = None, split: str | None = None,
                  max_turns: int = 10, render_mode: str | None = None,
-                 reward_weights: dict[str, float] | None = None) -> None:
+                 reward_weights: dict[str, float] | None = None,
+                 step_time_budget_s: float | None = STEP_TIME_BUDGET_S) -> None:
         from envs import registry
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         if not isinstance(max_turns, int) or max_turns < 1:
             raise ValueError(f"max_turns must be a positive integer, got {max_turns!r}")
+        if step_time_budget_s is not None and (
+                isinstance(step_time_budget_s, bool) or not isinstance(step_time_budget_s, (int, float))
+                or not math.isfinite(step_time_budget_s) or step_time_budget_s < 0):
+            raise ValueError(f"step_time_budget_s must be a finite number of seconds >= 0 or None, "
+                             f"got {step_time_budget_s!r}")
+        self.step_time_budget_s = None if step_time_budget_s is None else float(step_time_budget_s)
+        self.clock: Callable[[], float] = time.perf_counter
         self.domain_name = domain
         self.split = split
         self.max_turns = max_turns
@@ -160,6 +180,7 @@ class HealthcareGymEnv(gym.Env[str, str]):
         if self._done:
             return "The episode is over; call reset() to start a new one.", 0.0, True, False, {"error": "episode_over"}
         started = time.perf_counter()
+        budget_start = self.clock()
         turn_index = len(self._record.turns)
         toolkit = self.domain_env.toolkit
         if isinstance(action, str) and len(action) > MAX_ACTION_CHARS:
@@ -178,7 +199,11 @@ class HealthcareGymEnv(gym.Env[str, str]):
             refusal = (f"{len(parsed.calls) - MAX_CALLS_PER_ACTION} tool calls after the first {MAX_CALLS_PER_ACTION} "
                        f"were not run: an action may make at most {MAX_CALLS_PER_ACTION} calls")
             parsed.calls = parsed.calls[:MAX_CALLS_PER_ACTION]
+        over_budget: list[str] = []  # calls refused because the step's time budget was spent
         for call in parsed.calls:
+            if self._budget_spent(budget_start) and not self._is_submit(call.name):
+                over_budget.append(call.name if isinstance(call.name, str) else safe_repr(call.name, 80))
+                continue
             call_start = time.perf_counter()
             outcome: ToolOutcome = toolkit.call(call.name, call.arguments)
             text = outcome.as_text()
@@ -199,6 +224,12 @@ class HealthcareGymEnv(gym.Env[str, str]):
         if refusal is not None:
             parts.append(json.dumps({"error": refusal}))
             parsed.errors.append(refusal)  # recorded with the turn's parse errors
+        if over_budget:
+            shown = ", ".join(over_budget[:8]) + (", ..." if len(over_budget) > 8 else "")
+            budget_refusal = (f"{len(over_budget)} tool calls ({shown}) were not run: this action's tool calls "
+                              f"took longer than the step time budget of {self.step_time_budget_s:g} s")
+            parts.append(json.dumps({"error": budget_refusal}))
+            parsed.errors.append(budget_refusal)
         if not parsed.calls and not parsed.errors:
             parts.append("No tool call found in your message. " + CALL_FORMAT_HELP)
         observation = "\n".join(parts)[:MAX_OBSERVATION_CHARS]
@@ -220,6 +251,8 @@ class HealthcareGymEnv(gym.Env[str, str]):
                                 "action_format": parsed.format, "parse_errors": parsed.errors,
                                 # kinds of the calls that failed (unknown_tool, invalid_arguments, ...)
                                 "tool_errors": [r.error_kind for r in records if r.error_kind]}
+        if over_budget:
+            info["calls_over_budget"] = len(over_budget)
         if terminated or truncated:
             self._record.submitted_answer = submitted
             self._record.terminated, self._record.truncated = terminated, truncated
@@ -228,6 +261,14 @@ class HealthcareGymEnv(gym.Env[str, str]):
         if self.render_mode == "human":
             print(self._render_turn(turn))
         return observation, reward, terminated, truncated, info
+
+    def _budget_spent(self, budget_start: float) -> bool:
+        return self.step_time_budget_s is not None and self.clock() - budget_start >= self.step_time_budget_s
+
+    def _is_submit(self, name: Any) -> bool:
+        assert self.domain_env is not None
+        definition = self.domain_env.toolkit.definitions.get(name) if isinstance(name, str) else None
+        return definition is not None and definition.submit
 
     def truncate(self, reason: str) -> tuple[float, dict[str, Any]]:
         """End the running episode from outside the env (an agent runner's token or context limit),

@@ -217,3 +217,68 @@ def test_a_failing_grader_is_recorded_not_raised():
     record = env.trajectory()
     assert record.reward == 0.0 and record.reward_details == {"grader_error": "ZeroDivisionError: grader bug"}
     assert env.step("anything")[4] == {"error": "episode_over"}
+
+
+class TickingClock:
+    """A clock that advances `tick` seconds every time it is read: each tool call "takes" one tick."""
+
+    def __init__(self, tick: float) -> None:
+        self.now, self.tick = 0.0, tick
+
+    def __call__(self) -> float:
+        self.now += self.tick
+        return self.now
+
+
+def budget_env(domain="drug_interaction", max_turns=3, budget=0.0, clock=None):
+    env = HealthcareGymEnv(domain=domain, max_turns=max_turns, step_time_budget_s=budget)
+    if clock is not None:
+        env.clock = clock
+    env.reset(seed=0)
+    return env
+
+
+def test_time_budget_refuses_the_calls_after_it_is_spent():
+    # The budget is read before each call: start at t=1, calls checked at t=2, 3, 4, 5 -> with a
+    # budget of 2.5 s the first two run (elapsed 1 and 2) and the other two are refused.
+    env = budget_env(budget=2.5, clock=TickingClock(1.0))
+    action = "\n".join(f'lookup_drug(name="zq{i:04d}xkv")' for i in range(4))
+    observation, reward, terminated, truncated, info = env.step(action)
+    assert info["tool_calls"] == ["lookup_drug", "lookup_drug"] and info["calls_over_budget"] == 2
+    refusal = ("2 tool calls (lookup_drug, lookup_drug) were not run: this action's tool calls took longer "
+               "than the step time budget of 2.5 s")
+    assert refusal in info["parse_errors"] and refusal in observation
+    assert len(env.trajectory().turns[-1].tool_calls) == 2 and not terminated and not truncated
+
+
+def test_time_budget_still_runs_the_submit_and_scores_the_episode():
+    # The issue's slowest action (3,300 unknown-drug lookups) followed by the answer: with the budget
+    # spent from the start, no lookup runs but the submit does, and the episode is scored.
+    env = budget_env(budget=0.0)
+    action = "\n".join(f'lookup_drug(name="zq{i:04d}xkv")' for i in range(20)) + '\nsubmit_answer(answer="x")'
+    observation, reward, terminated, truncated, info = env.step(action)
+    assert terminated and info["tool_calls"] == ["submit_answer"] and info["calls_over_budget"] == 20
+    assert_scored(env, (observation, reward, terminated, truncated, info))
+    assert any("20 tool calls (lookup_drug, " in e and e.count("lookup_drug") == 8 for e in info["parse_errors"])
+
+
+@pytest.mark.parametrize("domain", DOMAINS)
+def test_time_budget_never_skips_terminal_scoring(domain):
+    # A 300-call action on the last turn (3-15 s in eight domains in the issue): cut to the call cap,
+    # then by the budget, and the turn-limit truncation is still scored.
+    env = budget_env(domain=domain, max_turns=1, budget=3.0, clock=TickingClock(1.0))
+    action = "\n".join(['think(thought="weighing the options")'] * 300)
+    out = env.step(action)
+    assert_scored(env, out, terminated=False)
+    info = out[4]
+    assert len(info["tool_calls"]) == 2 and info["calls_over_budget"] == MAX_CALLS_PER_ACTION - 2
+    assert any("after the first 32 were not run" in e for e in info["parse_errors"])
+
+
+def test_no_budget_runs_every_call_and_bad_budgets_are_named():
+    env = budget_env(budget=None, clock=TickingClock(1000.0))
+    out = env.step("\n".join(['think(thought="a")'] * 5))
+    assert len(out[4]["tool_calls"]) == 5 and "calls_over_budget" not in out[4]
+    for bad in (-1, float("nan"), float("inf"), True, "5"):
+        with pytest.raises(ValueError, match="step_time_budget_s must be a finite number of seconds >= 0 or None"):
+            HealthcareGymEnv(domain="drug_interaction", step_time_budget_s=bad)
