@@ -14,10 +14,7 @@ Each passage's provenance names only the packages that contributed to it.
 
 from __future__ import annotations
 
-import bz2
-import io
 import json
-import pickle
 import re
 import unicodedata
 from collections import defaultdict
@@ -53,16 +50,9 @@ def severity_en(level: str) -> str:
     return SEVERITY_EN.get(fold(level), fold(level))
 
 
-class _PlainUnpickler(pickle.Unpickler):
-    """The vocabulary pickle holds only dicts, lists, strings and numbers: refuse anything else."""
-
-    def find_class(self, module: str, name: str):  # pragma: no cover - only hit by a tampered file
-        raise pickle.UnpicklingError(f"refusing to load {module}.{name} from a data pickle")
-
-
 def load_vocabulary(arch: Archive) -> dict:
-    raw = bz2.decompress(arch.read_bytes(arch.find_one("drug_named_entity_recognition/drug_ner_dictionary.pkl.bz2")))
-    return _PlainUnpickler(io.BytesIO(raw)).load()
+    """The vocabulary pickle, as plain data only (Archive.read_pickle, envs/data/safe_pickle.py)."""
+    return arch.read_pickle(arch.find_one("drug_named_entity_recognition/drug_ner_dictionary.pkl.bz2"))
 
 
 def _ansm(arch: Archive) -> tuple[list[dict], dict[str, list[str]]]:

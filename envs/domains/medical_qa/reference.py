@@ -7,9 +7,7 @@ here is committed data: the package files are the source, read at build time.
 
 from __future__ import annotations
 
-import bz2
 import json
-import pickle
 import re
 import xml.etree.ElementTree as ET
 from collections import defaultdict
@@ -192,7 +190,8 @@ _CLASS_TAG = re.compile(r"^(.*)\s\[(EPC|MoA|PE|CS|Chemical/Ingredient)\]$")
 
 def load_drug_vocabulary(archive: Archive) -> dict:
     """The drug-named-entity-recognition dictionary: variants -> canonical names, and per-drug data."""
-    return pickle.loads(bz2.decompress(archive.read_bytes("drug_named_entity_recognition/drug_ner_dictionary.pkl.bz2")))
+    # Plain data only: the member comes from a downloaded package (Archive.read_pickle, safe_pickle.py).
+    return archive.read_pickle("drug_named_entity_recognition/drug_ner_dictionary.pkl.bz2")
 
 
 def _moiety(substance: str, variants: dict[str, list[str]]) -> str | None:
