@@ -16,6 +16,7 @@ naming the path and the command that builds it. It never degrades to empty resul
 from __future__ import annotations
 
 import json
+import numbers
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -25,10 +26,25 @@ import numpy as np
 
 from kb_service.analysis import MAX_QUERY_TERMS, Highlighter, plan_query
 from kb_service.schema import Passage
+from kb_service.store import check_text
 
 FORMAT = "hcgym-kb"
 FORMAT_VERSION = 1
 MAX_K = 1000
+
+
+def check_k(k: object) -> int:
+    """The number of passages asked for, as an int in [0, MAX_K].
+
+    Raises:
+        TypeError: `k` is not an integer (booleans and floats, infinity included, are refused).
+        ValueError: `k` is negative or above MAX_K.
+    """
+    if isinstance(k, bool) or not isinstance(k, numbers.Integral):
+        raise TypeError(f"k must be an integer number of passages (0-{MAX_K}), got {type(k).__name__} {k!r:.40}")
+    if not 0 <= k <= MAX_K:
+        raise ValueError(f"k must be between 0 and {MAX_K}, got {k}")
+    return int(k)
 
 
 class KBError(RuntimeError):
@@ -184,7 +200,15 @@ class KnowledgeBase:
     def _normalise_sources(self, source: str | Iterable[str] | None) -> list[str] | None:
         if source is None:
             return None
-        wanted = [source] if isinstance(source, str) else [str(s) for s in source]
+        if isinstance(source, str):
+            wanted = [source]
+        elif isinstance(source, (list, tuple, set, frozenset)):
+            wanted = list(source)
+            for position, item in enumerate(wanted):
+                if not isinstance(item, str):
+                    raise TypeError(f"source[{position}] must be a source name (str), got {type(item).__name__}")
+        else:
+            raise TypeError(f"source must be a source name or a list of them, got {type(source).__name__}")
         wanted = [s.strip() for s in wanted if s and s.strip()]
         if not wanted:
             return None
@@ -223,7 +247,7 @@ class KnowledgeBase:
         Args:
             query: Free text (an OR of its words), or query syntax: "a phrase", AND, OR, NOT,
                 +required, -excluded, parentheses.
-            k: Number of passages (at most 1000).
+            k: Number of passages, an integer from 0 to 1000 (TypeError / ValueError otherwise).
             source: Restrict to one source name or a list of them.
             category: Restrict to one category.
         """
@@ -241,12 +265,10 @@ class KnowledgeBase:
         return list(zip(docs, scores))
 
     def _rank(self, query, k, source, category) -> tuple[list[int], list[float], set[str]]:
-        try:
-            k = int(k)
-        except (TypeError, ValueError):
-            k = 10
-        k = max(0, min(k, MAX_K))
+        k = check_k(k)
         sources = self._normalise_sources(source)
+        if category is not None and not isinstance(category, str):
+            raise TypeError(f"category must be a category name (str) or None, got {type(category).__name__}")
         if k == 0 or (category is not None and category not in self._category_index):
             return [], [], set()
         plan = plan_query(query)
@@ -276,8 +298,16 @@ class KnowledgeBase:
 
     # ---------------------------------------------------------------------------- lookups
     def get(self, doc_id: str) -> Passage:
-        """The full passage with this doc_id; raises UnknownDocError."""
-        row = self.store.row_by_doc_id(str(doc_id)) if isinstance(doc_id, (str, int)) else None
+        """The full passage with this doc_id.
+
+        Raises:
+            UnknownDocError: no passage has it.
+            TypeError / ValueError: naming `doc_id` when it is not a str (an int is read as its digits)
+                or holds a lone surrogate.
+        """
+        if isinstance(doc_id, int) and not isinstance(doc_id, bool):
+            doc_id = str(doc_id)
+        row = self.store.row_by_doc_id(check_text("doc_id", doc_id))
         if row is None:
             raise UnknownDocError(f"no passage with doc_id {str(doc_id)[:200]!r} in the knowledge base at {self.path}")
         _, did, source, title, content, category, dataset_name, prov_id = row
@@ -291,7 +321,7 @@ class KnowledgeBase:
                 f"the knowledge base at {self.path} has no article store; add one with "
                 f"`hcgym kb build --articles ARTICLES.jsonl --out {self.path}`"
             )
-        text = str(title_or_url or "").strip()
+        text = check_text("title_or_url", "" if title_or_url is None else title_or_url).strip()
         art = self.articles.get(text)
         if art is None and " § " in text:
             art = self.articles.get(text.split(" § ")[0])

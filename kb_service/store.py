@@ -8,6 +8,7 @@ read-only and immutable by any number of processes.
 from __future__ import annotations
 
 import json
+import numbers
 import sqlite3
 import threading
 from pathlib import Path
@@ -34,6 +35,26 @@ CREATE TABLE IF NOT EXISTS ingest_progress(
 
 ROW_COLUMNS = "rowid, doc_id, source, title, content, category, dataset_name, prov_id"
 MMAP_BYTES = 1 << 40
+
+
+def check_text(argument: str, value: object) -> str:
+    """`value` if it is a str SQLite can bind; a clear error naming `argument` otherwise.
+
+    A lone surrogate (U+D800-U+DFFF, e.g. from JSON "\\ud800" or a bad decode) is valid in a Python
+    str but has no UTF-8 encoding: SQLite would fail with a bare UnicodeEncodeError.
+
+    Raises:
+        TypeError: `value` is not a str.
+        ValueError: `value` holds a lone surrogate (its position is named).
+    """
+    if not isinstance(value, str):
+        raise TypeError(f"{argument} must be a str, got {type(value).__name__}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raise ValueError(f"{argument} holds a lone surrogate (U+{ord(value[exc.start]):04X}) at position {exc.start}; "
+                         f"it is not valid Unicode text") from None
+    return value
 
 
 class StoreWriter:
@@ -147,8 +168,19 @@ class StoreReader:
         return int(self._conn().execute("SELECT coalesce(max(rowid), 0) FROM passages").fetchone()[0])
 
     def rows_by_index(self, doc_indices: Iterable[int]) -> dict[int, tuple]:
-        """{doc index: row} for 0-based document indices."""
-        ids = [int(i) + 1 for i in doc_indices]
+        """{doc index: row} for 0-based document indices (indices past the last row are absent).
+
+        Raises:
+            TypeError / ValueError: naming `doc_indices` for an entry that is not a non-negative integer.
+        """
+        ids = []
+        for position, index in enumerate(doc_indices):
+            # numpy integers count; booleans and floats (inf included) do not.
+            if isinstance(index, bool) or not isinstance(index, numbers.Integral):
+                raise TypeError(f"doc_indices[{position}] must be an integer, got {type(index).__name__}")
+            if not 0 <= index < 1 << 62:  # SQLite rowids are 64-bit
+                raise ValueError(f"doc_indices[{position}] must be a document number >= 0, got {index}")
+            ids.append(int(index) + 1)
         if not ids:
             return {}
         marks = ",".join("?" * len(ids))
@@ -156,6 +188,8 @@ class StoreReader:
         return {r[0] - 1: r for r in rows}
 
     def row_by_doc_id(self, doc_id: str) -> tuple | None:
+        """The row of `doc_id`, or None. Raises TypeError / ValueError naming `doc_id` (see `check_text`)."""
+        check_text("doc_id", doc_id)
         return self._conn().execute(f"SELECT {ROW_COLUMNS} FROM passages WHERE doc_id = ?", (doc_id,)).fetchone()
 
     def close(self) -> None:

@@ -86,7 +86,9 @@ def test_snippet_highlights_matched_terms(kb):
 def test_k_bounds(kb):
     assert kb.search("heart", k=0) == []
     assert len(kb.search("heart", k=3)) == 3
-    assert len(kb.search("patient", k=10_000)) <= 1000
+    assert len(kb.search("patient", k=1000)) <= 1000
+    with pytest.raises(ValueError, match="k must be between 0 and 1000, got 10000"):  # refused, not clamped
+        kb.search("patient", k=10_000)
 
 
 def test_get_and_unknown_doc(kb):
