@@ -2,7 +2,9 @@
 
 A builder is a module with `build(offline: bool = False, force: bool = False) -> dict` that
 writes its output under `envs.core.paths.data_dir()` deterministically and returns a summary of
-counts. To add one, append its module path to BUILDERS.
+counts. To add one, append its module path to BUILDERS. Builders read registry packages only
+through `envs.data.registry.open_package`, which hands out a package's wheel after checking it
+against its pinned sha256 (a new package is pinned in `registry.SOURCES` first).
 """
 
 from __future__ import annotations
