@@ -38,12 +38,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                                "MedLFQA, VQA-RAD, SLAKE, PathVQA, PMC-VQA, VQA-Med-2021, Quilt-VQA, MIMIC-III, eICU) or reference-format task files")
     imp.add_argument("--format", required=True,
                      help="medqa | medmcqa | mmlu | pubmedqa | medlfqa | vqa-rad | slake | pathvqa | pmc-vqa | vqa-med-2021 | quilt-vqa | "
-                          "mimic3 | eicu (PATH is the CSV folder) | reference")
+                          "mimic3 | eicu (PATH is the CSV folder) | reference (PATH a task file, a domain folder, or "
+                          "a folder of <domain>/tasks*.json)")
+    imp.add_argument("--replace", action="store_true",
+                     help="replace the output file if it exists (default: refuse, nothing is overwritten)")
+    imp.add_argument("--keep-ungradeable", action="store_true",
+                     help="also import tasks that cannot be graded (no gold answer, required arguments missing or "
+                          "empty); they are reported either way. Tasks naming unknown tools are never imported")
+    imp.add_argument("--show-errors", type=int, default=20, metavar="N",
+                     help="print the first N problems per source (default 20; -1 for all)")
     imp.add_argument("--max-stays", type=int, default=None, help="mimic3/eicu: convert at most this many ICU stays")
-    imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA)")
+    imp.add_argument("--domain", help="target domain (default: medical_qa, visual_diagnosis for VQA, ehr_management for "
+                                       "MIMIC-III/eICU; reference: the task file's folder name)")
     imp.add_argument("--output", help="tasks JSON to write (default: <domain's imported-task folder>/"
                      "<format>-<source file name>.json, loaded as split 'imported')")
-    imp.add_argument("--image-dir", help="image folder for VQA formats")
+    imp.add_argument("--image-dir", help="image folder for VQA formats (default: the dataset file's folder); image "
+                                          "names that lead outside it are rejected")
     imp.add_argument("--cop-base", type=int, choices=(0, 1), default=None,
                      help="MedMCQA: 1 for the original release (cop 1-4), 0 for the Hugging Face layout (cop 0-3); "
                           "default: detected per file (any 0 means 0-based), the assumption printed when ambiguous")
@@ -142,93 +152,10 @@ def cmd_tasks_stats(args: argparse.Namespace) -> int:
     return 0
 
 
-def _source_stem(path: str) -> str:
-    """`mmlu/anatomy_test.csv` -> `anatomy_test`, `x.jsonl.gz` -> `x`, a MIMIC folder -> its name."""
-    from pathlib import Path
-
-    name = Path(path).resolve().name
-    for suffix in (".gz", ".csv", ".jsonl", ".json", ".txt", ".parquet", ".pkl", ".pickle"):
-        name = name.removesuffix(suffix)
-    return name or "source"
-
-
-def _existing_ids(domain_dir, output) -> dict[str, str]:
-    """id -> file for every task already imported into the domain (the file being rewritten excluded)."""
-    from pathlib import Path
-
-    found: dict[str, str] = {}
-    if not Path(domain_dir).is_dir():
-        return found
-    for other in sorted(Path(domain_dir).glob("*.json")):
-        if other.resolve() == Path(output).resolve():
-            continue
-        try:
-            items = json.loads(other.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"{other}: cannot read an already imported task file to check ids: {exc}") from None
-        for item in items if isinstance(items, list) else []:
-            if isinstance(item, dict) and isinstance(item.get("id"), str):
-                found.setdefault(item["id"], str(other))
-    return found
-
-
 def cmd_tasks_import(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from envs.converters.importing import run_import
 
-    from envs.core.domain import imported_tasks_dir
-    from envs.core.task import dump_tasks
-
-    notes: list[str] = []
-    if args.format == "reference":
-        from envs.core.importers import import_reference_tasks
-
-        if not args.domain:
-            raise ValueError("--domain is required for the reference format")
-        result = import_reference_tasks(args.path, domain=args.domain)
-        tasks, issues, domain = result.tasks, [str(i) for i in result.issues], args.domain
-    else:
-        from envs.converters import convert
-
-        domain = args.domain or ("visual_diagnosis" if args.format in ("vqa-rad", "slake", "pathvqa", "pmc-vqa",
-                                                                            "vqa-med-2021", "quilt-vqa")
-                                 else "ehr_management" if args.format in ("mimic3", "eicu") else "medical_qa")
-        result = convert(args.format, args.path, domain=domain, image_dir=args.image_dir, cop_base=args.cop_base,
-                         max_stays=args.max_stays)
-        tasks, issues, notes = result.tasks, [str(e) for e in result.errors], list(result.notes)
-    # named after the source so a second MMLU subject (or MedQA's 5-option set) lands beside the first
-    output = Path(args.output) if args.output else \
-        imported_tasks_dir(domain) / f"{args.format}-{_source_stem(args.path)}.json"
-
-    # one duplicate id would stop the whole domain from loading: drop it here and say which and where
-    # (only where the output is loaded with the domain: an --output elsewhere is the caller's own file)
-    domain_dir = imported_tasks_dir(domain)
-    inside = output.resolve().parent == domain_dir.resolve()
-    existing = _existing_ids(domain_dir, output) if inside else {}
-    seen: set[str] = set()
-    kept = []
-    collisions: list[str] = []
-    for task in tasks:
-        if task.id in existing:
-            collisions.append(f"id {task.id} already imported in {existing[task.id]}: not imported again")
-        elif task.id in seen:
-            collisions.append(f"id {task.id} occurs more than once in {args.path}: kept the first")
-        else:
-            seen.add(task.id)
-            kept.append(task)
-
-    for note in notes:
-        print(f"note: {note}")
-    if not kept:
-        print(f"error: {args.path}: no task could be imported ({len(issues)} rows reported, "
-              f"{len(collisions)} duplicate ids); nothing was written to {output}", file=sys.stderr)
-        for line in issues + collisions:
-            print(f"  {line}", file=sys.stderr)
-        return 1
-    dump_tasks(kept, output)
-    print(f"imported {len(kept)} tasks into {output}; {len(issues)} rows reported; {len(collisions)} duplicate ids")
-    for line in issues + collisions:
-        print(f"  {line}")
-    return 0
+    return run_import(args)
 
 
 def cmd_play(args: argparse.Namespace) -> int:

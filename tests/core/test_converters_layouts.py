@@ -134,7 +134,7 @@ def test_import_where_every_row_fails_exits_non_zero_and_writes_nothing(data_roo
     good = tmp_path / "good.json"
     assert main(["tasks", "import", "--format", "medmcqa", "--output", str(good), str(FIX / "medmcqa_hf.json")]) == 0
     before = good.read_text()
-    assert main(["tasks", "import", "--format", "medmcqa", "--output", str(good),
+    assert main(["tasks", "import", "--format", "medmcqa", "--output", str(good), "--replace",
                  str(FIX / "medmcqa_bad_cop.json")]) == 1
     err = capsys.readouterr().err
     assert "nothing was written" in err and "medmcqa_bad_cop.json:3: field 'cop' must be an integer" in err
@@ -156,11 +156,14 @@ def test_ids_colliding_with_an_existing_import_are_reported_by_id_and_file(data_
     first = data_root / "medical_qa" / "medmcqa-medmcqa_hf.json"
     first_ids = [t["id"] for t in json.loads(first.read_text())]
     for task_id in first_ids:
-        assert f"id {task_id} already imported in {first}" in out
+        assert f"id {task_id} already defined in {first}" in out
     second = json.loads((data_root / "medical_qa" / "medmcqa-medmcqa_hf_copy.json").read_text())
-    assert [t["ticket"] for t in second] == ["New one"] and "3 duplicate ids" in out
-    # re-importing the same file rewrites its own output rather than colliding with it
-    assert main(["tasks", "import", "--format", "medmcqa", str(FIX / "medmcqa_hf.json")]) == 0
+    assert [t["ticket"] for t in second] == ["New one"] and "duplicate id 3" in out
+    # re-importing the same file is refused without --replace, and with it rewrites its own output
+    # rather than colliding with it
+    assert main(["tasks", "import", "--format", "medmcqa", str(FIX / "medmcqa_hf.json")]) == 1
+    assert "holds 3 tasks: not replaced (pass --replace" in capsys.readouterr().err
+    assert main(["tasks", "import", "--format", "medmcqa", "--replace", str(FIX / "medmcqa_hf.json")]) == 0
     assert len(json.loads(first.read_text())) == 3
 
 
