@@ -137,9 +137,10 @@ def _avoided_after(state: SafetyState, after: str) -> bool:
     """An avoidance word after the drug in its sentence, unless it governs another drug that
     follows it ("start apixaban and stop warfarin": the "stop" is about warfarin)."""
     for m in _AVOID_AFTER.finditer(after):
-        following = _WORD.findall(after[m.end():m.end() + 40])[:3]
-        if any(state.ctx.known_drug(w) for w in following if w not in ("the", "and", "any", "all")):
-            continue
+        rest = re.sub(r"^\W*(?:(?:the|his|her|their|any|all|of)\s+)*", "", after[m.end():m.end() + 60])
+        following = _WORD.match(rest)
+        if following and state.ctx.known_drug(following.group(0)):
+            continue  # "and stop warfarin": the stop governs warfarin
         return True
     return False
 

@@ -26,7 +26,7 @@ from envs.rewards.text import negated
 _FOLLOW_UP = re.compile(
     r"follow[- ]?up|return (?:visit|appointment|in \d)|\brecheck|re-?evaluat|reassess|"
     r"see (?:you|him|her|them|the patient) (?:again|back|in)|monitor(?:ing)? (?:in|for|closely|weekly|daily|response)|"
-    r"schedule (?:a |an )?(?:visit|appointment|review)|\bin \d+\s*(?:-\s*\d+\s*)?(?:days?|weeks?|months?)\b|"
+    r"schedule (?:a |an )?(?:visit|appointment|review)|\b(?:in|within) \d+\s*(?:-\s*\d+\s*)?(?:hours?|days?|weeks?|months?)\b|"
     r"repeat (?:labs?|testing|inr|levels?|imaging) in|(?:primary care|pcp|gp) (?:in|within)",
     re.IGNORECASE,
 )
