@@ -3,8 +3,11 @@
 By `task.answer_type`:
 
 * ``choice``: 1.0 when `extract_choice` finds the gold letter as the committed answer, else 0.
-* ``exact``: 1.0 when the answer equals the gold (or an alias) after normalisation, or states it
-  as a whole phrase in a short, unhedged answer (at most max(8, 3 x gold) tokens, no "or").
+* ``exact``: 1.0 when the answer equals the gold (or an alias) after normalisation, or says it by
+  meaning (`envs.rewards.equivalence.match_by_meaning`: abbreviations, guideline phrasing,
+  numbers with units and intervals, dates, vocabulary synonyms; the gold's words in order in a
+  short, unhedged answer that adds no number, qualifier or negation). An answer that negates the
+  gold ("Not a secondary pneumothorax") never passes.
 * ``numeric``: 1.0 when the stated value is within tolerance: `task.answer_tolerance` (absolute,
   in `task.answer_unit`), else half a unit of the gold's last stated decimal ("63.4" -> 0.05).
   Mass and volume units are converted (g/mg/mcg, L/dL/mL); a value in an incompatible unit is
@@ -27,6 +30,7 @@ from typing import Any
 
 from envs.core.task import Task
 from envs.rewards.choice import extract_choice
+from envs.rewards.equivalence import match_by_meaning
 from envs.rewards.similarity import calibrate, grading_tokens, overlap_score, semantic_similarity
 from envs.rewards.text import contains_phrase, normalise_text, tokens
 
@@ -63,19 +67,22 @@ def score_choice(answer: str, task: Task) -> AccuracyResult:
 _HEDGE_WORDS = re.compile(r"\b(?:or|either|versus|vs)\b|/")
 
 
+def _hedged(answer: str, gold: str) -> bool:
+    """A hedge word ("or", "either", "versus", "/") in the answer that the gold does not have."""
+    gold_hedges = set(_HEDGE_WORDS.findall(gold.lower()))
+    return any(h not in gold_hedges for h in _HEDGE_WORDS.findall(answer.lower()))
+
+
 def score_exact(answer: str, golds: list[str]) -> AccuracyResult:
     stripped = strip_answer_prefix(answer)
     norm = normalise_text(stripped)
-    n_tokens = len(norm.split())
-    hedged = _HEDGE_WORDS.search(stripped.lower()) is not None
     for gold in golds:
-        g = normalise_text(gold)
-        if not g:
-            continue
-        if norm == g:
+        if normalise_text(gold) and norm == normalise_text(gold):
             return AccuracyResult(1.0, "exact", {"matched": gold, "how": "equal"})
-        if not hedged and n_tokens <= max(8, 3 * len(g.split())) and contains_phrase(norm, g):
-            return AccuracyResult(1.0, "exact", {"matched": gold, "how": "stated"})
+    unhedged = [g for g in golds if g and not _hedged(stripped, g)]
+    match = match_by_meaning(stripped, unhedged) if unhedged else None
+    if match is not None:
+        return AccuracyResult(1.0, "exact", {"matched": match[0], "how": match[1]})
     return AccuracyResult(0.0, "exact", {"answer": norm[:200]})
 
 
@@ -175,8 +182,10 @@ _ESI_ANSWER = re.compile(
     re.IGNORECASE,
 )
 _SEVERITIES = ("contraindicated", "major", "moderate", "minor", "none")
-_SEVERITY_ALIASES = {"no interaction": "none", "no significant interaction": "none", "severe": "major",
-                     "serious": "major", "mild": "minor", "contraindication": "contraindicated"}
+_SEVERITY_ALIASES = {"no clinically significant interaction": "none", "no clinically relevant interaction": "none",
+                     "no interaction of concern": "none", "no known interaction": "none", "no relevant interaction": "none",
+                     "no interactions": "none", "no interaction": "none", "no significant interaction": "none",
+                     "severe": "major", "serious": "major", "mild": "minor", "contraindication": "contraindicated"}
 _SCORED_GOLD = re.compile(r"^\s*([a-z][a-z\- ]*?)[\s\-:]*([0-9][a-c]?)\s*$", re.IGNORECASE)
 
 
@@ -197,6 +206,9 @@ def esi_levels(text: str) -> set[int]:
 def severities(text: str) -> set[str]:
     lower = text.lower()
     found: set[str] = set()
+    if "moderately severe" in lower:  # between two levels: a hedge, not "severe"
+        found |= {"moderate", "major"}
+        lower = lower.replace("moderately severe", " ")
     for alias, value in _SEVERITY_ALIASES.items():
         if contains_phrase(lower, alias):
             found.add(value)
@@ -224,15 +236,26 @@ def score_category(answer: str, task: Task) -> AccuracyResult:
         got = esi_levels(stripped)
         return AccuracyResult(1.0 if got == {want} else 0.0, "category", {"family": "esi", "stated": sorted(got), "gold": want})
     g_norm = normalise_text(gold)
-    severity_gold = _SEVERITY_ALIASES.get(g_norm, g_norm)
+    # only a gold written as a level of the interaction scale is graded on that scale: a PHQ-9
+    # "severe" is not an interaction's "major"
+    severity_gold = g_norm
     if severity_gold in _SEVERITIES:
         got_s = severities(stripped)
+        if not got_s and len(golds) > 1:
+            # no level word at all: the task's own wording of the level ("precaution for use") decides
+            by_alias = score_exact(answer, golds[1:])
+            if by_alias.score == 1.0:
+                return AccuracyResult(1.0, "category", {"family": "severity", "stated": [severity_gold],
+                                                        "gold": severity_gold, "matched": by_alias.details.get("matched")})
         return AccuracyResult(1.0 if got_s == {severity_gold} else 0.0, "category",
                               {"family": "severity", "stated": sorted(got_s), "gold": severity_gold})
     scored = _SCORED_GOLD.match(gold)
     if scored and len(scored.group(1).strip()) >= 2:
         prefix = normalise_text(scored.group(1))
-        pattern = re.compile(r"\b" + r"[\s\-]*".join(map(re.escape, prefix.split()))
+        # ACR TI-RADS levels are written "TR5", "TI-RADS 5" or "TI-RADS TR5"
+        prefix_re = r"(?:ti[\s\-]?rads[\s\-:]*(?:category\s*)?(?:tr)?|tr)" if prefix == "tr" else \
+            r"[\s\-]*".join(map(re.escape, prefix.split()))
+        pattern = re.compile(r"\b" + prefix_re
                              + r"[\s\-:]*(?:category\s*)?([0-9][a-c]?)\b", re.IGNORECASE)
         got_v = {v.lower() for v in pattern.findall(stripped)}
         if got_v:
