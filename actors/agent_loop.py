@@ -294,8 +294,8 @@ class AgentLoop:
             num_tool_calls += len(step_info.get("tool_calls") or [])
             if terminated or env_truncated:
                 final = step_info.get("final") or summarize_final_info(step_info, reward)
-                if env_truncated:
-                    truncation = "max_turns"
+                if env_truncated:  # an env actor ends an episode whose env raised as "env_error"
+                    truncation = "env_error" if step_info.get("env_error") else "max_turns"
                 break
             tail = ([self.im_end_id] if cut else []) + self.observation_ids(
                 observation, bool(step_info.get("tool_calls")))
@@ -329,7 +329,8 @@ class AgentLoop:
             response_tokens=response_tokens, episode=final.get("episode"),
             metadata={"truncation": truncation, "env_reward": float(final["reward"]),
                       "is_correct": bool(final["is_correct"]), "num_turns": len(turns),
-                      "group_index": spec.group_index, "split": spec.split, **timings},
+                      "group_index": spec.group_index, "split": spec.split, **timings,
+                      **({"env_error": final["env_error"]} if final.get("env_error") else {})},
         )
 
 

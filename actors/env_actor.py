@@ -12,11 +12,18 @@ restart). `RemoteEnv` turns both into `EnvActorLost`; `run_episode` then re-runs
 its start with the same `EpisodeSpec` (same seed), on whichever actor has room. `EpisodeLedger`
 accounts for every episode: each one completes exactly once, and every lost attempt is recorded,
 so a test can check that nothing was lost or counted twice.
+
+Hostile actions and env failures. `env.step` never raises on any action (issue 13); should an env
+method raise anyway (a bug in a domain's toolkit or scorer), `EnvActor.step` / `finish` end that
+episode as truncated with reward 0 and `final["env_error"]` naming the failure, instead of raising
+into the agent loop, which would fail the episode's whole group. The actor keeps serving (a Python
+exception never kills it) and does not reuse that episode's env.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import uuid
 from dataclasses import dataclass, field
@@ -66,10 +73,13 @@ class EnvActor:
         self._active: dict[str, Any] = {}
         self._idle: dict[tuple[str, str | None], list[Any]] = {}
         self.episodes_started = 0
+        self.env_errors = 0  # episodes ended because their env raised (see `step`)
+        self._broken: set[str] = set()
 
     def ping(self) -> dict[str, Any]:
         return {"actor_index": self.actor_index, "pid": os.getpid(), "incarnation": self.incarnation,
-                "active": len(self._active), "episodes_started": self.episodes_started}
+                "active": len(self._active), "episodes_started": self.episodes_started,
+                "env_errors": self.env_errors}
 
     def _env_for(self, domain: str, split: str | None):
         idle = self._idle.setdefault((domain, split), [])
@@ -99,21 +109,50 @@ class EnvActor:
             ) from None
 
     def step(self, key: str, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self._env(key).step(action)
-        final = summarize_final_info(info, float(reward)) if terminated or truncated else None
-        info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
+        """`env.step` for one episode. Never raises for a hostile action or a failing env method:
+        `env.step` itself never raises on any action; an exception from the env anyway (a bug in a
+        domain's toolkit or scorer) ends that episode here, unscored (reward 0, `final["env_error"]`
+        naming the failure), so the rest of the batch and this actor carry on."""
+        env = self._env(key)
+        try:
+            obs, reward, terminated, truncated, info = env.step(action)
+            final = summarize_final_info(info, float(reward)) if terminated or truncated else None
+            info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
+        except Exception as exc:
+            return self._failed(key, env, "step", exc)
         if final is not None:
             info["final"] = final
         return obs, float(reward), bool(terminated), bool(truncated), info
 
     def finish(self, key: str, reason: str) -> dict[str, Any]:
-        return finished_info(self._env(key))
+        """Score an episode the agent loop stopped; a failure is returned as `env_error`, not raised."""
+        env = self._env(key)
+        try:
+            return finished_info(env, reason)
+        except Exception as exc:
+            return self._failed(key, env, "finish", exc)[4]["final"]
+
+    def _failed(self, key: str, env: Any, method: str, exc: Exception) -> tuple[str, float, bool, bool, dict[str, Any]]:
+        """The episode's end after its env raised: truncated, reward 0, the failure named in
+        `info["env_error"]` and `final["env_error"]`. The env is not reused (its state is unknown)."""
+        record = getattr(env, "_record", None)
+        where = f"{getattr(env, 'domain_name', '?')}/{getattr(record, 'task_id', '?')}"
+        error = (f"env actor {self.actor_index}: {method} of episode {key!r} ({where}) failed: "
+                 f"{type(exc).__name__}: {str(exc)[:500]}")
+        self.env_errors += 1
+        self._broken.add(key)
+        final = {"reward": 0.0, "reward_components": {}, "is_correct": False, "safety_violations": {},
+                 "submitted_answer": None, "env_error": error}
+        observation = json.dumps({"error": "the environment failed on this action; the episode ends here"})
+        info = {"env_error": error, "final": final, "tool_calls": [], "parse_errors": [], "tool_errors": []}
+        return observation, 0.0, False, True, info
 
     def release(self, key: str) -> None:
         entry = self._active.pop(key, None)
-        if entry is not None:
+        if entry is not None and key not in self._broken:
             env, where = entry
             self._idle.setdefault(where, []).append(env)
+        self._broken.discard(key)
 
 
 def _is_actor_failure(exc: BaseException) -> bool:

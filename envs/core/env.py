@@ -286,7 +286,7 @@ class HealthcareGymEnv(gym.Env[str, str]):
             raise RuntimeError(f"episode of task {self._record.task_id!r} is already over")
         self._record.terminated, self._record.truncated = False, True
         info: dict[str, Any] = {"end_reason": reason}
-        reward = self._finish(info)
+        reward = self._finish_safely(info)  # a grader failure is recorded, as at a terminal step
         self._done = True
         return reward, info
 
