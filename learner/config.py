@@ -35,15 +35,14 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
-from envs.core.models import StrictModel
-from learner.config_models import OFFPOLICY_TIS_CAP, LearnerConfig, TeacherConfig, WeightSyncConfig
+from learner.config_models import OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig, WeightSyncConfig
 
 
 class ConfigError(ValueError):
     """A config file is unreadable or invalid; the message names the file and each key path."""
 
 
-class TinyModelConfig(StrictModel):
+class TinyModelConfig(ConfigModel):
     """A Qwen-architecture model built from a config, with a BPE tokenizer trained on the task corpus."""
 
     architecture: Literal["qwen3", "qwen2"] = "qwen3"
@@ -54,7 +53,7 @@ class TinyModelConfig(StrictModel):
     overrides: dict[str, int | float | bool] = Field(default_factory=dict)
 
 
-class ModelConfig(StrictModel):
+class ModelConfig(ConfigModel):
     """Where the initial policy comes from: `tiny` builds one, `pretrained` loads a checkpoint.
 
     `path` (kind: pretrained) is a local checkpoint folder or a hub id (`Qwen/Qwen3.5-9B`) resolved
@@ -78,7 +77,7 @@ class ModelConfig(StrictModel):
         return self
 
 
-class SFTConfig(StrictModel):
+class SFTConfig(ConfigModel):
     """Warm start: supervised fine-tuning on gold-replay trajectories before RL."""
 
     enabled: bool = False
@@ -95,7 +94,7 @@ class SFTConfig(StrictModel):
     hint_fraction: float = Field(default=0.0, ge=0, le=1)
 
 
-class DataConfig(StrictModel):
+class DataConfig(ConfigModel):
     domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
     # Domains outside envs/domains to register first (name -> module with get_environment/get_tasks),
     # in the driver and in every env actor.
@@ -148,7 +147,7 @@ class RolloutConfig(RolloutLimits):
         return value
 
 
-class GeneratorConfig(StrictModel):
+class GeneratorConfig(ConfigModel):
     backend: Literal["hf", "vllm"] = "hf"
     num_generators: int = Field(default=1, ge=1)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
@@ -177,7 +176,7 @@ class GeneratorConfig(StrictModel):
         return {"py_executable": python} if python else None
 
 
-class RewardConfig(StrictModel):
+class RewardConfig(ConfigModel):
     """The RL reward and the correctness rule (dynamic sampling and teacher hints read `correct`)."""
 
     kind: Literal["total", "cosine"] = "total"
@@ -218,7 +217,7 @@ _CORRECT_IF_INSTEAD = ("use 'is_correct' (the env's grader: the task's accuracy 
                        "with accuracy_threshold")
 
 
-class DynamicSamplingConfig(StrictModel):
+class DynamicSamplingConfig(ConfigModel):
     enabled: bool = True
     criterion: Literal["correct", "reward"] = Field(
         default="correct", description="mixed outcome = both correct and incorrect members / reward std > eps")
@@ -228,7 +227,7 @@ class DynamicSamplingConfig(StrictModel):
     max_admissions_factor: float = Field(default=4.0, ge=1)
 
 
-class TrainerConfig(StrictModel):
+class TrainerConfig(ConfigModel):
     batch_size: int = Field(default=8, ge=1, description="prompts (groups) per learner step")
     max_steps: int = Field(default=60, ge=0)
     max_staleness: int = Field(default=0, ge=0, description="max policy-version lag of admitted work; 0 = on-policy")
@@ -244,7 +243,7 @@ class TrainerConfig(StrictModel):
     drain_timeout_s: float = Field(default=120.0, ge=0, description="at the end, wait this long for admitted groups")
 
 
-class RayConfig(StrictModel):
+class RayConfig(ConfigModel):
     address: str | None = Field(default=None, description="None = the cluster in RAY_ADDRESS (set for `ray job submit` jobs), else a new local one")
     num_cpus: int | None = Field(default=2, ge=1)
     include_dashboard: bool = False
@@ -268,7 +267,7 @@ class RayConfig(StrictModel):
     check_resources: bool = Field(default=True, description="fail at start when the cluster lacks resources")
 
 
-class KBConfig(StrictModel):
+class KBConfig(ConfigModel):
     """The knowledge-base service env actors share (kb_service.service); off = each process opens
     the KB itself when a tool needs it."""
 
@@ -279,13 +278,13 @@ class KBConfig(StrictModel):
     name: str = "hcgym-kb"
 
 
-class MetricsConfig(StrictModel):
+class MetricsConfig(ConfigModel):
     tensorboard: bool = True
     ray_metrics: bool = True
     progress: bool = True  # one line per step on stdout
 
 
-class RunConfig(StrictModel):
+class RunConfig(ConfigModel):
     name: str = "run"
     seed: int = 0
     output_dir: str = "runs/run"

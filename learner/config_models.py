@@ -9,11 +9,18 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from envs.core.models import StrictModel
 
 KLEstimator = Literal["k1", "k3"]
+
+class ConfigModel(StrictModel):
+    """Base of every config section: unknown keys and non-finite numbers (NaN, infinity) are
+    errors, also when a section is built in code or re-validated in an actor from a dict."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
 
 # The truncation C of the behaviour weight min(pi_old / mu, C) that runs with max_staleness > 0 get
 # by default: 2 as in TIS (Yao et al. 2025) and verl's rollout-correction default; no token of a
@@ -21,7 +28,7 @@ KLEstimator = Literal["k1", "k3"]
 OFFPOLICY_TIS_CAP = 2.0
 
 
-class GRPOConfig(StrictModel):
+class GRPOConfig(ConfigModel):
     """Eq. 1: clipped group-relative policy gradient plus a KL penalty to a frozen reference."""
 
     clip_eps_low: float = Field(default=0.2, ge=0, lt=1, description="lower clip range: ratio >= 1 - eps")
@@ -52,7 +59,7 @@ class GRPOConfig(StrictModel):
     tis_cap: float | None = Field(default=None, gt=0)
 
 
-class DistillConfig(StrictModel):
+class DistillConfig(ConfigModel):
     """Eq. 2-3: turn-level truncated on-policy distillation toward the (EMA) teacher."""
 
     enabled: bool = False
@@ -73,7 +80,7 @@ class DistillConfig(StrictModel):
     turn_reduction: Literal["sum", "mean"] = "sum"
 
 
-class KLGradConfig(StrictModel):
+class KLGradConfig(ConfigModel):
     """How sampled-token KL estimates are differentiated (applies to KL_ref and the distillation KL).
 
     "unbiased": value of the estimator plus a score-function term, so the gradient is the gradient
@@ -84,14 +91,14 @@ class KLGradConfig(StrictModel):
     mode: Literal["unbiased", "pathwise"] = "unbiased"
 
 
-class LossConfig(StrictModel):
+class LossConfig(ConfigModel):
     grpo: GRPOConfig = Field(default_factory=GRPOConfig)
     distill: DistillConfig = Field(default_factory=DistillConfig)
     kl_grad: KLGradConfig = Field(default_factory=KLGradConfig)
     entropy_coef: float = Field(default=0.0, ge=0, description="entropy bonus (0 = only logged)")
 
 
-class OptimConfig(StrictModel):
+class OptimConfig(ConfigModel):
     # Upper bounds catch typos (`lr: 5e7` for 5e-7): Adam steps of size ~lr per weight, so past 1 a
     # single update rewrites the model.
     lr: float = Field(default=5e-7, gt=0, le=1)
@@ -103,7 +110,7 @@ class OptimConfig(StrictModel):
     updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
 
 
-class DeepSpeedConfig(StrictModel):
+class DeepSpeedConfig(ConfigModel):
     """DeepSpeed ZeRO-3. On CPU it runs with gloo; `world_size` ranks are separate Ray actors."""
 
     zero_stage: Literal[1, 2, 3] = 3
@@ -119,7 +126,7 @@ class DeepSpeedConfig(StrictModel):
     timeout_s: float = Field(default=600.0, gt=0, description="torch.distributed collective timeout")
 
 
-class LearnerConfig(StrictModel):
+class LearnerConfig(ConfigModel):
     backend: Literal["torch", "deepspeed"] = "torch"
     dtype: Literal["float32", "bfloat16"] = "float32"
     device: Literal["cpu", "cuda"] = "cpu"
@@ -144,7 +151,7 @@ class LearnerConfig(StrictModel):
         return self
 
 
-class HintConfig(StrictModel):
+class HintConfig(ConfigModel):
     """Outcome-conditioned privileged hints (Sec. 4.2)."""
 
     enabled: bool = True
@@ -170,7 +177,7 @@ class HintConfig(StrictModel):
         return self
 
 
-class TeacherConfig(StrictModel):
+class TeacherConfig(ConfigModel):
     """The EMA teacher actor (Sec. 4.2 "Stability mechanisms", Algorithm 1)."""
 
     enabled: bool = False
@@ -202,7 +209,7 @@ def teacher_update_action(step: int, config: TeacherConfig) -> Literal["hard_cop
     return "none"
 
 
-class WeightSyncConfig(StrictModel):
+class WeightSyncConfig(ConfigModel):
     """Learner -> generators / teacher weight transfer."""
 
     transport: Literal["object_store", "collective"] = "object_store"

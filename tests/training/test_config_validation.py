@@ -206,3 +206,15 @@ def test_deeply_nested_yaml_names_the_file(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_config(path)
     assert str(path.resolve()) in str(err.value)
+
+
+def test_sections_built_in_code_refuse_non_finite_numbers():
+    # The learner actor re-validates its section from a dict: NaN must not slip in that way either.
+    from pydantic import ValidationError
+
+    from learner.config_models import LearnerConfig, TeacherConfig
+
+    with pytest.raises(ValidationError, match="loss.grpo.kl_beta"):
+        LearnerConfig(loss={"grpo": {"kl_beta": float("inf")}})
+    with pytest.raises(ValidationError, match="ema_alpha"):
+        TeacherConfig(ema_alpha=float("nan"))
