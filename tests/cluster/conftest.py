@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from envs._runtime import LOOPBACK_SWITCH_ENV
 from tests.training.conftest import ward_policy_dir  # noqa: F401  (fixture reused by the job test)
 
 VENV_BIN = Path(sys.executable).parent  # not resolved: a venv's bin/python is a symlink
@@ -124,6 +125,9 @@ def start_local_head(num_cpus: int = 2, timeout_s: float = 90.0) -> LocalRayHead
     # The token goes by file path, not by RAY_AUTH_TOKEN, so it is not copied into every process's
     # environment dump; ~/.ray/auth_token of the machine is left alone.
     env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN_PATH=str(token_file), RAY_USAGE_STATS_ENABLED="0")
+    # On loopback only, like a local run (envs/_runtime.py): `--node-ip-address=127.0.0.1` alone is
+    # rewritten by Ray to the host's routable IP, and every server would listen on all interfaces.
+    env[LOOPBACK_SWITCH_ENV] = "0"
     # Like a cluster node, the head does not have the venv on PATH (even if pytest was started from
     # an activated venv): a job's `python` is the venv's only if its runtime env says so.
     path = env.get("PATH", "").split(os.pathsep)

@@ -91,6 +91,13 @@ def listening_sockets(root_pid: int) -> list[tuple[str, str, int]]:
         return _listening_sockets_ss({p.pid for p in processes})
 
 
+def listening_sockets_of_one(pid: int) -> list[tuple[str, str, int]]:
+    try:
+        return _listening_sockets_psutil([psutil.Process(pid)])
+    except psutil.AccessDenied:
+        return _listening_sockets_ss({pid})
+
+
 @pytest.mark.parametrize("host", ["127.0.0.1", "127.0.1.1", "::1", "::ffff:127.0.0.1", "localhost"])
 def test_loopback_addresses_are_recognised(host):
     assert is_loopback_address(host)
@@ -152,3 +159,19 @@ def test_importing_the_project_sets_no_ray_auth_mode():
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, env=env, capture_output=True, text=True,
                          check=True, timeout=300).stdout.strip().splitlines()[-1]
     assert out == "None None"
+
+
+@pytest.mark.slow
+def test_every_socket_of_a_local_ray_start_head_listens_on_loopback(local_ray_head):
+    """The `ray start --head` path (tests/cluster's head, a user's local head) with the same switch."""
+    sockets = []
+    for pid in local_ray_head.processes():
+        try:
+            sockets += listening_sockets_of_one(pid)
+        except psutil.NoSuchProcess:
+            continue
+    names = {name for name, _, _ in sockets}
+    assert {"gcs_server", "raylet"} <= names, sockets
+    assert local_ray_head.dashboard_port in {port for _, _, port in sockets}, sockets
+    exposed = [s for s in sockets if not is_loopback_address(s[1])]
+    assert exposed == [], f"listening on a non-loopback address: {exposed}"
