@@ -267,10 +267,14 @@ def read_reference_file(path: Path) -> list[Any]:
 def import_reference_tasks(path: str | Path, domain: str, *, tool_names: set[str] | None = None) -> ImportResult:
     """Read a reference-format tasks JSON file and convert it; see the module docstring."""
     path = Path(path)
+    per_task = None
     if tool_names is None:
         from envs import registry
 
         tool_names = set(registry.get_environment(domain).toolkit.tool_names)
+        # domains whose tools depend on the task (cross_domain: a pathway's phases, or an imported task's
+        # knowledge tools) say which tools each task may use
+        per_task = getattr(registry.domain_module(domain), "task_tool_definitions", None)
     raw = read_reference_file(path)
     result = ImportResult()
     renamed: dict[str, int] = {}
@@ -288,7 +292,13 @@ def import_reference_tasks(path: str | Path, domain: str, *, tool_names: set[str
         except ValueError as exc:
             result.reject("schema", f"{path} [{label}]: {exc}")
             continue
-        missing = sorted({a.name for a in task.evaluation_criteria.actions} - tool_names)
+        available = tool_names
+        if per_task is not None:
+            try:
+                available = set(per_task(task))
+            except (KeyError, ValueError):
+                available = tool_names
+        missing = sorted({a.name for a in task.evaluation_criteria.actions} - available)
         if missing:
             result.reject("unknown tool", f"{path} [{label}]: names tools the {domain!r} domain lacks: "
                                           f"{', '.join(missing)}")

@@ -86,9 +86,22 @@ def add_patient_hook(domain: str):
     raise DataFileError(f"domain {domain!r} has no add_patient hook (pathway_hooks.add_patient)")
 
 
+def _imported_toolkit():
+    """The toolkit of an imported cross-domain task (`hcgym tasks import`, no pathway): think, submit_answer
+    and the shared knowledge tools, which is what the reference's cross-domain task files call."""
+    from envs.core.common_tools import BaseDomainTools
+    from envs.core.shared import shared_toolkits
+    from envs.core.tools import CompositeToolkit
+
+    return CompositeToolkit(BaseDomainTools(None), *shared_toolkits())
+
+
 def _reset(domain_env: DomainEnvironment, task: Task, pathways: dict[str, Pathway] | None = None) -> None:
     from envs import registry
 
+    if "pathway_id" not in task.metadata:  # an imported task, not a pathway
+        domain_env.toolkit = _imported_toolkit()
+        return
     pathway = (pathways or load_pathways())[task.metadata["pathway_id"]]
     envs_by_domain: dict[str, DomainEnvironment] = {}
     for domain in dict.fromkeys(p.domain for p in pathway.phases):
@@ -129,6 +142,8 @@ def task_tool_definitions(task: Task) -> dict[str, Any]:
     from envs import registry
     from envs.domains.cross_domain.pathway import PathwayControlTools
 
+    if "pathway_id" not in task.metadata:
+        return dict(_imported_toolkit().definitions)
     pathway = load_pathways()[task.metadata["pathway_id"]]
     definitions: dict[str, Any] = dict(PathwayControlTools(None).definitions)
     toolkits: dict[str, Any] = {}
@@ -154,8 +169,18 @@ def get_environment() -> DomainEnvironment:
     return env
 
 
+def imported_tasks() -> list[Task]:
+    """Tasks converted into this domain by `hcgym tasks import` (split 'imported')."""
+    from envs.core.domain import imported_tasks_dir
+    from envs.core.task import load_tasks
+
+    folder = imported_tasks_dir("cross_domain")
+    return [t for f in sorted(folder.glob("*.json")) for t in load_tasks(f, domain="cross_domain")] \
+        if folder.is_dir() else []
+
+
 def get_tasks(split: str | None = None) -> list[Task]:
-    tasks = [pathway_task(p) for p in load_pathways().values()]
+    tasks = [pathway_task(p) for p in load_pathways().values()] + imported_tasks()
     if split is None:
         return tasks
     splits = get_splits()
@@ -167,7 +192,9 @@ def get_tasks(split: str | None = None) -> list[Task]:
 
 def get_splits() -> dict[str, list[str]]:
     path = HERE / "split_tasks.json"
+    imported = [t.id for t in imported_tasks()]
     if path.exists():
-        return json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(path.read_text(encoding="utf-8")) | ({"imported": imported} if imported else {})
     ids = sorted(f"pathway_{p}" for p in load_pathways())
-    return {"train": ids[: max(1, len(ids) * 3 // 4)], "test": ids[max(1, len(ids) * 3 // 4):]}
+    return {"train": ids[: max(1, len(ids) * 3 // 4)], "test": ids[max(1, len(ids) * 3 // 4):]} | (
+        {"imported": imported} if imported else {})
