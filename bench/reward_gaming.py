@@ -204,7 +204,9 @@ def correct_rule() -> Callable[[dict[str, Any]], bool]:
 
 
 def run(domains: list[str], split: str, limit: int | None, strategies: tuple[str, ...],
-        log: Callable[[str], None] = print) -> dict[str, dict[str, dict[str, float]]]:
+        log: Callable[[str], None] = print, sample: int | None = None) -> dict[str, dict[str, dict[str, float]]]:
+    """The table domain -> strategy -> figures; `limit` takes the first tasks of each split, `sample`
+    that many tasks evenly spaced over it."""
     from envs import registry
     from envs.core.env import HealthcareGymEnv
 
@@ -212,6 +214,8 @@ def run(domains: list[str], split: str, limit: int | None, strategies: tuple[str
     table: dict[str, dict[str, dict[str, float]]] = {}
     for domain in domains:
         tasks = registry.get_tasks(domain, split)[:limit] if limit else registry.get_tasks(domain, split)
+        if sample and len(tasks) > sample:
+            tasks = [tasks[i * len(tasks) // sample] for i in range(sample)]
         candidates = Candidates(domain)
         env = HealthcareGymEnv(domain=domain, split=split)
         started = time.perf_counter()
@@ -273,7 +277,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", default="test")
     parser.add_argument("--domains", default="", help="comma-separated; default: every domain")
-    parser.add_argument("--limit", type=int, default=None, help="tasks per domain (default: the whole split)")
+    parser.add_argument("--limit", type=int, default=None, help="the first N tasks per domain (default: the whole split)")
+    parser.add_argument("--sample", type=int, default=None, help="N tasks per domain, evenly spaced over the split")
     parser.add_argument("--strategies", default="", help="comma-separated; default: all")
     parser.add_argument("--embeddings", action="store_true", help="grade free text with the embedding model")
     parser.add_argument("--json", default=None, help="write the table here")
@@ -288,7 +293,7 @@ def main() -> int:
     if unknown:
         parser.error(f"--strategies: unknown {', '.join(unknown)}; known: {', '.join(GOLD + CHEAP)}")
     started = time.perf_counter()
-    table = run(domains, args.split, args.limit, strategies)
+    table = run(domains, args.split, args.limit, strategies, sample=args.sample)
     elapsed = time.perf_counter() - started
     episodes = sum(row["episodes"] for rows in table.values() for row in rows.values())
     print(f"\n{episodes} episodes over split {args.split!r} in {elapsed:.0f} s; cells: mean total / "

@@ -26,7 +26,8 @@ attempt commits to the value the task asks for, as its accuracy grader reads it:
 
 * no answer at all (empty, whitespace, or a truncated episode without a submission): none;
 * an answer that copies the task's text (`accuracy.copies_question`): none;
-* choice: `extract_choice` finds one option (a list of options, a hedge "A or C" or no letter: none);
+* choice: `extract_choice` finds one option and no line of the answer commits to another (a list of
+  options, a hedge "A or C", "A\nAnswer: B\nThe answer is C" or no letter: none);
 * numeric: a number is stated (`accuracy.stated_number`);
 * category: exactly one value of the family when the gold belongs to one (one ESI level, one
   interaction severity, one BI-RADS category; "ESI 1, ESI 2, ESI 3" is none), else any value;
@@ -81,6 +82,11 @@ def real_attempt(view: EpisodeView) -> tuple[bool, str]:
     if task.answer_type == "choice":
         if extract_choice(answer, task.options) is None:
             return False, "no single option committed to"
+        # "A / (B) / Answer: C / the answer is D" commits to every option in turn: the grader reads the
+        # last, but it is no more an attempt than the list "A, B, C, D"
+        committed = {extract_choice(line, task.options, strict=True) for line in answer.splitlines()} - {None}
+        if len(committed) > 1:
+            return False, f"commits to {len(committed)} different options"
         return True, ""
     if task.answer_type == "numeric":
         return (True, "") if stated_number(answer, task.answer_unit) is not None else (False, "no number stated")
