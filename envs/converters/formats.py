@@ -523,9 +523,12 @@ def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[.
         images = _image_folder(fmt, image_dir, path)
         result = ConversionResult()
         rows = _pathvqa_rows(path, result) if fmt == "pathvqa" else iter_json_records(path, result)
+        skipped: dict[str, int] = {}
         for line, row in rows:
             item = _item(row)
             if lang_key and row.get(lang_key, "en") != "en":
+                language = str(row.get(lang_key))
+                skipped[language] = skipped.get(language, 0) + 1
                 continue  # SLAKE is bilingual; we keep the English questions
             if fmt == "pathvqa":
                 name, question, answer, kind = _pathvqa_fields(row)
@@ -547,6 +550,8 @@ def _vqa(fmt: str, image_key: str, *, lang_key: str | None = None) -> Callable[.
             metadata = {k: row[k] for k in ("qid", "question_id", "question_type", "modality", "location",
                                             "content_type") if k in row}
             _add(result, path, line, _vqa_task(fmt, domain, name, image, question, answer, kind, metadata))
+        for language, count in sorted(skipped.items()):
+            result.notes.append(f"{path}: {count} question(s) with {lang_key} {language!r} skipped (English only)")
         return result
 
     return convert

@@ -76,6 +76,9 @@ REFERENCE_TOOL_RENAMES: dict[str, dict[str, tuple[str, dict[str, str]]]] = {
 }
 
 
+GRADED_BASES = ("ACTION", "NL_ASSERTION", "ANSWER", "DB", "RUBRIC")
+
+
 def rename_for(domain: str, name: str) -> tuple[str, dict[str, str]] | None:
     return REFERENCE_TOOL_RENAMES.get(domain, {}).get(name) or REFERENCE_TOOL_RENAMES["*"].get(name)
 
@@ -202,7 +205,12 @@ def convert_reference_task(raw: dict[str, Any], domain: str, *, renamed: dict[st
     crit["actions"] = actions
     crit = {k: v for k, v in crit.items() if k in ("actions", "nl_assertions", "reward_basis", "rubric")}
     if "reward_basis" in crit:
-        crit["reward_basis"] = [b for b in crit["reward_basis"] if b in ("ACTION", "NL_ASSERTION", "ANSWER", "DB", "RUBRIC")]
+        given = crit["reward_basis"] if isinstance(crit["reward_basis"], list) else [crit["reward_basis"]]
+        # the reference's "MCQA" basis is its multiple-choice answer check: our ANSWER
+        basis = [{"MCQA": "ANSWER"}.get(str(b), str(b)) for b in given]
+        crit["reward_basis"] = list(dict.fromkeys(b for b in basis if b in GRADED_BASES))
+        if given and not crit["reward_basis"]:
+            raise ValueError(f"reward_basis {given} names nothing we grade ({', '.join(GRADED_BASES)}, or MCQA)")
     if mentions:
         crit["nl_assertions"] = list(crit.get("nl_assertions") or []) + [f"The response mentions {m}" for m in mentions]
         crit["rubric"] = list(crit.get("rubric") or []) + [
@@ -212,6 +220,8 @@ def convert_reference_task(raw: dict[str, Any], domain: str, *, renamed: dict[st
         crit["reward_basis"] = list(dict.fromkeys([*basis, "NL_ASSERTION", "RUBRIC"]))
     out["evaluation_criteria"] = crit
     options = _options(raw.get("options"))
+    if options is not None and not options and raw.get("correct_answer") is not None:
+        raise ValueError(f"options are empty but correct_answer is {raw['correct_answer']!r}")
     if options:
         out["options"] = options
     gold = raw.get("correct_answer")

@@ -236,6 +236,7 @@ def test_slake_round_trip_keeps_english_rows():
     rows = json.loads((FIX / "slake.json").read_text(encoding="utf-8"))
     result = convert("slake", FIX / "slake.json", image_dir=IMAGES)
     assert [gold_text(t) for t in result.tasks] == [r["answer"].lower() for r in rows if r["q_lang"] == "en"]
+    assert any("1 question(s) with q_lang 'zh' skipped" in note for note in result.notes)
 
 
 PATHVQA_ROWS = [{"image": "train_0001", "question": "Does this image show necrosis?", "answer": "yes"},

@@ -213,3 +213,14 @@ def test_import_reference_tasks_counts_reasons():
     result = import_reference_tasks(fixture, "ward", tool_names=set(registry.get_environment("ward").toolkit.tool_names))
     assert result.rows_read == 5 and len(result.tasks) == 2
     assert result.rejected == {"unknown tool": 1, "schema": 1, "not a task object": 1}
+
+
+def test_empty_options_with_a_letter_and_a_basis_that_grades_nothing_are_refused():
+    with pytest.raises(ValueError, match="options are empty but correct_answer is 'C'"):
+        convert_reference_task({"id": "o", "ticket": "t", "options": {}, "correct_answer": "C"}, "medical_qa")
+    with pytest.raises(ValueError, match=r"reward_basis \['STYLE'\] names nothing we grade"):
+        convert_reference_task({"id": "b", "ticket": "t", "correct_answer": "x",
+                                "evaluation_criteria": {"reward_basis": ["STYLE"]}}, "medical_qa")
+    mcqa = convert_reference_task({"id": "m", "ticket": "t", "options": {"A": "x", "B": "y"}, "correct_answer": "B",
+                                   "evaluation_criteria": {"reward_basis": ["MCQA"]}}, "medical_qa")
+    assert mcqa["evaluation_criteria"]["reward_basis"] == ["ANSWER"]
