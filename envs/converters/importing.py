@@ -77,6 +77,9 @@ def reference_sources(path: Path, domain: str | None) -> list[tuple[str, Path]]:
         raise ValueError("--domain applies to one task file or one domain folder, not to a folder of domains")
     pairs = [(sub.name, f) for sub in sorted(path.iterdir()) if sub.is_dir() and sub.name in registry.DOMAINS
              for f in sorted(sub.glob("tasks*.json"))]
+    for sub in sorted(path.iterdir()):
+        if sub.is_dir() and sub.name not in registry.DOMAINS and any(sub.glob("tasks*.json")):
+            print(f"note: {sub}: skipped, {sub.name!r} is not a domain here (import it with --domain NAME)")
     if not pairs:
         raise ValueError(f"{path}: no <domain>/tasks*.json files (domains: {', '.join(registry.DOMAINS)})")
     return pairs

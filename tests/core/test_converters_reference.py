@@ -148,8 +148,10 @@ def test_reference_folder_import_table_reasons_and_cross_domain_loading(built_da
         "id": "mimic_ehr_047", "expected_actions": [{"tool": "get_patient_summary", "args": {"hadm_id": "H9"}}]},
         {"id": "mimic_ehr_048", "ticket": "Review the chart.", "patient_id": "P1",
          "expected_actions": [{"tool": "get_patient_summary", "args": {"hadm_id": "H9"}}]}])
+    _write(ref / "full_4modality_clean" / "tasks.json", CROSS)  # a reference folder that is not a domain here
     assert main(["tasks", "import", "--format", "reference", str(ref)]) == 0
     out = capsys.readouterr().out
+    assert "full_4modality_clean: skipped, 'full_4modality_clean' is not a domain here" in out
     lines = {line.split()[0]: line for line in out.splitlines() if line.split()[:1] in (["cross_domain"],
                                                                                           ["ehr_management"])}
     # domain, read, imported, rejected, reasons
