@@ -35,7 +35,8 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
-from learner.config_models import OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig, WeightSyncConfig
+from learner.config_models import (OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig,
+                                   WeightSyncConfig)
 
 
 class ConfigError(ValueError):

@@ -160,8 +160,10 @@ def checkpoint_weight_map(model_dir: str | os.PathLike) -> dict[str, Path]:
     root = Path(model_dir)
     index = root / INDEX_FILE
     if index.is_file():
-        data = json.loads(index.read_text())
-        if not isinstance(data.get("weight_map"), dict):
+        from learner.checkpoint import read_json  # names the file of a truncated / non-UTF-8 index
+
+        data = read_json(index)
+        if not isinstance(data, dict) or not isinstance(data.get("weight_map"), dict):
             raise ValueError(f"{index} has no 'weight_map' object")
         out = {name: root / shard for name, shard in data["weight_map"].items()}
         for shard in sorted(set(out.values())):
@@ -170,9 +172,7 @@ def checkpoint_weight_map(model_dir: str | os.PathLike) -> dict[str, Path]:
         return out
     single = root / SINGLE_FILE
     if single.is_file():
-        from safetensors import safe_open
-
-        with safe_open(str(single), framework="pt", device="cpu") as f:
+        with _open_safetensors(single) as f:
             return dict.fromkeys(f.keys(), single)
     present = sorted(p.name for p in root.iterdir()) if root.is_dir() else []
     raise FileNotFoundError(f"no {INDEX_FILE} or {SINGLE_FILE} in {root} (found: {present[:12]}); "
@@ -192,6 +192,18 @@ def checkpoint_key_candidates(name: str) -> list[str]:
     elif name.startswith("model.visual."):
         out.append(name[len("model."):])
     return out
+
+
+def _open_safetensors(path: Path):
+    """`safe_open(path)`; a corrupt or truncated file raises `CheckpointError` naming it."""
+    from safetensors import safe_open
+
+    from learner.checkpoint import CheckpointError
+
+    try:
+        return safe_open(str(path), framework="pt", device="cpu")
+    except Exception as exc:  # SafetensorError / OSError, which do not name the file
+        raise CheckpointError(f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})") from None
 
 
 class CheckpointReader:
@@ -229,17 +241,20 @@ class CheckpointReader:
         Raises:
             KeyError: The checkpoint holds no tensor under `name` (or its older-layout name).
         """
-        from safetensors import safe_open
-
         stored = self.stored_name(name)
         if stored is None:
             raise KeyError(f"checkpoint {self.model_dir} has no tensor {name!r}")
         shard = self.weight_map[stored]
         handle = self._handles.get(shard)
         if handle is None:
-            handle = self._stack.enter_context(safe_open(str(shard), framework="pt", device="cpu"))
+            handle = self._stack.enter_context(_open_safetensors(shard))
             self._handles[shard] = handle
-        return handle.get_tensor(stored)
+        try:
+            return handle.get_tensor(stored)
+        except Exception as exc:  # a shard cut short after its header: safetensors names no file
+            from learner.checkpoint import CheckpointError
+
+            raise CheckpointError(f"{shard}: cannot read tensor {stored!r} ({type(exc).__name__}: {exc})") from None
 
 
 def read_checkpoint_tensors(model_dir: str | os.PathLike) -> dict[str, torch.Tensor]:
