@@ -162,7 +162,9 @@ def convert_medmcqa(path: Path, domain: str = "medical_qa", cop_base: int | None
         if isinstance(cop, bool) or not isinstance(cop, int):
             result.add_error(path, line, f"field 'cop' must be an integer, got {cop!r} ({type(cop).__name__})")
             continue
-        rows.append((line, row, cop))
+        # keep only what the task needs until the base is known: `exp` (explanations) is most of a row
+        rows.append((line, {k: row.get(k) for k in ("id", "question", *MEDMCQA_OPTION_FIELDS, "subject_name",
+                                                      "topic_name")}, cop))
     base = _medmcqa_base([cop for _, _, cop in rows], path, cop_base, result)
     for line, row, cop in rows:
         index = cop - base
