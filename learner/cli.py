@@ -12,6 +12,11 @@ from typing import Any, Callable
 
 METRICS_FILE = "metrics.jsonl"  # one line per learner step (learner/metrics.py)
 CONFIG_FILE = "config.yaml"
+# What a training run writes at the top of its folder (learner/train.py, metrics.py, sft.py, plot.py).
+# Only these are ever removed after a failed start: `output_dir` may be a shared folder where
+# other programs create files while the run starts.
+RUN_ENTRIES = frozenset({CONFIG_FILE, "model", "checkpoints", "trajectories", METRICS_FILE, "validation.jsonl",
+                         "validation", "tensorboard", "summary.json", "training_dynamics.png"})
 
 
 @dataclass
@@ -56,9 +61,9 @@ def _complete_policy(model_dir: Path) -> bool:
 def undo_failed_start(before: RunFolderSnapshot) -> str:
     """After a run failed, remove what it created if it had not finished a learner step yet.
 
-    Removed: every top-level entry of the run folder the failed run created (config.yaml, an empty
-    or half-built model/, trajectories/, logs ...), and the folder itself when it was new and ends
-    up empty; config.yaml is restored when an earlier run had written one. Kept: whatever was
+    Removed: every top-level entry of the run folder the failed run created among those a run
+    writes (`RUN_ENTRIES`: config.yaml, an empty or half-built model/, tensorboard/ ...), and the
+    folder itself when it was new and ends up empty; config.yaml is restored when an earlier run had written one. Kept: whatever was
     there before, and a complete initial policy in model/ (rebuilding it can take minutes of SFT).
     A run that finished a step keeps its folder as it is (its checkpoints and metrics are real).
 
@@ -74,6 +79,9 @@ def undo_failed_start(before: RunFolderSnapshot) -> str:
     removed, kept = [], []
     for path in sorted(run_dir.iterdir()):
         if path.name in before.entries:
+            continue
+        if path.name not in RUN_ENTRIES:
+            kept.append(f"{path.name} (not written by the run)")
             continue
         if path.name == "model" and path.is_dir() and _complete_policy(path):
             kept.append("model/ (the complete initial policy; a rerun with this config reuses it)")

@@ -72,6 +72,19 @@ def test_a_complete_initial_policy_is_kept(tmp_path):
     assert "removed model/" in undo_failed_start(before) and not run_dir.exists()
 
 
+def test_only_what_a_run_writes_is_removed(tmp_path):
+    # output_dir may be a shared folder: a file another program created meanwhile stays.
+    run_dir = tmp_path / "shared"
+    before = RunFolderSnapshot.take(run_dir)
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text("name: x\n", encoding="utf-8")
+    (run_dir / "tensorboard").mkdir()
+    (run_dir / "someone_elses.log").write_text("x", encoding="utf-8")
+    message = undo_failed_start(before)
+    assert "removed config.yaml, tensorboard/" in message and "kept someone_elses.log (not written by the run)" in message
+    assert sorted(p.name for p in run_dir.iterdir()) == ["someone_elses.log"]
+
+
 def test_a_run_that_recorded_a_step_is_left_as_it_is(tmp_path):
     run_dir = tmp_path / "run"
     run_dir.mkdir()
