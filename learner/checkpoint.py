@@ -82,8 +82,9 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
         raise
 
 
-def _replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """`write(tmp)` then rename over `path`; the temporary file is removed if anything fails."""
+def replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """`write(tmp)` then rename over `path`, so readers never see half a file; the temporary file
+    (`.NAME.tmp` next to `path`) is removed if anything fails, and the previous file stays."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
     try:
@@ -141,7 +142,7 @@ def save_tensors(path: str | os.PathLike, tensors: dict[str, torch.Tensor], meta
     """Save a flat name -> tensor dict with safetensors (contiguous CPU copies, atomic rename)."""
     path = Path(path)
     clean = {k: v.detach().to("cpu").contiguous() for k, v in tensors.items()}
-    _replace_atomic(path, lambda tmp: save_file(clean, str(tmp), metadata=metadata))
+    replace_atomic(path, lambda tmp: save_file(clean, str(tmp), metadata=metadata))
 
 
 def load_tensors(path: str | os.PathLike, device: str = "cpu") -> dict[str, torch.Tensor]:
@@ -162,7 +163,7 @@ def load_tensors(path: str | os.PathLike, device: str = "cpu") -> dict[str, torc
 
 def save_torch_state(path: str | os.PathLike, obj: Any) -> None:
     """torch.save for optimizer states: only tensors and plain containers, so `load_torch_state` can read it."""
-    _replace_atomic(Path(path), lambda tmp: torch.save(obj, tmp))
+    replace_atomic(Path(path), lambda tmp: torch.save(obj, tmp))
 
 
 def load_torch_state(path: str | os.PathLike) -> Any:
@@ -258,7 +259,7 @@ def mark_latest(run_dir: str | os.PathLike, step: int) -> None:
     if not target.is_dir():
         raise FileNotFoundError(f"cannot mark missing checkpoint {target} as latest")
     latest = Path(run_dir) / "checkpoints" / LATEST
-    _replace_atomic(latest, lambda tmp: tmp.write_text(target.name, encoding="utf-8"))
+    replace_atomic(latest, lambda tmp: tmp.write_text(target.name, encoding="utf-8"))
 
 
 def latest_checkpoint(run_dir: str | os.PathLike) -> Path | None:

@@ -470,6 +470,8 @@ def save_sharded_checkpoint(
     """
     from safetensors.torch import save_file
 
+    from learner.checkpoint import replace_atomic
+
     source = resolve_model_path(source_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -513,15 +515,12 @@ def save_sharded_checkpoint(
     total = 0
     for i, names in enumerate(shards, start=1):
         filename = f"model-{i:05d}-of-{len(shards):05d}.safetensors"
-        tmp = out / f".{filename}.tmp"
-        save_file({n: clean[n] for n in names}, str(tmp), metadata=meta)
-        os.replace(tmp, out / filename)
+        shard = {n: clean[n] for n in names}
+        replace_atomic(out / filename, lambda tmp, shard=shard: save_file(shard, str(tmp), metadata=meta))
         weight_map.update(dict.fromkeys(names, filename))
         total += sum(clean[n].numel() * clean[n].element_size() for n in names)
     index = {"metadata": {"total_size": total, **(metadata or {})}, "weight_map": weight_map}
-    tmp = out / f".{INDEX_FILE}.tmp"
-    tmp.write_text(json.dumps(index, indent=2, sort_keys=True))
-    os.replace(tmp, out / INDEX_FILE)
+    replace_atomic(out / INDEX_FILE, lambda tmp: tmp.write_text(json.dumps(index, indent=2, sort_keys=True)))
     if source != out.resolve():
         for f in source.iterdir():
             if f.is_file() and not f.name.startswith(".") and not _WEIGHT_FILE.search(f.name):
