@@ -136,22 +136,44 @@ def test_visual_never_applies_fleischner_to_known_malignancy(visual):
     env, tasks = visual
     checked = 0
     for t in tasks:
-        if t.description.task_type != "ct_fleischner":
+        sid = t.metadata.get("study_id")
+        study = env.toolkit.call("get_study_metadata", {"study_id": sid}) if sid else None
+        if study is None or study.error is not None or study.result["modality"] != "CT":
             continue
-        sid = t.metadata["study_id"]
         history = env.toolkit.call("get_clinical_history", {"study_id": sid}).result
-        study = env.toolkit.call("get_study_metadata", {"study_id": sid})
-        indication = study.result["indication"] if study.error is None else ""
-        known_cancer = bool(STAGING.search(indication) or STAGING.search(history["history"]))
+        known_cancer = bool(STAGING.search(study.result["indication"]) or STAGING.search(history["history"]))
         assert known_cancer == bool(history["known_malignancy"]), sid
-        if known_cancer:
-            checked += 1
-            assert t.correct_answer == "oncologic staging follow-up", t.id
-            out = env.toolkit.call("fleischner_recommendation", {"study_id": sid})
-            assert out.error is None and out.result["applicable"] is False, t.id
-        else:
-            assert t.correct_answer in FLEISCHNER_CATEGORIES, t.id
-    assert checked >= 3
+        if known_cancer:  # generated and authored alike: never a Fleischner category as gold
+            assert t.correct_answer not in FLEISCHNER_CATEGORIES, t.id
+        if t.description.task_type == "ct_fleischner" or t.correct_answer == "oncologic staging follow-up":
+            if known_cancer:
+                checked += 1
+                assert t.correct_answer == "oncologic staging follow-up", t.id
+                out = env.toolkit.call("fleischner_recommendation", {"study_id": sid})
+                assert out.error is None and out.result["applicable"] is False, t.id
+            else:
+                assert t.correct_answer in FLEISCHNER_CATEGORIES, t.id
+    assert checked >= 4  # generated cases and the authored breast-cancer staging CT
+
+
+def test_authored_radiology_staging_ct_is_not_given_a_fleischner_category():
+    from envs.domains.radiology_report import build as rad_build
+
+    rad_build.build()
+    env = registry.get_environment("radiology_report")
+    checked = 0
+    for t in registry.get_tasks("radiology_report"):
+        sids = set(re.findall(r"\bRAD-\d{3}\b", t.ticket))
+        for sid in sids:
+            study = env.toolkit.call("get_study", {"study_id": sid}).result
+            history = env.toolkit.call("get_patient_history", {"study_id": sid}).result
+            if study["region"] != "chest" or study["modality"] != "CT":
+                continue
+            if STAGING.search(study["indication"]) or STAGING.search(history["history"]):
+                checked += 1
+                assert history["known_malignancy"], sid
+                assert t.correct_answer not in FLEISCHNER_CATEGORIES, t.id
+    assert checked >= 14  # 13 generated staging CTs and the authored colon-cancer case
 
 
 # -- triage_emergency: vital signs the complaint implies ------------------------------------------------

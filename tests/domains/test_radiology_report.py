@@ -87,7 +87,10 @@ def test_classification_tools_fill_from_the_study(tk):
     assert use(tk, "calculate_birads", study_id="RAD-011")["category"] == "BI-RADS 2"
     with pytest.raises(ToolError, match="BI-RADS applies to breast"):
         use(tk, "calculate_birads", study_id="RAD-001")
-    assert use(tk, "fleischner_recommendation", study_id="RAD-005")["category"] == "CT at 3-6 months"
+    # RAD-005 is a colon-cancer staging CT: Fleischner 2017 excludes known malignancy.
+    staged = use(tk, "fleischner_recommendation", study_id="RAD-005")
+    assert staged["applicable"] is False and staged["category"] == "oncologic staging follow-up"
+    assert use(tk, "fleischner_recommendation", nodule_type="ground_glass", size_mm=8, multiple=True, risk="low")["category"] == "CT at 3-6 months"
     assert use(tk, "fleischner_recommendation", study_id="RAD-008")["category"] == "no routine follow-up"
     assert use(tk, "fleischner_recommendation", study_id="RAD-008", risk="high")["category"] == "optional CT at 12 months"
     assert use(tk, "calculate_lung_rads", study_id="RAD-004")["category"] == "4B"

@@ -22,6 +22,8 @@ def mean_diameter(long_mm: float, short_mm: float) -> float:
 
 _FLEISCHNER = ("no routine follow-up", "optional CT at 12 months", "CT at 6-12 months", "CT at 3-6 months",
                "CT at 3 months, PET/CT or tissue sampling")
+# A staging CT's report recommends oncologic follow-up instead (Fleischner 2017 excludes known malignancy).
+_FLEISCHNER += (KNOWN_MALIGNANCY_MANAGEMENT,)
 
 
 def normalise_category(system: str, text: str) -> str | None:

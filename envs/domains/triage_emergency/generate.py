@@ -272,7 +272,7 @@ CALCULATOR_GUIDELINES = {
     "rts": "Revised Trauma Score (Champion et al., J Trauma 1989;29:623-629)",
     "parkland": "Parkland formula (Baxter & Shires 1968; ABA Advanced Burn Life Support course 2018)",
     "shock_index": "Shock index HR/SBP (Allgower & Burri 1967)",
-    "centor": "Centor criteria (Centor et al., Med Decis Making 1981;1:239-246)",
+    "centor": "Modified Centor (McIsaac) score (McIsaac et al., CMAJ 1998;158:75-83; Centor et al., Med Decis Making 1981)",
 }
 
 

@@ -11,18 +11,41 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
+from envs.calculators import CALCULATORS
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import generate as G
 from envs.domains.visual_diagnosis import render as R
-from envs.domains.visual_diagnosis.data_model import PatientInfo, Study
+from envs.domains.visual_diagnosis.data_model import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_MANAGEMENT, PatientInfo, Study
 from envs.domains.visual_diagnosis.png import write_png
 
 PROV = {"source": "authored", "license": "project (ours)"}
 
 
-def _pt(age, sex, history, pack=0.0, symptoms=()):
+def _pt(age, sex, history, pack=0.0, symptoms=(), known_malignancy=None):
     return PatientInfo(age=age, sex=sex, history=history, smoking_pack_years=pack, lung_cancer_risk="high" if pack >= 10 else "low",
-                       symptoms=list(symptoms))
+                       symptoms=list(symptoms), known_malignancy=known_malignancy)
+
+
+_FLEISCHNER = "Fleischner Society 2017 guidelines for incidental pulmonary nodules (MacMahon et al., Radiology 2017;284:228-243)"
+# The guideline or reference each authored workflow follows, by its category.
+CATEGORY_GUIDELINES = {
+    "chest emergency": "BTS Guideline for Pleural Disease (Roberts et al., Thorax 2023), pneumothorax; ATLS 10th edition (tension "
+                       "pneumothorax: immediate decompression)",
+    "infection": "Fleischner Society Glossary of Terms for Thoracic Imaging (Hansell et al., Radiology 2008); ATS/IDSA community-acquired "
+                 "pneumonia guideline (Metlay et al., Am J Respir Crit Care Med 2019)",
+    "nodule surveillance": _FLEISCHNER + "; Bankier et al., Radiology 2017 (nodule measurement and growth)",
+    "incidental nodule management": _FLEISCHNER,
+    "nodule in known malignancy": "Fleischner 2017 scope (MacMahon et al., Radiology 2017): excludes patients with known malignancy; NCCN "
+                                  "Guidelines Breast Cancer (staging work-up)",
+    "lesion measurement": "Fleischner Society recommendations for measuring pulmonary nodules at CT (Bankier et al., Radiology 2017)",
+    "lung cancer": "Fleischner Society Glossary (mass > 3 cm); ACCP lung cancer diagnosis and management guideline, 3rd ed. (Chest 2013)",
+    "chest radiograph interpretation": "Fleischner Society Glossary of Terms for Thoracic Imaging (Hansell et al., Radiology 2008)",
+    "pleural disease": "BTS Guideline for Pleural Disease (Roberts et al., Thorax 2023)",
+    "cardiac size": "Cardiothoracic ratio on a PA radiograph, > 0.50 = cardiomegaly (Danzer 1919; Fleischner Society Glossary, Hansell "
+                    "et al., Radiology 2008)",
+    "CT nodule characterisation": "Fleischner Society Glossary (solid, part-solid, ground-glass nodule; Hansell et al., Radiology 2008)",
+    "CT nodule detection": "Fleischner Society recommendations for measuring pulmonary nodules at CT (Bankier et al., Radiology 2017)",
+}
 
 
 def _cxr_pair(sid: str, rng: random.Random, image_dir: Path) -> tuple[Study, dict]:
@@ -52,7 +75,8 @@ def task(tid, ticket, s: Study, root: Path, answer, answer_type, actions, assert
          options=None, aliases=None, emergency=None, truth=None):
     t = {"id": tid, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type, "image_path": str(root / s.image_file),
          "description": {"purpose": "Authored image-interpretation workflow: analyse, measure, compare, retrieve, record and act.",
-                         "difficulty": "hard", "source": "authored", "category": category, "task_type": "workflow", "provenance": PROV},
+                         "difficulty": "hard", "source": "authored", "category": category, "task_type": "workflow",
+                         "provenance": {**PROV, "guideline": CATEGORY_GUIDELINES[category]}},
          "evaluation_criteria": {"actions": actions, "nl_assertions": assertions, "reward_basis": ["ACTION", "ANSWER", "NL_ASSERTION"]},
          "metadata": {"study_id": s.study_id, "truth": truth or {}}}
     for k, v in (("answer_unit", unit), ("answer_tolerance", tol), ("options", options), ("emergency", emergency)):
@@ -124,15 +148,15 @@ def build_authored(root: Path) -> tuple[list[Study], list[dict]]:
                   ["The agent reports growth of the solid nodule over 12 months (about 3.5 mm).", "The agent states that interval growth in a heavy smoker is suspicious for malignancy and recommends tissue sampling or PET/CT."],
                   "nodule surveillance", unit="mm", tol=1.0, truth={"delta_mm": delta}))
 
-    s, tr, _ = ct("VIS-005", [("solid", 7.0), ("solid", 5.0)], _pt(62, "female", "ex-smoker", 30), "staging CT for breast cancer")
-    from envs.calculators import CALCULATORS
-    res = CALCULATORS["fleischner_recommendation"](nodule_type="solid", size_mm=7.0, multiple=True, risk="high")
-    T.append(task("vis_a_multiple_solid", "Axial chest CT VIS-005: 62-year-old woman, 30 pack-years, staging for breast cancer (image attached). Count and measure the nodules, then give the Fleischner 2017 recommendation. What follow-up is recommended?",
-                  s, root, res.category, "exact",
-                  [act("analyze_medical_image", {"study_id": "VIS-005"}), act("get_clinical_history", {"study_id": "VIS-005"}),
-                   act("fleischner_recommendation", {"study_id": "VIS-005"}, ["study_id"])],
-                  ["The agent counts two solid nodules, the largest about 7 mm.", "The agent notes that in a cancer-staging context metastasis must be considered, beyond the Fleischner default."],
-                  "incidental nodule management", truth=tr))
+    # Breast-cancer staging: a known malignancy, outside Fleischner 2017 (MacMahon et al., Radiology 2017).
+    s, tr, _ = ct("VIS-005", [("solid", 7.0), ("solid", 5.0)],
+                  _pt(62, "female", "ex-smoker; breast cancer diagnosed this month, staging in progress", 30, known_malignancy="breast cancer"),
+                  "staging CT for breast cancer")
+    T.append(task("vis_a_multiple_solid", "Axial chest CT VIS-005: 62-year-old woman, 30 pack-years, staging for breast cancer (image attached). Count and measure the nodules, then say what follow-up is appropriate (if a guideline does not apply to this patient, say so and give the management that does).",
+                  s, root, KNOWN_MALIGNANCY_MANAGEMENT, "exact",
+                  [act("analyze_medical_image", {"study_id": "VIS-005"}), act("get_clinical_history", {"study_id": "VIS-005"})],
+                  ["The agent counts two solid nodules, the largest about 7 mm.", "The agent states that Fleischner 2017 does not apply to a patient with known cancer and that the nodules are assessed within the breast-cancer staging, metastasis being considered."],
+                  "nodule in known malignancy", aliases=KNOWN_MALIGNANCY_ALIASES, truth=tr))
 
     s, tr, _ = ct("VIS-006", [("part_solid", 12.0)], _pt(58, "male", "no relevant history", 20), "chronic cough")
     T.append(task("vis_a_part_solid", "Axial chest CT VIS-006: 58-year-old man, 20 pack-years, chronic cough (image attached). Characterise the nodule, check the definition of its type and give the Fleischner recommendation. Which type is it?",
@@ -200,7 +224,7 @@ def build_authored(root: Path) -> tuple[list[Study], list[dict]]:
                   ["The agent identifies a single pure ground-glass nodule of about 9 mm.", "The agent recommends CT at 6-12 months to confirm persistence, then every 2 years to 5 years."],
                   "incidental nodule management", truth=tr))
 
-    s, tr, _ = ct("VIS-014", [("solid", 12.0), ("solid", 8.0), ("ground_glass", 6.0)], _pt(64, "male", "colorectal cancer", 10), "staging of colorectal cancer")
+    s, tr, _ = ct("VIS-014", [("solid", 12.0), ("solid", 8.0), ("ground_glass", 6.0)], _pt(64, "male", "colorectal cancer", 10, known_malignancy="colorectal adenocarcinoma"), "staging of colorectal cancer")
     T.append(task("vis_a_three_nodules", "Axial chest CT VIS-014: 64-year-old man staged for colorectal cancer (image attached). Detect and record every nodule. How many nodules are there?",
                   s, root, "3", "numeric",
                   [act("analyze_medical_image", {"study_id": "VIS-014"}),
