@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     imp.add_argument("--keep-ungradeable", action="store_true",
                      help="also import tasks that cannot be graded (no gold answer, required arguments missing or "
                           "empty); they are reported either way. Tasks naming unknown tools are never imported")
+    imp.add_argument("--replay", action="store_true",
+                     help="also replay every task's gold solution before writing (as `hcgym tasks validate` does); "
+                          "tasks whose replay fails are reported and left out (slower: one episode per task)")
     imp.add_argument("--show-errors", type=int, default=20, metavar="N",
                      help="print the first N problems per source (default 20; -1 for all)")
     imp.add_argument("--max-stays", type=int, default=None, help="mimic3/eicu: convert at most this many ICU stays")

@@ -178,11 +178,39 @@ def screen(job: ImportJob, tasks: list[Task], *, keep_ungradeable: bool) -> list
     return kept
 
 
-def finish(job: ImportJob, tasks: list[Task], *, replace: bool, keep_ungradeable: bool) -> None:
+def replay_gold(job: ImportJob, tasks: list[Task], *, keep_ungradeable: bool) -> list[Task]:
+    """`--replay`: run each task's gold solution in a fresh episode (`envs.core.validate.validate_task`):
+    expected actions that fail (e.g. a patient the domain does not have) or a gold answer the grader does
+    not give full marks are reported as `gold replay fails`."""
+    from envs.core.validate import REPLAY_FAILS, validate_task
+
+    definitions, per_task = _definitions(job.domain)
+    kept = []
+    for task in tasks:
+        try:
+            defs = per_task(task) if per_task else definitions
+        except (KeyError, ValueError):
+            defs = definitions
+        report = validate_task(task, job.domain, defs, replay=True)
+        if report.ok:
+            kept.append(task)
+        elif keep_ungradeable:
+            job.kept_ungradeable[REPLAY_FAILS] += 1
+            job.problems.append(f"task {task.id}: imported though its gold replay fails: {'; '.join(report.problems)}")
+            kept.append(task)
+        else:
+            job.rejected[REPLAY_FAILS] += 1
+            job.problems.append(f"task {task.id}: not imported ({REPLAY_FAILS}): {'; '.join(report.problems)}")
+    return kept
+
+
+def finish(job: ImportJob, tasks: list[Task], *, replace: bool, keep_ungradeable: bool, replay: bool = False) -> None:
     from envs.core.domain import imported_tasks_dir
     from envs.core.task import dump_tasks
 
     tasks = screen(job, tasks, keep_ungradeable=keep_ungradeable)
+    if replay:
+        tasks = replay_gold(job, tasks, keep_ungradeable=keep_ungradeable)
     inside = job.output.resolve().parent == imported_tasks_dir(job.domain).resolve()
     existing = existing_ids(job.domain, job.output) if inside else {}
     seen: set[str] = set()
@@ -252,7 +280,8 @@ def run_import(args: Any) -> int:
             if converted.errors:
                 job.rejected[ROW_ERROR] += len(converted.errors)
                 job.problems.extend(str(e) for e in converted.errors)
-        finish(job, tasks, replace=args.replace, keep_ungradeable=args.keep_ungradeable)
+        finish(job, tasks, replace=args.replace, keep_ungradeable=args.keep_ungradeable,
+               replay=getattr(args, "replay", False))
     report(jobs, show_errors=args.show_errors)
     return 1 if any(job.failed for job in jobs) else 0
 

@@ -50,7 +50,10 @@ def gold_replay(task: Task, domain: str, max_turns: int | None = None) -> tuple[
 
     actions = gold_actions_as_text(task)
     turns = max_turns or len(actions) + 2
-    env = HealthcareGymEnv(domain=domain, task_id=task.id, max_turns=turns)
+    env = HealthcareGymEnv(domain=domain, max_turns=turns)
+    # the task given is the one replayed, whether or not the domain has loaded it yet (`hcgym tasks import
+    # --replay` checks tasks before they are written)
+    env._tasks_by_id[task.id] = task
     env.reset(seed=0, options={"task_id": task.id})
     info: dict[str, Any] = {}
     for action in actions:
@@ -70,6 +73,7 @@ EMPTY_REQUIRED = "empty required arguments"
 BAD_ARGUMENTS = "invalid arguments"
 NO_GOLD = "no gold answer"
 NOTHING_TO_GRADE = "nothing to grade"
+REPLAY_FAILS = "gold replay fails"
 
 
 def static_problems(task: Task, domain: str, toolkit_definitions: dict) -> list[tuple[str, str]]:
@@ -96,8 +100,8 @@ def static_problems(task: Task, domain: str, toolkit_definitions: dict) -> list[
                 problems.append((EMPTY_REQUIRED, f"{where}: required argument(s) {empty} are empty"))
         for key in action.compare_args or []:
             if key not in action.arguments:
-                problems.append((BAD_ARGUMENTS, f"{where}: compare_args names {key!r}, which is not among its "
-                                                f"arguments"))
+                message = f"{where}: compare_args names {key!r}, which is not among its arguments"
+                problems.append((BAD_ARGUMENTS, message))
     if not (task.has_gold_answer or crit.rubric):
         reason = NO_GOLD if (crit.actions or crit.nl_assertions) else NOTHING_TO_GRADE
         problems.append((reason, "no gradeable gold answer (correct_answer with answer_type, or a rubric)"))

@@ -226,3 +226,19 @@ def test_empty_options_with_a_letter_and_a_basis_that_grades_nothing_are_refused
     mcqa = convert_reference_task({"id": "m", "ticket": "t", "options": {"A": "x", "B": "y"}, "correct_answer": "B",
                                    "evaluation_criteria": {"reward_basis": ["MCQA"]}}, "medical_qa")
     assert mcqa["evaluation_criteria"]["reward_basis"] == ["ANSWER"]
+
+
+def test_replay_at_import_reports_tasks_whose_gold_fails(built_data, tmp_path, capsys):
+    # a legacy EHR task about a patient our EHR database does not have: its expected calls fail on replay
+    unknown_patient = LEGACY_EHR | {"id": "mimic_ehr_900", "expected_actions": [
+        {"tool": "get_patient_summary", "args": {"hadm_id": "MHADM_30452653"}}]}
+    path = _write(tmp_path / "cross_domain" / "tasks.json", [CROSS[0]])
+    ehr = _write(tmp_path / "ehr_management" / "tasks.json", [unknown_patient])
+    assert main(["tasks", "import", "--format", "reference", "--replay", str(path)]) == 0
+    assert main(["tasks", "import", "--format", "reference", "--replay", str(ehr)]) == 1
+    captured = capsys.readouterr()
+    assert "gold replay fails 1" in captured.out
+    assert "mimic_ehr_900: not imported (gold replay fails): gold replay: call 'summarize_admission' failed" in \
+        captured.err
+    assert not (built_data / "imported" / "ehr_management").exists() or \
+        not any((built_data / "imported" / "ehr_management").iterdir())
