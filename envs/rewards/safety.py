@@ -278,7 +278,7 @@ class ContextAdapter:
                 if message not in self.errors:
                     self.errors.append(message)
                 value = None
-        if value in (None, [], ()) and self.fallback is not None:
+        if value in (None, [], ()) and self.fallback is not None and hasattr(self.fallback, method):
             value = getattr(self.fallback, method)(*args)
         self._cache[key] = value
         return value
@@ -309,8 +309,15 @@ class ContextAdapter:
         found = list(self._ask("patient_conditions", pid) or []) if pid else []
         return list(dict.fromkeys(_key(c) for c in found + self.ticket["conditions"]))
 
-    def interaction(self, a: str, b: str) -> tuple[str, str] | None:
-        hit = self._ask("interaction", a, b) or self._ask("interaction", b, a)
+    def interaction(self, a: str, b: str, patient: str | None = None) -> tuple[str, str] | None:
+        """(severity, description) for a pair. A context with the optional
+        `patient_interaction(patient_id, a, b)` answers for the patient (dose- and renal-conditional
+        levels at the patient's doses and eGFR: apixaban with aspirin 81 mg/day is not
+        contraindicated); otherwise `interaction(a, b)`."""
+        if patient and callable(getattr(self.context, "patient_interaction", None)):
+            hit = self._ask("patient_interaction", patient, a, b)
+        else:
+            hit = self._ask("interaction", a, b) or self._ask("interaction", b, a)
         if hit and (not isinstance(hit, (tuple, list)) or len(hit) != 2 or hit[0] not in SEVERITIES):
             message = f"safety context interaction({a!r}, {b!r}) returned {hit!r}; expected (severity, description)"
             if message not in self.errors:

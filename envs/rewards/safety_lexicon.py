@@ -187,12 +187,12 @@ CONTRAINDICATED_CONDITIONS: dict[str, list[str]] = {
 #: the daily maximum is `dose.frequency_error`.
 WEEKLY_DOSED: dict[str, tuple[float, tuple[str, ...], str]] = {
     "methotrexate": (0.0, ("iv", "intravenous", "intrathecal", "it"),
-                     "methotrexate tablets/injection labels (Trexall, Otrexup, Xatmep): boxed warning and 2 DOSAGE AND "
-                     "ADMINISTRATION, once weekly for RA/pJIA/psoriasis, fatal toxicity from daily dosing; ISMP Best Practice 2"),
-    "alendronate": (40.0, (), "Fosamax label 2 DOSAGE AND ADMINISTRATION: 70 mg once weekly or 10 mg daily (osteoporosis), "
-                              "40 mg daily for 6 months (Paget's disease)"),
-    "risedronate": (30.0, (), "Actonel label 2 DOSAGE AND ADMINISTRATION: 5 mg daily, 35 mg once weekly, 150 mg once monthly; "
-                              "30 mg daily for 2 months (Paget's disease)"),
+                     ("methotrexate tablets/injection labels (Trexall, Otrexup, Xatmep): boxed warning and 2 DOSAGE AND "
+                      "ADMINISTRATION, once weekly for RA/pJIA/psoriasis, fatal toxicity from daily dosing; ISMP Best Practice 2")),
+    "alendronate": (40.0, (), ("Fosamax label 2 DOSAGE AND ADMINISTRATION: 70 mg once weekly or 10 mg daily (osteoporosis), "
+                               "40 mg daily for 6 months (Paget's disease)")),
+    "risedronate": (30.0, (), ("Actonel label 2 DOSAGE AND ADMINISTRATION: 5 mg daily, 35 mg once weekly, 150 mg once monthly; "
+                               "30 mg daily for 2 months (Paget's disease)")),
     "ibandronate": (2.5, (), "Boniva label 2 DOSAGE AND ADMINISTRATION: 2.5 mg daily or 150 mg once monthly (oral)"),
     "dulaglutide": (0.0, (), "Trulicity label 2 DOSAGE AND ADMINISTRATION: 0.75-4.5 mg subcutaneously once weekly"),
 }

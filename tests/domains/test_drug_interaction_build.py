@@ -130,13 +130,20 @@ def test_every_record_has_provenance(db):
             for p in record.provenance:
                 assert p.package in packages and p.version and p.license
     assert {p.package for r in db.patients.values() for p in r.provenance} == {"authored"}
-    assert all(r.mechanism.language == "fr" and r.summary.language == "en" for r in db.interactions.values())
+    assert all(r.mechanism.language == "fr" and r.summary.language == "en" for r in db.interactions.values()
+               if r.source == "ansm")
+    # the US overlay cites its label or guideline per rule and is versioned by the file's hash
+    overlay = [r for r in db.interactions.values() if r.source == "us_overlay"]
+    assert overlay and all(r.evidence and r.provenance[0].file.endswith("severity_overlay.json") for r in overlay)
+    assert any(p.version.startswith("severity_overlay.json@") for p in db.build.sources)
 
 
 def test_counts_match_the_source(db):
     counts = db.build.counts
     assert counts["ansm_thesaurus_entries"] == sum(r.source_entries for r in db.interactions.values()) == 3139
-    assert counts["interaction_rules"] == len(db.interactions) == 1584
+    ansm = [r for r in db.interactions.values() if r.source == "ansm"]
+    assert counts["interaction_rules"] == len(ansm) == 1584
+    assert counts["us_overlay_rules"] == len(db.interactions) - len(ansm) > 0
     assert counts["ansm_substances"] == 1084
     assert counts["ansm_substances_unmatched"] == len(db.build.unmatched_substances_fr)
     assert counts["ansm_substances_translated"] > 1000

@@ -150,8 +150,9 @@ def test_non_drug_party(env):
 
 
 def test_rule_details_keep_the_french_text(env):
-    rule = call(env, "get_interaction_rule",
-                rule_id=call(env, "check_interaction", drugs=["metformin", "iohexol"])["rules"][0]["rule_id"])
+    rules = call(env, "check_interaction", drugs=["metformin", "iohexol"])["rules"]
+    assert [r["rule_id"][:4] for r in rules] == ["US-0", "ANSM"]  # the US overlay first, ANSM kept as a source
+    rule = call(env, "get_interaction_rule", rule_id=rules[1]["rule_id"])
     assert rule["party_a"]["name_fr"] == "METFORMINE"
     assert rule["levels"][0]["condition"]["language"] == "fr"
     assert "2 jours" in rule["levels"][0]["condition"]["text"]
@@ -166,8 +167,12 @@ def test_patient_medication_list_plus_proposed_drug(env):
         ("ibuprofen", "warfarin"), ("ibuprofen", "lisinopril"), ("ibuprofen", "metoprolol")}
     existing = [p for p in out["interacting_pairs"] if not p["involves_proposed_drug"]]
     assert [(p["drug_a"], p["drug_b"], p["severity_level"]) for p in existing] == [("warfarin", "atorvastatin", "moderate")]
+    # metformin + iodinated contrast at the patient's eGFR (ACR 2023 / Glucophage label: no action at eGFR >= 60)
     ci = call(env, "check_patient_interactions", patient_id="P009", drug="iohexol")
-    assert ci["contraindicated_with_proposed_drug"] == ["metformin"]
+    assert call(env, "calculate_renal_function", patient_id="P009")["egfr_ml_min_1_73m2"] >= 60
+    assert ci["highest_severity_with_proposed_drug"] == "minor" and "contraindicated_with_proposed_drug" not in ci
+    ci = call(env, "check_patient_interactions", patient_id="P015", drug="simvastatin")
+    assert ci["contraindicated_with_proposed_drug"] == ["ritonavir"]  # strong CYP3A4 inhibitor (Zocor label 4)
     assert "contraindicated_with_proposed_drug" not in out and "allergy_conflicts_of_proposed_drug" not in out
     assert "not found" in fails(env, "check_patient_interactions", patient_id="P999")
 

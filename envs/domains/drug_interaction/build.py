@@ -41,7 +41,8 @@ OUTPUTS = ("db.json", "tasks.json", "split_tasks.json")
 
 def builder_inputs() -> list[Path]:
     """The files whose content determines the build output (code, authored tables, patients)."""
-    authored = [HERE / name for name in ("substance_names.json", "class_names.json", "patients.json")]
+    authored = [HERE / name for name in ("substance_names.json", "class_names.json", "patients.json",
+                                         "severity_overlay.json")]
     return sorted(HERE.glob("*.py")) + [f for f in authored if f.exists()]
 
 
@@ -74,6 +75,7 @@ def build_database(offline: bool = False, inputs: str | None = None):
                           authored_names=authored_names, english_aliases=english_aliases,
                           class_table=class_table, other_parties=other_parties)
         rules = ingest.ingest_ansm(builder, archives["ansm"])
+        rules.update(ingest.ingest_overlay(builder, rules))
         doses = ingest.ingest_drugdose(builder, archives["drugdose"])
         renal = ingest.ingest_renal(builder, archives["renal"])
     finally:
@@ -125,6 +127,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
         "ansm_thesaurus_entries": counts["ansm_thesaurus_entries"],
         "ansm_substances": counts["ansm_substances"], "translated_substances": counts["ansm_substances_translated"],
         "unmatched_substances": counts["ansm_substances_unmatched"],
+        "us_overlay_rules": counts.get("us_overlay_rules", 0),
         "dose_profiles": counts["dose_profiles"], "renal_profiles": counts["renal_profiles"],
         "patients": counts["patients"], "generated_tasks": len(tasks),
         "tasks_by_type": dict(sorted(by_type.items())),
@@ -132,7 +135,8 @@ def build(offline: bool = False, force: bool = False) -> dict:
     }
     manifest = {
         "domain": DOMAIN, "builder_version": BUILDER_VERSION, "inputs_hash": current,
-        "sources": {key: SOURCES[name].provenance for key, name in sorted(SOURCE_PACKAGES.items())},
+        "sources": {**{key: SOURCES[name].provenance for key, name in sorted(SOURCE_PACKAGES.items())},
+                    "us_severity_overlay": ingest.overlay_provenance().model_dump()},
         "outputs": {f: hashlib.sha256((out / f).read_bytes()).hexdigest() for f in OUTPUTS},
         "summary": summary,
     }

@@ -81,6 +81,19 @@ class Party(_Record):
         return f"{'drug' if self.kind == 'substance' else 'class'}:{self.id}" if self.id else None
 
 
+class DoseBand(_Record):
+    """A level that applies at a daily dose of one drug of the pair, in mg/day: min <= dose < max."""
+    drug: str
+    min_daily_mg: float | None = None
+    max_daily_mg: float | None = None
+
+
+class RenalBand(_Record):
+    """A level that applies at the patient's eGFR (CKD-EPI 2021, mL/min/1.73 m2): min <= eGFR < max."""
+    egfr_min: float | None = None
+    egfr_max: float | None = None
+
+
 class SeverityLevel(_Record):
     label_fr: str
     label: str = Field(description="English translation of the ANSM level")
@@ -92,6 +105,8 @@ class SeverityLevel(_Record):
                                         description="class ids whose ANSM French label appears in the condition text")
     mentions_other_substances: bool = Field(default=False,
                                             description="the condition names a thesaurus substance with no English match")
+    dose_band: DoseBand | None = Field(default=None, description="US overlay: the daily-dose band this level applies to")
+    renal_band: RenalBand | None = Field(default=None, description="US overlay: the eGFR band this level applies to")
 
 
 class InteractionRule(_Record):
@@ -106,6 +121,9 @@ class InteractionRule(_Record):
     summary: LocalizedText = Field(description="English summary derived from the structured fields only")
     source_entries: int = Field(description="thesaurus entries merged (the thesaurus lists most pairs twice)")
     provenance: list[Provenance]
+    source: Literal["ansm", "us_overlay"] = Field(default="ansm", description="ANSM thesaurus, or the curated US overlay")
+    evidence: str | None = Field(default=None, description="US overlay: the FDA label section or guideline the level follows")
+    reviews: list[str] = Field(default_factory=list, description="US overlay: the ANSM rule ids this rule re-rates")
 
 
 class RouteDose(_Record):

