@@ -38,7 +38,14 @@ def build_run(root: Path, domain: str, episodes: int, steps: int) -> Path:
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
-    from actors.agent_loop import AgentLoop, EpisodeSpec, GoldReplayPolicy, LocalEnv, RolloutLimits, gold_turn_actions
+    from actors.agent_loop import (
+        AgentLoop,
+        EpisodeSpec,
+        GoldReplayPolicy,
+        LocalEnv,
+        RolloutLimits,
+        gold_turn_actions,
+    )
     from bench.rollout import build_tokenizer
     from envs import registry
     from learner.metrics import write_samples
@@ -126,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for p in sample for r in pq.read_table(p).to_pylist()]
     matched = [r for r in rows if 0.3 <= r["reward"] <= 0.6]
     baseline_s = (time.perf_counter() - t0) * len(files) / len(sample)
+    print(f"baseline sample: {len(rows):,} episodes read, {len(matched):,} in the reward range")
 
     print(f"episodes: {total:,}")
     print(f"open (index + first page):       {open_s:6.2f} s   (target < 2 s)")

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 from actors.types import RolloutSample, TeacherOutput
 
@@ -137,7 +139,7 @@ class MetricsSink:
     def write(self, record: dict[str, Any]) -> None:
         step = int(record["step"])
         with self.path.open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(record, sort_keys=False, default=float) + "\n")
+            handle.write(json.dumps(json_record(record), sort_keys=False, allow_nan=False) + "\n")
         for key, value in record.items():
             if key == "step" or not isinstance(value, (int, float)) or isinstance(value, bool):
                 continue
@@ -155,11 +157,34 @@ class MetricsSink:
             self._tb.close()
 
 
+def json_record(record: dict[str, Any]) -> dict[str, Any]:
+    """A metrics row as standard JSON: numbers as floats/ints (numpy scalars included), NaN and
+    infinities as null (bare `NaN` is not JSON: browsers and most readers refuse the whole line)."""
+    out: dict[str, Any] = {}
+    for key, value in record.items():
+        if isinstance(value, bool) or value is None or isinstance(value, str):
+            out[key] = value
+        elif isinstance(value, numbers.Integral):
+            out[key] = int(value)
+        elif isinstance(value, numbers.Real):
+            out[key] = float(value) if math.isfinite(float(value)) else None
+        else:
+            out[key] = value
+    return out
+
+
 def read_metrics(run_dir: str | Path) -> list[dict[str, Any]]:
+    """The rows of `metrics.jsonl`; a metric written as null (it was NaN or infinite) reads as NaN."""
     path = Path(run_dir) / "metrics.jsonl"
     if not path.exists():
         raise FileNotFoundError(f"{path}: no metrics.jsonl (is {run_dir} a run directory?)")
-    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return read_metric_rows(path)
+
+
+def read_metric_rows(path: Path) -> list[dict[str, Any]]:
+    """Rows of a metrics JSONL file (metrics.jsonl, validation.jsonl), nulls read back as NaN."""
+    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return [{k: (math.nan if v is None else v) for k, v in row.items()} for row in rows]
 
 
 # ---------------------------------------------------------------------------------------------

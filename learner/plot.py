@@ -10,17 +10,16 @@ are overlaid in one figure (ablations).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from learner.metrics import read_metrics
+from learner.metrics import read_metric_rows, read_metrics
 
 
 def _validation(run_dir: Path) -> list[dict]:
     path = run_dir / "validation.jsonl"
     if not path.exists():
         return []
-    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return read_metric_rows(path)
 
 
 def _label(run_dir: Path) -> str:

@@ -11,8 +11,8 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from actors.agent_loop import AgentLoop, EpisodeSpec, PromptTooLongError
 from actors.env_actor import EnvActorLost, EnvPool, EpisodeLedger, run_episode
@@ -20,7 +20,7 @@ from actors.generator import GeneratorClient
 from actors.types import RolloutSample
 from learner.batching import Group, is_correct, mixed_outcomes, shape_reward
 from learner.config import RunConfig
-from learner.metrics import rollout_metrics, write_samples
+from learner.metrics import json_record, rollout_metrics, write_samples
 from learner.tasks import TaskRef, episode_specs
 
 
@@ -104,7 +104,7 @@ class Rollouts:
         metrics["val_env_reward_mean"] = metrics.pop("val_env_reward_mean", 0.0)
         metrics["val_time_s"] = time.perf_counter() - t0
         with (self.run_dir / "validation.jsonl").open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps({"step": step, **metrics}) + "\n")
+            handle.write(json.dumps(json_record({"step": step, **metrics}), allow_nan=False) + "\n")
         if cfg.trainer.save_trajectories:
             write_samples(samples, self.run_dir / "validation" / f"step_{step:06d}.parquet", step=step)
         self.last_val = metrics

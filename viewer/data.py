@@ -59,7 +59,7 @@ class EpisodeQuery:
     limit: int = 50
 
     @classmethod
-    def from_params(cls, params: dict[str, str]) -> "EpisodeQuery":
+    def from_params(cls, params: dict[str, str]) -> EpisodeQuery:
         """Parse URL query parameters; a bad value raises ViewerError naming the parameter."""
         known = {f for f in cls.__dataclass_fields__}
         unknown = sorted(set(params) - known - {"source"})

@@ -22,10 +22,11 @@ import json
 import math
 import mimetypes
 import threading
+from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 from viewer.data import EpisodeQuery, EvalSource, RunSource, Source, ViewerError
@@ -106,7 +107,7 @@ def make_handler(app: ViewerApp) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         server_version = "hcgym-view"
 
-        def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - quiet by default
+        def log_message(self, format: str, *args: Any) -> None:
             pass
 
         def _send(self, status: int, body: bytes, content_type: str) -> None:
@@ -120,7 +121,7 @@ def make_handler(app: ViewerApp) -> type[BaseHTTPRequestHandler]:
             self.end_headers()
             self.wfile.write(body)
 
-        def do_GET(self) -> None:  # noqa: N802 - http.server's name
+        def do_GET(self) -> None:
             url = urlsplit(self.path)
             if url.path.startswith("/api/"):
                 params = dict(parse_qsl(url.query, keep_blank_values=True))
@@ -154,7 +155,7 @@ class ViewerServer:
         host, port = self.httpd.server_address[:2]
         return f"http://{host}:{port}/"
 
-    def start(self) -> "ViewerServer":
+    def start(self) -> ViewerServer:
         self.thread = threading.Thread(target=self.httpd.serve_forever, name="hcgym-view", daemon=True)
         self.thread.start()
         return self

@@ -42,12 +42,13 @@ def ward_registered():
 def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F811
     import ray
 
+    from envs._runtime import init_ray
     from learner.train import train
     from tests.training.test_train import tiny_config
 
     started = not ray.is_initialized()
     if started:
-        ray.init(**SESSION_RAY_INIT)
+        init_ray(**SESSION_RAY_INIT)
     try:
         run_dir = tmp_path_factory.mktemp("viewer") / "ttopd-run"
         cfg = tiny_config(
@@ -67,7 +68,14 @@ def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F8
 
 @pytest.fixture(scope="package")
 def gold_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F811
-    from actors.agent_loop import AgentLoop, EpisodeSpec, GoldReplayPolicy, LocalEnv, RolloutLimits, gold_turn_actions
+    from actors.agent_loop import (
+        AgentLoop,
+        EpisodeSpec,
+        GoldReplayPolicy,
+        LocalEnv,
+        RolloutLimits,
+        gold_turn_actions,
+    )
     from envs import registry
     from learner.metrics import rollout_metrics, write_samples
     from learner.model import load_tokenizer

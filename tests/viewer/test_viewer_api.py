@@ -111,3 +111,18 @@ def test_a_half_written_metrics_file_still_shows(tmp_path):
     (source,) = discover([run])
     assert source.metrics()["train"] == [{"step": 1, "accuracy": 0.5}]
     assert source.episodes(EpisodeQuery())["total"] == 0
+
+
+def test_nan_metrics_are_written_as_null_and_read_back_as_nan(tmp_path):
+    import math
+
+    from learner.metrics import MetricsSink, read_metrics
+
+    logger = MetricsSink(tmp_path, run_name="t", tensorboard=False, ray_metrics=False)
+    logger.write({"step": 1, "kl_teacher": float("nan"), "accuracy": 0.5, "grad_norm": float("inf")})
+    line = (tmp_path / "metrics.jsonl").read_text(encoding="utf-8").strip()
+    assert json.loads(line) == {"step": 1, "kl_teacher": None, "accuracy": 0.5, "grad_norm": None}
+    (row,) = read_metrics(tmp_path)
+    assert math.isnan(row["kl_teacher"]) and row["accuracy"] == 0.5
+    (source,) = discover([tmp_path])
+    assert source.metrics()["train"][0]["kl_teacher"] is None  # the page gets JSON null, not NaN

@@ -120,9 +120,8 @@ def test_a_point_opens_the_episodes_of_its_step(served, browser, trained_run):
 
 
 def test_episode_page_shows_the_parquet_record(served, browser, gold_run):
-    from learner.metrics import read_samples
-
     from envs import registry
+    from learner.metrics import read_samples
 
     samples, _ = read_samples(gold_run / "trajectories" / "step_000001.parquet")
     tasks = registry.get_tasks("ward", None)
