@@ -246,7 +246,6 @@ def _exists_message(output: Path) -> str:
 
 def run_import(args: Any) -> int:
     """The `hcgym tasks import` command (see the module docstring)."""
-    from envs.core.domain import imported_tasks_dir
 
     path = Path(args.path)
     if args.format == "reference":
@@ -255,7 +254,18 @@ def run_import(args: Any) -> int:
             raise ValueError("--output names one file; a folder of reference task files writes one per source")
     else:
         sources = [(args.domain or default_domain(args.format), path)]
+    from envs.converters.formats import _cyclic_gc_paused
+
     jobs: list[ImportJob] = []
+    with _cyclic_gc_paused():  # the whole job holds every task (convert, check, write): see the helper
+        _run_jobs(args, sources, jobs)
+    report(jobs, show_errors=args.show_errors)
+    return 1 if any(job.failed for job in jobs) else 0
+
+
+def _run_jobs(args: Any, sources: list[tuple[str, Path]], jobs: list[ImportJob]) -> None:
+    from envs.core.domain import imported_tasks_dir
+
     for domain, source in sources:
         output = Path(args.output) if args.output else \
             imported_tasks_dir(domain) / f"{args.format}-{source_stem(source)}.json"
@@ -282,8 +292,6 @@ def run_import(args: Any) -> int:
                 job.problems.extend(str(e) for e in converted.errors)
         finish(job, tasks, replace=args.replace, keep_ungradeable=args.keep_ungradeable,
                replay=getattr(args, "replay", False))
-    report(jobs, show_errors=args.show_errors)
-    return 1 if any(job.failed for job in jobs) else 0
 
 
 def report(jobs: list[ImportJob], *, show_errors: int) -> None:
