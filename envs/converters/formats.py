@@ -677,7 +677,7 @@ CONVERTERS: dict[str, Callable[..., ConversionResult]] = {
 
 
 @contextmanager
-def _cyclic_gc_paused() -> Iterator[None]:
+def cyclic_gc_paused() -> Iterator[None]:
     """Pause Python's cyclic garbage collector while a file converts.
 
     A converter keeps every task it makes alive until it returns (183k for MedMCQA's train set), and each
@@ -697,5 +697,5 @@ def convert(fmt: str, path: str | Path, **options: Any) -> ConversionResult:
     """Convert a benchmark file; raises SourceFileError when the whole file cannot be read."""
     if fmt not in CONVERTERS:
         raise ValueError(f"unknown format {fmt!r}; supported: {', '.join(sorted(CONVERTERS))} (and 'reference')")
-    with _cyclic_gc_paused():
+    with cyclic_gc_paused():
         return CONVERTERS[fmt](Path(path), **{k: v for k, v in options.items() if v is not None})

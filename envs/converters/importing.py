@@ -246,6 +246,7 @@ def _exists_message(output: Path) -> str:
 
 def run_import(args: Any) -> int:
     """The `hcgym tasks import` command (see the module docstring)."""
+    from envs.converters.formats import cyclic_gc_paused
 
     path = Path(args.path)
     if args.format == "reference":
@@ -254,10 +255,8 @@ def run_import(args: Any) -> int:
             raise ValueError("--output names one file; a folder of reference task files writes one per source")
     else:
         sources = [(args.domain or default_domain(args.format), path)]
-    from envs.converters.formats import _cyclic_gc_paused
-
     jobs: list[ImportJob] = []
-    with _cyclic_gc_paused():  # the whole job holds every task (convert, check, write): see the helper
+    with cyclic_gc_paused():  # the whole job holds every task (convert, check, write): see the helper
         _run_jobs(args, sources, jobs)
     report(jobs, show_errors=args.show_errors)
     return 1 if any(job.failed for job in jobs) else 0
@@ -274,24 +273,35 @@ def _run_jobs(args: Any, sources: list[tuple[str, Path]], jobs: list[ImportJob])
         if output.exists() and not args.replace:
             job.failed = _exists_message(output)  # refused before converting anything
             continue
-        if args.format == "reference":
-            from envs.core.importers import import_reference_tasks
-
-            result = import_reference_tasks(source, domain=domain)
-            tasks, job.read, job.notes = result.tasks, result.rows_read, list(result.notes)
-            job.rejected.update(result.rejected)
-            job.problems.extend(result.issues)
-        else:
-            from envs.converters import convert
-
-            converted = convert(args.format, source, domain=domain, image_dir=args.image_dir,
-                                cop_base=args.cop_base, max_stays=args.max_stays)
-            tasks, job.read, job.notes = converted.tasks, converted.rows_read, list(converted.notes)
-            if converted.errors:
-                job.rejected[ROW_ERROR] += len(converted.errors)
-                job.problems.extend(str(e) for e in converted.errors)
+        try:
+            tasks = _convert(args, job)
+        except ValueError as exc:  # the whole file cannot be read (SourceFileError, DataFileError): name it, go on
+            if len(sources) == 1:
+                raise
+            job.failed = str(exc)
+            continue
         finish(job, tasks, replace=args.replace, keep_ungradeable=args.keep_ungradeable,
                replay=getattr(args, "replay", False))
+
+
+def _convert(args: Any, job: ImportJob) -> list[Task]:
+    if args.format == "reference":
+        from envs.core.importers import import_reference_tasks
+
+        result = import_reference_tasks(job.source, domain=job.domain)
+        job.read, job.notes = result.rows_read, list(result.notes)
+        job.rejected.update(result.rejected)
+        job.problems.extend(result.issues)
+        return result.tasks
+    from envs.converters import convert
+
+    converted = convert(args.format, job.source, domain=job.domain, image_dir=args.image_dir,
+                        cop_base=args.cop_base, max_stays=args.max_stays)
+    job.read, job.notes = converted.rows_read, list(converted.notes)
+    if converted.errors:
+        job.rejected[ROW_ERROR] += len(converted.errors)
+        job.problems.extend(str(e) for e in converted.errors)
+    return converted.tasks
 
 
 def report(jobs: list[ImportJob], *, show_errors: int) -> None:

@@ -242,3 +242,15 @@ def test_replay_at_import_reports_tasks_whose_gold_fails(built_data, tmp_path, c
         captured.err
     assert not (built_data / "imported" / "ehr_management").exists() or \
         not any((built_data / "imported" / "ehr_management").iterdir())
+
+
+def test_a_damaged_file_in_a_reference_folder_is_named_and_the_others_import(built_data, tmp_path, capsys):
+    ref = tmp_path / "domains"
+    _write(ref / "cross_domain" / "tasks.json", [CROSS[0]])
+    broken = ref / "ehr_management" / "tasks.json"
+    broken.parent.mkdir(parents=True)
+    broken.write_bytes(b'[\n {"id": "a", "ticket": "caf\xe9"}\n]\n')  # Latin-1, not UTF-8
+    assert main(["tasks", "import", "--format", "reference", str(ref)]) == 1
+    captured = capsys.readouterr()
+    assert f"{broken}:2: not UTF-8 (byte 0xe9" in captured.err
+    assert [t.id for t in registry.get_tasks("cross_domain", "imported")] == ["evid_cross_domain_ok"]
