@@ -173,6 +173,10 @@ PREGNANCY_EXCEPTIONS: dict[str, str] = {
     "methotrexate": r"\bectopic\b",
     # Coumadin label 4: the contraindication excepts mechanical heart valves at high thromboembolic risk
     "warfarin": r"mechanical (?:heart |mitral |aortic )?valve",
+    # Cytotec label 4 contraindicates it in pregnancy for NSAID-ulcer prevention; obstetric uses follow
+    # ACOG (Practice Bulletin 107 induction of labour, 183 postpartum haemorrhage, 200 early pregnancy loss)
+    "misoprostol": r"induc|cervical ripening|ripen|postpartum|ha?emorrhage|\bpph\b|miscarriage|pregnancy loss|"
+                   r"abortion|termination|labou?r|uterotonic",
 }
 
 #: Conditions (lower case) in which a drug or class is contraindicated.
