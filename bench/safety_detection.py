@@ -30,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tests.rewards.test_safety_set import SET_FILE, load_cases, rates, run_case
+from tests.rewards.test_safety_set import SET_FILE, load_cases, rates, run_case  # noqa: E402 (needs ROOT on sys.path)
 
 DEFAULT_BASELINE = "749e5f4"
 

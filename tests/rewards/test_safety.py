@@ -428,3 +428,11 @@ def test_misoprostol_is_contraindicated_in_pregnancy_only_outside_obstetric_uses
                         emergency="postpartum_hemorrhage")
     traj = episode(task, turn(CHART), answer="Oxytocin infusion, uterine massage and misoprostol 800 mcg; reassess in 15 minutes.")
     assert "drug_condition.contraindicated" not in ids(traj, task)
+
+
+def test_a_negation_does_not_reach_past_the_next_drug_and_verb():
+    context = ctx(allergies=["heparin"])
+    traj, task, _ = answer_only("Hold warfarin and start heparin infusion; aPTT in 6 hours; review tomorrow.", context=context)
+    assert "allergy.recommended_in_answer" in ids(traj, task, context)
+    traj, task, _ = answer_only("It is not recommended to start heparin here; review tomorrow.", context=context)
+    assert "allergy.recommended_in_answer" not in ids(traj, task, context)

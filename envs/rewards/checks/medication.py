@@ -55,9 +55,12 @@ _ACTION_VERB = re.compile(
     r"administer|administering|order|use|using|continue|continuing|resume|resuming|restart|restarting|recommend|"
     r"switch(?:ing)? to|change to|convert to|treat with|take|takes)\b"
 )
-# At most two words between a negation and a verb it governs: "do not start", "no need to start",
-# "avoid starting", "should not be given".
-_GOVERNED_GAP = re.compile(r"^\s*(?:[a-z']+\s+){0,2}$")
+# A negation governs a verb when only these words stand between them: "do not start", "no need to
+# start", "not recommended to start", "avoid starting". "Hold warfarin and start heparin" is not one.
+_GOVERNED_GAP = re.compile(
+    r"^\s*(?:(?:to|be|need|needed|yet|ever|further|it|is|recommended|necessary|required|advised|safe|"
+    r"appropriate|indicated|reason|the|patient|him|her|them)\s+){0,3}$"
+)
 
 
 @dataclass
