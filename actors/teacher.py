@@ -148,12 +148,19 @@ class Teacher:
         t0 = time.perf_counter()
         contexts = [self.build_context(s) for s in samples]
         ids, mask = pad_batch([c.input_ids for c in contexts], self.pad_id, side="right")
+        # Only the student's trained tokens are served (below): the LM head runs on those alone, at
+        # their positions in the teacher's context (shifted by the hint).
+        wanted = torch.zeros_like(mask, dtype=torch.bool)
+        for b, (s, c) in enumerate(zip(samples, contexts)):
+            for p, m in enumerate(s.loss_mask):
+                if m:
+                    wanted[b, p + (c.hint_tokens if p >= c.insert_at else 0)] = True
         dev = self.config.device
         k = self.config.serve_topk
         with self._weights_lock, torch.no_grad():
             version = self._version
             stats = token_stats(self.model, ids.to(dev), mask.to(dev), temperature=self.config.temperature,
-                                topk=k, chunk_size=self.config.logprob_chunk_size)
+                                topk=k, chunk_size=self.config.logprob_chunk_size, positions=wanted.to(dev))
         lp = stats.logprobs.cpu()
         tk_lp = stats.topk_logprobs.cpu() if k else None
         tk_id = stats.topk_ids.cpu() if k else None

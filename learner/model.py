@@ -335,6 +335,7 @@ def token_stats(
     topk: int = 0,
     chunk_size: int = 1024,
     entropy_requires_grad: bool = False,
+    positions: torch.Tensor | None = None,
 ) -> TokenStats:
     """One forward pass, then log-probs (and optional entropy / top-k) computed chunk by chunk.
 
@@ -353,6 +354,12 @@ def token_stats(
         chunk_size: Positions per LM-head chunk.
         entropy_requires_grad: Keep the entropy in the autograd graph (only for an entropy bonus;
             otherwise it is computed without grad so its [chunk, vocab] intermediates are not kept).
+        positions: Optional [B, T] mask of the positions whose statistics are needed (the trained
+            tokens: the loss mask). The LM head and log-softmax then run only on the hidden states
+            that predict them, and every other position holds 0. The decoder still reads the whole
+            sequence, so the values at these positions are the full pass's (up to float rounding).
+            In a multi-turn episode most positions are prompt and tool text: skipping their
+            [vocab]-wide head and softmax is most of the reference and teacher cost.
 
     Returns:
         A `TokenStats` whose position t is the prediction of token t given tokens < t.
@@ -366,9 +373,15 @@ def token_stats(
         raise ValueError(f"temperature must be > 0, got {temperature}")
     if gather_ids is not None and gather_ids.shape[:2] != input_ids.shape:
         raise ValueError(f"gather_ids must be [B, T, K] with [B, T]={tuple(input_ids.shape)}, got {tuple(gather_ids.shape)}")
+    if positions is not None and positions.shape != input_ids.shape:
+        raise ValueError(f"positions must be [B, T]={tuple(input_ids.shape)}, got {tuple(positions.shape)}")
     position_ids = position_ids_from_mask(attention_mask)
     decoder, head = _decoder_and_head(model)
     B, T = input_ids.shape
+    if positions is not None:
+        return _sliced_token_stats(model, decoder, head, input_ids, attention_mask, position_ids, positions,
+                                   temperature=temperature, with_entropy=with_entropy, gather_ids=gather_ids,
+                                   topk=topk, chunk_size=chunk_size, entropy_requires_grad=entropy_requires_grad)
     if decoder is not None and head is not None:
         hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
         logits_of = lambda lo, hi: head(hidden[:, lo:hi])
@@ -399,9 +412,7 @@ def token_stats(
 
     # A prediction exists only where both the token and its predecessor are real: padding and the
     # first real token of a left-padded row get 0, like position 0.
-    valid = attention_mask.clone().float()
-    valid[:, 1:] *= attention_mask[:, :-1].float()
-    valid[:, 0] = 0.0
+    valid = _valid_predictions(attention_mask)
     stats = TokenStats(logprobs=stitch(lp_parts) * valid)
     if with_entropy:
         stats.entropy = stitch(ent_parts) * valid
@@ -411,6 +422,64 @@ def token_stats(
         stats.topk_logprobs = stitch(tkv_parts, (topk,)) * valid.unsqueeze(-1)
         ids = torch.cat([torch.zeros((B, 1, topk), dtype=torch.long, device=input_ids.device), *tki_parts], 1)
         stats.topk_ids = ids * valid.long().unsqueeze(-1)
+    return stats
+
+
+def _valid_predictions(attention_mask: torch.Tensor) -> torch.Tensor:
+    """1 where a prediction exists: the token and its predecessor are real (never position 0)."""
+    valid = attention_mask.clone().float()
+    valid[:, 1:] *= attention_mask[:, :-1].float()
+    valid[:, 0] = 0.0
+    return valid
+
+
+def _sliced_token_stats(model, decoder, head, input_ids, attention_mask, position_ids, positions, *,
+                        temperature: float, with_entropy: bool, gather_ids, topk: int, chunk_size: int,
+                        entropy_requires_grad: bool) -> TokenStats:
+    """`token_stats` at the requested positions only: the decoder's hidden states that predict them
+    are gathered into one [N, hidden] block before the LM head, and the results scattered back."""
+    B, T = input_ids.shape
+    device = input_ids.device
+    selected = (positions.to(device).bool() & _valid_predictions(attention_mask).bool())
+    rows, cols = selected.nonzero(as_tuple=True)      # cols >= 1: the predicted token's position
+    if decoder is not None and head is not None:
+        hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
+        picked = hidden[rows, cols - 1]                # the hidden state that predicts token cols
+        logits_of = lambda lo, hi: head(picked[lo:hi])
+    else:  # a model without the decoder/head split: slice its full logits
+        full = model(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).logits
+        picked = full[rows, cols - 1]
+        logits_of = lambda lo, hi: picked[lo:hi]
+    targets = input_ids[rows, cols]
+    n = int(rows.numel())
+    lp_parts, ent_parts, gat_parts, tkv_parts, tki_parts = [], [], [], [], []
+    for lo in range(0, n, chunk_size):
+        hi = min(lo + chunk_size, n)
+        logp = F.log_softmax(logits_of(lo, hi).float() / temperature, dim=-1)
+        lp_parts.append(logp.gather(-1, targets[lo:hi].unsqueeze(-1)).squeeze(-1))
+        if with_entropy:
+            with torch.set_grad_enabled(entropy_requires_grad and torch.is_grad_enabled()):
+                ent_parts.append(-(logp.exp() * logp).sum(-1))
+        if gather_ids is not None:
+            gat_parts.append(logp.gather(-1, gather_ids[rows[lo:hi], cols[lo:hi]]))
+        if topk:
+            vals, ids = logp.topk(topk, dim=-1)
+            tkv_parts.append(vals)
+            tki_parts.append(ids)
+
+    def scatter(parts, trailing=(), dtype=torch.float32):
+        values = torch.cat(parts) if parts else torch.zeros((0, *trailing), dtype=dtype, device=device)
+        out = torch.zeros((B, T, *trailing), dtype=dtype, device=device)
+        return out.index_put((rows, cols), values.to(dtype))  # out of place: gradients reach `values`
+
+    stats = TokenStats(logprobs=scatter(lp_parts))
+    if with_entropy:
+        stats.entropy = scatter(ent_parts)
+    if gather_ids is not None:
+        stats.gathered = scatter(gat_parts, (gather_ids.shape[-1],))
+    if topk:
+        stats.topk_logprobs = scatter(tkv_parts, (topk,))
+        stats.topk_ids = scatter(tki_parts, (topk,), dtype=torch.long)
     return stats
 
 

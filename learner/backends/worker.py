@@ -252,6 +252,8 @@ class RankWorker:
                 gather_ids=t.get("teacher_topk_ids") if d.enabled and d.estimator == "topk" else None,
                 chunk_size=self.config.logprob_chunk_size,
                 entropy_requires_grad=grad and self.config.loss.entropy_coef > 0,
+                # Every loss term reads only the trained tokens: the LM head runs on those alone.
+                positions=t["loss_mask"] > 0,
             )
 
     def _reference_logprobs(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:
@@ -260,7 +262,7 @@ class RankWorker:
             return None
         with torch.no_grad(), self.backend.autocast():
             return token_stats(ref, t["input_ids"], t["attention_mask"], temperature=self.config.temperature,
-                               chunk_size=self.config.logprob_chunk_size).logprobs
+                               chunk_size=self.config.logprob_chunk_size, positions=t["loss_mask"] > 0).logprobs
 
     def _run(self, samples: list[RolloutSample], teacher, *, update: bool) -> dict[str, float]:
         t0 = time.perf_counter()

@@ -114,3 +114,46 @@ def test_entropy_topk_gather_and_chunking_agree(policy):
     assert torch.allclose(a.gathered[0, 1:], probs.log()[:, [1, 2, 3]], atol=1e-4)
     with pytest.raises(ValueError, match="attention_mask"):
         token_stats(model, ids, mask[:, :3])
+
+
+def test_sliced_stats_equal_the_full_pass_at_the_trained_positions(policy):
+    """`positions` (the loss mask) runs the LM head only there: every statistic equals the full
+    pass's at those positions, is 0 elsewhere, and gradients flow only through them."""
+    model, tok = policy
+    seqs = [[5, 17, 99, 300, 42, 7, 11, 12, 13], [8, 9, 10, 61, 62]]
+    for side in ("right", "left"):
+        ids, mask = pad_batch(seqs, tok.pad_token_id, side=side)
+        B, T = ids.shape
+        # Trained tokens of a multi-turn layout: two "turns", a prompt and a tool result between; one
+        # position on padding and position 0, which have no prediction and must stay 0.
+        wanted = torch.zeros((B, T), dtype=torch.bool)
+        real = [torch.nonzero(mask[b]).flatten().tolist() for b in range(B)]
+        for b, cols in enumerate(real):
+            for j in (3, 4, 7, 8):
+                if j < len(cols):
+                    wanted[b, cols[j]] = True
+        wanted[0, 0] = True
+        if side == "left":
+            wanted[1, 0] = True  # padding
+        gather = torch.randint(0, len(tok), (B, T, 3), generator=torch.Generator().manual_seed(0))
+        full = token_stats(model, ids, mask, temperature=0.7, with_entropy=True, gather_ids=gather, topk=4)
+        sliced = token_stats(model, ids, mask, temperature=0.7, with_entropy=True, gather_ids=gather, topk=4,
+                             positions=wanted, chunk_size=3)
+        keep = wanted & (full.logprobs != 0)  # the full pass's 0 = no prediction (position 0, padding)
+        assert keep.sum() == 6  # real tokens 3, 4, 7, 8 of the first row; 3, 4 of the second
+        for name in ("logprobs", "entropy", "gathered", "topk_logprobs"):
+            a, b = getattr(full, name), getattr(sliced, name)
+            assert a.shape == b.shape, name
+            assert torch.allclose(a[keep], b[keep], atol=1e-5), name
+            assert b[~keep].abs().sum() == 0, name
+        assert torch.equal(full.topk_ids[keep], sliced.topk_ids[keep])
+        # Gradients: the same at the trained positions' loss, none from elsewhere.
+        model.zero_grad()
+        token_stats(model, ids, mask, positions=wanted).logprobs.sum().backward()
+        g_sliced = model.lm_head.weight.grad.clone()
+        model.zero_grad()
+        (token_stats(model, ids, mask).logprobs * keep).sum().backward()
+        assert torch.allclose(g_sliced, model.lm_head.weight.grad, atol=1e-5)
+        model.zero_grad()
+    with pytest.raises(ValueError, match="positions"):
+        token_stats(model, ids, mask, positions=wanted[:, :2])

@@ -1,0 +1,101 @@
+"""actors/generator.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache).
+
+Turn t+1 of an episode is turn t's context plus the sampled turn and the tool result; with reuse the
+generator encodes only those new tokens. The sampled tokens and their log-probs must be the ones a
+generator without reuse returns for the same requests (same seeds), in mixed batches too.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from actors.generator import GenerationRequest, HFGenerator, SamplingConfig
+from learner.model import ENDOFTEXT, IM_END, load_tokenizer, tool_turn_text
+from tests.training.learner_fixtures import tiny_model_dir
+
+TICKETS = ["Check warfarin and aspirin.", "A 64-year-old man with chest pain.", "Creatinine clearance 45 mL/min.",
+           "Answer: B. Revisit the differential."]
+
+
+def _generators():
+    model_dir = tiny_model_dir()
+    tok = load_tokenizer(model_dir)
+    stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
+    sampling = SamplingConfig(temperature=0.9)
+    reuse = HFGenerator(model_dir, sampling, stop, options={"reuse_kv_cache": True})
+    plain = HFGenerator(model_dir, sampling, stop, options={"reuse_kv_cache": False})
+    return tok, reuse, plain
+
+
+def _prompt(tok, ticket):
+    text = tok.apply_chat_template([{"role": "user", "content": ticket}], tokenize=False, add_generation_prompt=True)
+    return tok.encode(text, add_special_tokens=False)
+
+
+def _turns(tok, gen, turns=3, lengths=(9, 14, 6)):
+    """Run the four conversations for `turns` turns; the second conversation sits out turn 2, so later
+    batches mix rows with and without a cached prefix and of different cached lengths."""
+    contexts = {f"ep{i}": _prompt(tok, t) for i, t in enumerate(TICKETS)}
+    history = []
+    for turn in range(turns):
+        requests = [GenerationRequest(request_id=f"{key}:t{turn}", prompt_ids=ids, max_new_tokens=lengths[turn],
+                                      seed=1000 * turn + i)
+                    for i, (key, ids) in enumerate(contexts.items()) if not (turn == 1 and key == "ep1")]
+        results = gen.generate(requests)
+        history.append(results)
+        for req, res in zip(requests, results):
+            observation = tok.encode(tool_turn_text(f"result {turn} of {req.request_id}"), add_special_tokens=False)
+            tail = ([] if res.token_ids[-1] in gen.stop_token_ids else [tok.convert_tokens_to_ids(IM_END)])
+            contexts[req.request_id.rpartition(":t")[0]] = list(req.prompt_ids) + res.token_ids + tail + observation
+    return history
+
+
+def test_reuse_gives_the_tokens_and_logprobs_of_a_full_encode():
+    tok, reuse, plain = _generators()
+    with_reuse = _turns(tok, reuse)
+    without = _turns(tok, plain)
+    assert reuse.cache_stats["reused_requests"] == 3 + 4  # turn 2: ep0, ep2, ep3; turn 3: all four
+    assert plain.cache_stats["reused_requests"] == 0
+    # Only the new tokens were encoded: the cached prefixes were not read again.
+    assert reuse.cache_stats["encoded_prompt_tokens"] + reuse.cache_stats["reused_tokens"] == \
+        plain.cache_stats["encoded_prompt_tokens"]
+    assert reuse.cache_stats["encoded_prompt_tokens"] < plain.cache_stats["encoded_prompt_tokens"] / 2
+    for turn_a, turn_b in zip(with_reuse, without):
+        for a, b in zip(turn_a, turn_b):
+            assert a.request_id == b.request_id
+            assert a.token_ids == b.token_ids, a.request_id
+            assert a.finish_reason == b.finish_reason
+            assert torch.allclose(torch.tensor(a.logprobs), torch.tensor(b.logprobs), atol=1e-4), a.request_id
+
+
+def test_new_weights_or_a_changed_prefix_are_never_served_from_the_cache():
+    tok, reuse, _ = _generators()
+    prompt = _prompt(tok, TICKETS[0])
+    first = reuse.generate([GenerationRequest(request_id="e:t0", prompt_ids=prompt, max_new_tokens=5, seed=1)])[0]
+    follow = prompt + first.token_ids + tok.encode(tool_turn_text("x"), add_special_tokens=False)
+    # New weights: the keys and values of the old ones are dropped.
+    reuse.update_weights({k: v.clone() for k, v in reuse.model.state_dict().items()}, 1)
+    reuse.generate([GenerationRequest(request_id="e:t1", prompt_ids=follow, max_new_tokens=3, seed=2)])
+    assert reuse.cache_stats["reused_requests"] == 0
+    # A context that does not start with the cached tokens (an edited history) is encoded in full.
+    edited = [follow[0] + 1] + follow[1:]
+    reuse.generate([GenerationRequest(request_id="e:t2", prompt_ids=edited, max_new_tokens=3, seed=3)])
+    assert reuse.cache_stats["reused_requests"] == 0
+    # Request ids outside the agent loop's `<episode>:t<turn>` naming are never cached.
+    assert HFGenerator.conversation_key(GenerationRequest(request_id="free-form", prompt_ids=[1],
+                                                          max_new_tokens=1, seed=0)) is None
+
+
+def test_the_cache_stays_within_its_token_budget():
+    model_dir = tiny_model_dir()
+    tok = load_tokenizer(model_dir)
+    gen = HFGenerator(model_dir, SamplingConfig(), [tok.convert_tokens_to_ids(IM_END)],
+                      options={"kv_cache_max_tokens": 60})
+    prompts = [_prompt(tok, t) for t in TICKETS]
+    gen.generate([GenerationRequest(request_id=f"e{i}:t0", prompt_ids=p, max_new_tokens=4, seed=i)
+                  for i, p in enumerate(prompts)])
+    assert 0 < gen._cached_tokens <= 60
+    assert sum(len(e.token_ids) for e in gen._prefixes.values()) == gen._cached_tokens
+    with pytest.raises(ValueError):
+        HFGenerator(model_dir, SamplingConfig(), [0], options={"kv_cache_max_tokens": -1})
