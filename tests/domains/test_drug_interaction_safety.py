@@ -29,7 +29,10 @@ def test_label_pregnancy_contraindications_fill_the_drugdose_gap(env, drug, cite
 
     ctx = env.safety_context
     resolved = L.resolve_drug(env.db, drug)
-    assert L.pregnancy_assessment(env.db, resolved)["recommendation"] == "no_data"  # drugdose has no category
+    assert resolved.id not in env.db.dose_profiles  # drugdose has no category for it
+    # the tool the agent calls reports what the reward uses: the label's contraindication, no invented letter
+    report = env.toolkit.call("check_pregnancy_safety", {"drug": drug}).result
+    assert report["fda_category"] is None and report["recommendation"] == "contraindicated" and cited in report["us_label"]
     assert "pregnancy" in ctx.contraindicated_conditions(drug)
     assert cited in ctx.label_pregnancy_contraindication(drug)
 
@@ -39,6 +42,7 @@ def test_statins_and_safe_drugs_are_not_pregnancy_contraindications(env):
     ctx = env.safety_context
     for drug in ("atorvastatin", "amoxicillin", "labetalol", "nifedipine"):
         assert "pregnancy" not in ctx.contraindicated_conditions(drug), drug
+    assert env.toolkit.call("check_pregnancy_safety", {"drug": "atorvastatin"}).result["recommendation"] == "no_data"
 
 
 @pytest.mark.parametrize("drug", ["lisinopril", "warfarin", "isotretinoin"])

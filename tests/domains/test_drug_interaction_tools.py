@@ -301,7 +301,11 @@ def test_pregnancy_category_from_drugdose(env, raw_drugdose):
     assert out["fda_category"] == raw_drugdose["magnesium_sulfate"]["pregnancy_category"] == "A"
     assert out["patient"]["pregnant"] is True
     assert call(env, "check_pregnancy_safety", drug="midazolam")["fda_category"] == raw_drugdose["midazolam"]["pregnancy_category"]
-    assert call(env, "check_pregnancy_safety", drug="warfarin")["recommendation"] == "no_data"
+    # no drugdose category: the US label's contraindication where there is one (Coumadin label 4), else no data
+    warfarin = call(env, "check_pregnancy_safety", drug="warfarin")
+    assert warfarin["fda_category"] is None and warfarin["recommendation"] == "contraindicated"
+    assert "Coumadin" in warfarin["us_label"]
+    assert call(env, "check_pregnancy_safety", drug="amoxicillin")["recommendation"] == "no_data"
 
 
 # -- writes ----------------------------------------------------------------------------------------

@@ -510,12 +510,33 @@ PREGNANCY_CATEGORIES = {
 }
 
 
+# ANSM class ids -> the class names of the US-label pregnancy table (envs/rewards/safety_lexicon.py).
+_LABEL_CLASSES = {"ace-inhibitors": "ace inhibitors", "angiotensin-ii-receptor-blockers": "arbs"}
+
+
+def label_pregnancy_contraindication(db: DrugInteractionDB, drug: Drug) -> str | None:
+    """The US-label citation when the label contraindicates the drug (or its class) in pregnancy:
+    `safety_lexicon.PREGNANCY_CONTRAINDICATED`, boxed warnings and section 4 we transcribed."""
+    from envs.rewards import safety_lexicon as lex  # the reward's table: one source for tools and reward
+
+    names = [drug.id, drug.id.replace(" ", "-"), lex.BRANDS.get(drug.id, ""), lex.BRANDS.get(drug.id.replace(" ", "-"), "")]
+    names += [_LABEL_CLASSES.get(c, "") for c in drug.class_ids]
+    return next((lex.PREGNANCY_CONTRAINDICATED[n] for n in names if n in lex.PREGNANCY_CONTRAINDICATED), None)
+
+
 def pregnancy_assessment(db: DrugInteractionDB, drug: Drug) -> dict:
+    """drugdose's FDA letter category (49 drugs); for a drug without one, the US label's pregnancy
+    contraindication when there is one (lisinopril, warfarin, isotretinoin), else no data."""
     profile = db.dose_profiles.get(drug.id)
     category = profile.pregnancy_category if profile else None
     if category not in PREGNANCY_CATEGORIES:
+        label = label_pregnancy_contraindication(db, drug)
+        if label:
+            return {"drug": drug.id, "fda_category": None, "recommendation": "contraindicated", "us_label": label,
+                    "note": "no FDA letter category in drugdose; the US label contraindicates it in pregnancy"}
         return {"drug": drug.id, "fda_category": None, "recommendation": "no_data",
-                "note": "no FDA pregnancy category in the formulary sources (drugdose covers 49 emergency drugs)"}
+                "note": "no FDA pregnancy category in the formulary sources (drugdose covers 49 emergency drugs) "
+                        "and no pregnancy contraindication in the US-label table"}
     meaning, recommendation = PREGNANCY_CATEGORIES[category]
     return {"drug": drug.id, "fda_category": category, "meaning": meaning, "recommendation": recommendation,
             "source": profile.provenance[0].model_dump()}

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-from envs.rewards import safety_lexicon as lex
 from envs.rewards.safety import BaseSafetyContext
 
 from . import logic as L
@@ -150,17 +149,12 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
         hepatic = L.hepatic_assessment(self.db, d, "C")
         if hepatic["recommendation"] == "avoid_or_specialist_review":
             out.append("child-pugh c")
-        pregnancy = L.pregnancy_assessment(self.db, d)
-        if pregnancy["recommendation"] == "contraindicated" or (
-                pregnancy["recommendation"] == "no_data" and self.label_pregnancy_contraindication(drug)):
+        if L.pregnancy_assessment(self.db, d)["recommendation"] == "contraindicated":
             out.append("pregnancy")
         return out
 
     def label_pregnancy_contraindication(self, drug: str) -> str | None:
-        """The US-label citation when the drug or one of its classes is contraindicated in pregnancy
-        (the fallback for drugs without a drugdose category), else None."""
+        """The US-label citation when the drug or its class is contraindicated in pregnancy (the
+        fallback for drugs without a drugdose category, as `check_pregnancy_safety` reports), else None."""
         d = self._drug(drug)
-        if d is None:
-            return None
-        names = [d.id, lex.BRANDS.get(d.id, ""), lex.BRANDS.get(d.id.replace(" ", "-"), ""), *self.drug_classes(drug)]
-        return next((lex.PREGNANCY_CONTRAINDICATED[n] for n in names if n in lex.PREGNANCY_CONTRAINDICATED), None)
+        return L.label_pregnancy_contraindication(self.db, d) if d is not None else None
