@@ -418,28 +418,34 @@ def _item(row: dict[str, Any]) -> str:
 _ARTICLES = {"a", "an", "the"}
 
 
+def _tokens(text: str) -> list[str]:
+    """Words as written (case kept), articles left out."""
+    return [w for w in re.findall(r"[\w\-+/.]+", text) if w.lower() not in _ARTICLES]
+
+
 def _words(text: str) -> list[str]:
-    return [w for w in re.findall(r"[\w\-+/.]+", text.lower()) if w not in _ARTICLES]
+    return [w.lower() for w in _tokens(text)]
 
 
 def closed_alternatives(question: str, answer: str) -> list[str] | None:
-    """The two alternatives of a closed question "Is this a CT or an MRI?" as written, when the answer is one.
+    """The two alternatives of a closed question "Is this a CT or an MRI?", as the question writes them, when
+    the answer is one of them (compared without case and articles).
 
-    The question must hold one " or "; the answer must be the words just before it or just after it
-    (articles ignored); the other alternative is as many words on the other side. None otherwise."""
+    The question must hold one " or "; the answer must be the words just before it or just after it; the
+    other alternative is as many words on the other side. None otherwise."""
     text = question.strip().rstrip("?.! ")
     parts = re.split(r"\s+or\s+", text, flags=re.IGNORECASE)
     if len(parts) != 2:
         return None
-    left, right = _words(parts[0]), _words(re.split(r"[,;:]", parts[1])[0])
+    left, right = _tokens(parts[0]), _tokens(re.split(r"[,;:]", parts[1])[0])
     want = _words(answer)
     n = len(want)
     if not n or n > len(left) or n > len(right):
         return None
-    if left[-n:] == want:
-        return [" ".join(want), " ".join(right[:n])]
-    if right[:n] == want:
-        return [" ".join(left[-n:]), " ".join(want)]
+    if [w.lower() for w in left[-n:]] == want:
+        return [" ".join(left[-n:]), " ".join(right[:n])]
+    if [w.lower() for w in right[:n]] == want:
+        return [" ".join(left[-n:]), " ".join(right[:n])]
     return None
 
 
@@ -461,10 +467,10 @@ def _vqa_task(fmt: str, domain: str, name: str, image: Path, question: str, answ
     if closed and answer.lower() in ("yes", "no"):
         base.update(options={"A": "yes", "B": "no"}, correct_answer="A" if answer.lower() == "yes" else "B",
                     answer_type="choice")
-    elif alternatives and alternatives[0] != alternatives[1]:
-        gold = _words(answer)
-        options = {"A": alternatives[0], "B": alternatives[1]}
-        letter = "A" if _words(alternatives[0]) == gold else "B"
+    elif alternatives and _words(alternatives[0]) != _words(alternatives[1]):
+        letter = "A" if _words(alternatives[0]) == _words(answer) else "B"
+        # the gold option is the source's answer text as written; the other as the question writes it
+        options = {"A": alternatives[0], "B": alternatives[1], letter: answer}
         base.update(options=options, correct_answer=letter, answer_type="choice")
         base["metadata"] = {**metadata, "closed_alternatives": "from the question"}
     else:

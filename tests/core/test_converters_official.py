@@ -217,17 +217,19 @@ def test_vqa_rad_round_trip_and_closed_answers_that_are_not_yes_no(tmp_path):
     result = convert("vqa-rad", path, image_dir=IMAGES)
     assert result.errors == []
     tasks = result.tasks
-    assert [gold_text(t).lower() for t in tasks] == [r["answer"].lower() for r in rows]
+    assert [gold_text(t) for t in tasks[1:]] == [r["answer"] for r in rows[1:]]
+    assert gold_text(tasks[0]) == "yes"  # yes/no options are written lower-case
     assert [t.answer_type for t in tasks] == ["choice", "choice", "choice", "choice", "choice", "exact", "exact"]
-    assert tasks[1].options == {"A": "ct", "B": "mri"} and tasks[2].options == {"A": "right", "B": "left"}
+    assert tasks[1].options == {"A": "CT", "B": "MRI"} and tasks[2].options == {"A": "right", "B": "left"}
+    assert tasks[3].options == {"A": "T1 weighted", "B": "T2 weighted"} and tasks[4].options == {"A": "1", "B": "2"}
     # every CLOSED question is counted by the closed-question metric (evals: closed_accuracy)
     assert [t.description.task_type for t in tasks] == ["vqa_closed"] * 6 + ["vqa_open"]
 
 
 def test_closed_alternatives():
-    assert closed_alternatives("Is this a CT or an MRI?", "CT") == ["ct", "mri"]
+    assert closed_alternatives("Is this a CT or an MRI?", "ct") == ["CT", "MRI"]
     assert closed_alternatives("Is the lesion on the left or right?", "right") == ["left", "right"]
-    assert closed_alternatives("Is this a CT, MRI or X-ray?", "x-ray") == ["mri", "x-ray"]
+    assert closed_alternatives("Is this a CT, MRI or X-ray?", "x-ray") == ["MRI", "X-ray"]
     assert closed_alternatives("Which organ is abnormal?", "liver") is None
     assert closed_alternatives("Is this a CT or an MRI?", "ultrasound") is None
 
