@@ -90,8 +90,33 @@ def read_text(path: Path) -> str:
     return "".join(text for _, text in iter_lines(path))
 
 
+def iter_parquet(path: Path, result: ConversionResult) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(row number, record) for each row of a parquet file (Hugging Face's own layout of MedMCQA, MMLU,
+    ...): the same records as the JSON lines, with integers kept as integers."""
+    _require_file(path)
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:  # pragma: no cover - pyarrow is a dependency
+        raise SourceFileError(f"{path}: reading parquet needs pyarrow (pip install pyarrow)") from None
+    try:
+        parquet = pq.ParquetFile(path)
+        batches = parquet.iter_batches(batch_size=4096)  # a batch at a time: never the whole table as Python objects
+        number = 0
+        for batch in batches:
+            for record in batch.to_pylist():
+                number += 1
+                result.rows_read += 1
+                yield number, record
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid / ArrowIOError derive from these
+        raise SourceFileError(f"{path}: not a readable parquet file ({type(exc).__name__}: {exc})") from None
+
+
 def iter_jsonl(path: Path, result: ConversionResult) -> Iterator[tuple[int, dict[str, Any]]]:
-    """Yield (line number, object) for each non-empty line; bad lines go to `result.errors`."""
+    """Yield (line number, object) for each non-empty line; bad lines go to `result.errors`.
+    A `.parquet` file yields its rows (numbered from 1) instead."""
+    if path.name.endswith(".parquet"):
+        yield from iter_parquet(path, result)
+        return
     for number, line in iter_lines(path):
         if not line.strip():
             continue
@@ -170,7 +195,11 @@ def iter_json_array(path: Path, text: str, result: ConversionResult,
 def iter_json_records(path: Path, result: ConversionResult) -> Iterator[tuple[int, dict[str, Any]]]:
     """A JSON array of objects or, failing that, JSON lines: (file line, object).
 
-    For an array, errors name the item index and its file line ("item 3: ...")."""
+    For an array, errors name the item index and its file line ("item 3: ..."). A `.parquet` file yields
+    its rows."""
+    if path.name.endswith(".parquet"):
+        yield from iter_parquet(path, result)
+        return
     text = read_text(path)
     if text.lstrip().startswith("["):
         for index, line, obj in iter_json_array(path, text, result):

@@ -3,7 +3,7 @@
 | format | file | domain | gold |
 |---|---|---|---|
 | medqa | JSONL: question, answer (text), options {A..} (4 or 5), answer_idx, meta_info [, metamap_phrases, realidx] | medical_qa | option letter |
-| medmcqa | JSON lines: id, question, opa..opd, cop (1-4 as released, 0-3 in the HF layout: detected per file, `cop_base` overrides) | medical_qa | option letter |
+| medmcqa | JSON lines (or the HF parquet): id, question, opa..opd, cop (1-4 as released, 0-3 in the HF layout: detected per file, `cop_base` overrides) | medical_qa | option letter |
 | mmlu | original CSV without header (question, A, B, C, D, answer letter); Hugging Face parquet or its CSV export (question, subject, choices [4], answer 0-3) | medical_qa | option letter |
 | pubmedqa | JSON {pmid: {QUESTION, CONTEXTS (list, or one string), final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
 | medlfqa | JSONL: Question, Free_form_answer, Must_have [..], Nice_to_have [..] | medical_qa | free text + rubric |
@@ -17,6 +17,7 @@
 | eicu | folder: patient, lab, diagnosis (.csv/.csv.gz) | ehr_management | tool-computed |
 
 Every file may be UTF-8 with or without a BOM, with LF or CRLF line ends, and gzip-compressed (`.gz`);
+record formats (JSON lines / arrays) also read a `.parquet` export of the same records;
 other encodings and damaged gzip stop with the file and line (`envs/converters/base.py`). Ids are
 `<format>_<hash of everything that makes the task distinct>` (question, options, answer, and the image or
 subject where there is one), so they are namespaced by source and two layouts of one question differ.

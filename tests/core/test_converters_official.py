@@ -452,3 +452,21 @@ def test_mimic3_max_stays_keeps_only_the_selected_admissions_labs():
     def labs(result):
         return {t.id: t.metadata["ehr_patient"]["admissions"][0]["lab_events"] for t in result.tasks}
     assert all(labs(full)[task_id] == events for task_id, events in labs(one).items())
+
+
+def test_medmcqa_hugging_face_parquet_round_trip(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rows = [r | {"cop": c} for r, c in zip(MEDMCQA, [2, 1, 3, 0])]
+    table = pa.table({key: [r[key] for r in rows] for key in rows[0]})
+    path = tmp_path / "train-00000-of-00001.parquet"
+    pq.write_table(table, path)
+    result = convert("medmcqa", path)
+    assert result.errors == [] and result.rows_read == 4
+    assert [gold_text(t) for t in result.tasks] == ANSWERS
+    assert any("0-based" in note for note in result.notes)
+    damaged = tmp_path / "cut.parquet"
+    damaged.write_bytes(path.read_bytes()[:200])
+    with pytest.raises(SourceFileError, match="cut.parquet: not a readable parquet file"):
+        convert("medmcqa", damaged)
