@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from envs.core.task import RubricItem
+from envs.rewards.equivalence import canonical
 from envs.rewards.similarity import calibrate, grading_tokens, similarity_matrix
 from envs.rewards.text import clip01, has_negation, sentences, short
 from envs.rewards.view import EpisodeView
@@ -82,32 +83,57 @@ class AssertionGrader(Protocol):
 
 # -- rules + embeddings ----------------------------------------------------------------------------
 class RuleGrader:
-    """Keyword recall plus sentence-embedding similarity (no network, no model required)."""
+    """Keyword recall plus sentence-embedding similarity (no network, no model required).
+
+    Args:
+        use_observations: Count what the agent's successful tool calls returned as evidence for
+            positive criteria (what the agent established in the episode). False grades only the
+            agent's text, its answer and its calls (the grader before the calibration of issue 14).
+    """
 
     name = "rule"
 
+    def __init__(self, use_observations: bool = True) -> None:
+        self.use_observations = use_observations
+
     def grade(self, criteria: list[str], view: EpisodeView) -> list[CriterionResult]:
-        evidence = _evidence_sentences(view)
-        all_tokens = set(grading_tokens(" ".join(evidence)))
+        said = _evidence_sentences(view)
+        observed = _observation_sentences(view) if self.use_observations else []
+        evidence = list(dict.fromkeys(said + observed))[:_MAX_EVIDENCE]
+        acted = _acting_sentences(view)
+        all_tokens = set(_keyword_tokens(evidence))
         plain = [s for s in evidence if not has_negation(s)]
-        plain_tokens = set(grading_tokens(" ".join(plain)))
+        plain_tokens = set(_keyword_tokens(plain))
+        # what a negative criterion forbids is present only in what the agent itself wrote or did
+        # (an interaction check naming sildenafil, or a result listing it, is not prescribing it)
+        own_plain = [s for s in list(dict.fromkeys(_said_only(view) + acted)) if not has_negation(s)]
+        own_tokens = set(_keyword_tokens(own_plain))
         positives = [(_NEGATIVE.sub("", c, count=1), bool(_NEGATIVE.match(c))) for c in criteria]
         sims = similarity_matrix([p for p, _ in positives], evidence) if evidence else None
+        own_sims = similarity_matrix([p for p, _ in positives], own_plain) if own_plain else None
         plain_idx = [i for i, s in enumerate(evidence) if not has_negation(s)]
         results = []
         for i, (positive, is_negative) in enumerate(positives):
-            words = [w for w in grading_tokens(positive) if w not in _FILLER] or grading_tokens(positive)
-            # polarity must match: "recommends ibuprofen" is not met by "avoid ibuprofen", while
-            # "recommends avoiding NSAIDs" is
-            plain_only = is_negative or not has_negation(positive)
-            pool = plain_tokens if plain_only else all_tokens
-            recall = sum(w in pool for w in words) / len(words) if words else 0.0
-            # a negative criterion is broken by naming half of what it forbids ("NSAIDs such as ibuprofen")
-            keyword = clip01(recall / 0.5) if is_negative else clip01((recall - 0.2) / 0.6)
+            words = [w for w in _keyword_tokens([positive]) if w not in _FILLER] or _keyword_tokens([positive])
             semantic = None
-            if sims is not None:
-                row = sims[i, plain_idx] if plain_only else sims[i]
-                semantic = calibrate(float(row.max())) if len(row) else 0.0
+            if is_negative:
+                recall = sum(w in own_tokens for w in words) / len(words) if words else 0.0
+                # a negative criterion is broken by naming half of what it forbids ("NSAIDs such as ibuprofen")
+                keyword = clip01(recall / 0.5)
+                if own_sims is not None:
+                    semantic = calibrate(float(own_sims[i].max()))
+                elif sims is not None:
+                    semantic = 0.0
+            else:
+                # polarity must match: "recommends ibuprofen" is not met by "avoid ibuprofen", while
+                # "recommends avoiding NSAIDs" is
+                plain_only = not has_negation(positive)
+                pool = plain_tokens if plain_only else all_tokens
+                recall = _weighted_recall(words, pool)
+                keyword = clip01((recall - KEYWORD_FLOOR) / (KEYWORD_FULL - KEYWORD_FLOOR))
+                if sims is not None:
+                    row = sims[i, plain_idx] if plain_only else sims[i]
+                    semantic = calibrate(float(row.max())) if len(row) else 0.0
             present = max(keyword, semantic or 0.0)
             score = 1.0 - present if is_negative else present
             reason = f"keyword recall {recall:.2f}" + (f", semantic {semantic:.2f}" if semantic is not None else "")
@@ -115,16 +141,102 @@ class RuleGrader:
         return results
 
 
-def _evidence_sentences(view: EpisodeView) -> list[str]:
+def _keyword_tokens(texts: list[str]) -> list[str]:
+    """Stemmed content tokens of texts in the canonical wording of `equivalence.canonical`, so that
+    an abbreviation and its expansion ("ECG", "CT", "MgSO4", "FNA") or two writings of one quantity
+    or interval ("6 to 12 months", "6-12 months") count as the same keyword."""
+    return [t for text in texts for t in grading_tokens(canonical(text[:2000]))]
+
+
+def _weighted_recall(words: list[str], pool: set[str]) -> float:
+    """Share of the criterion's keywords present, a number counting `NUMBER_WEIGHT` times: "assigns
+    ESI level 2" is not met by "assign triage level esi_level 3" although three of its four words are."""
+    if not words:
+        return 0.0
+    weights = [NUMBER_WEIGHT if any(ch.isdigit() for ch in w) else 1.0 for w in words]
+    return sum(wt for w, wt in zip(words, weights) if w in pool) / sum(weights)
+
+
+NUMBER_WEIGHT = 3.0
+#: Keyword recall at or below the floor scores 0, at or above `KEYWORD_FULL` scores 1.
+KEYWORD_FLOOR, KEYWORD_FULL = 0.2, 0.7
+_MAX_EVIDENCE = 600
+_MAX_OBSERVATION_UNITS = 40  # per call: a long result (a whole chart) must not drown the rest
+
+
+def _said_only(view: EpisodeView) -> list[str]:
     out: list[str] = []
     for _, text in view.turn_texts:
         out.extend(sentences(text))
     out.extend(sentences(view.answer_text))
+    return [s for s in dict.fromkeys(s.strip() for s in out) if s]
+
+
+def _render_call(ref) -> str:
+    args = " ".join(f"{k} {v}" for k, v in ref.args.items() if isinstance(v, (str, int, float)))
+    return f"{ref.name.replace('_', ' ')} {args}".strip()
+
+
+def _evidence_sentences(view: EpisodeView) -> list[str]:
+    out = _said_only(view)
     for ref in view.calls:
         if ref.call.ok and not ({"think", "submit"} & ref.families):
-            args = " ".join(f"{k} {v}" for k, v in ref.args.items() if isinstance(v, (str, int, float)))
-            out.append(f"{ref.name.replace('_', ' ')} {args}".strip())
+            out.append(_render_call(ref))
     return [s for s in dict.fromkeys(s.strip() for s in out) if s][:400]
+
+
+def _acting_sentences(view: EpisodeView) -> list[str]:
+    """Calls that change the world (prescribe, order, escalate, document), attempted or not:
+    what a negative criterion ("does not prescribe X") can be broken by."""
+    return [_render_call(ref) for ref in view.calls
+            if ref.call.tool_type == "write" or (ref.families & _ACTING_FAMILIES)]
+
+
+_ACTING_FAMILIES = frozenset({"prescribing", "place_order", "escalation", "discharge", "discontinue", "invasive",
+                              "triage", "diagnosis", "resuscitation", "intubation", "follow_up"})
+
+
+def _flatten(value: Any, prefix: str, out: list[str], depth: int = 0) -> None:
+    if len(out) >= _MAX_OBSERVATION_UNITS or depth > 6:
+        return
+    if isinstance(value, dict):
+        scalars = [f"{k.replace('_', ' ')} {v}" for k, v in value.items()
+                   if isinstance(v, (str, int, float, bool)) and not isinstance(v, bool) or isinstance(v, bool) and v]
+        if scalars:
+            out.append((prefix + " " + "; ".join(str(s) for s in scalars)).strip())
+        for k, v in value.items():
+            if isinstance(v, (dict, list)):
+                _flatten(v, f"{prefix} {str(k).replace('_', ' ')}".strip(), out, depth + 1)
+    elif isinstance(value, list):
+        if value and all(isinstance(v, (str, int, float)) for v in value):
+            out.append(f"{prefix} {', '.join(str(v) for v in value)}".strip())
+        else:
+            for v in value:
+                _flatten(v, prefix, out, depth + 1)
+    elif isinstance(value, (str, int, float)):
+        out.extend(f"{prefix} {s}".strip() for s in sentences(str(value)))
+
+
+def _observation_sentences(view: EpisodeView) -> list[str]:
+    """What the agent's successful calls returned, as short units: JSON results flattened to one
+    line per object ("severity major; mechanism ..."), text results split into sentences."""
+    out: list[str] = []
+    for ref in view.calls:
+        call = ref.call
+        if not call.ok or not call.result or ({"think", "submit"} & ref.families):
+            continue
+        units: list[str] = []
+        text = call.result.strip()
+        try:
+            data = json.loads(text) if text[:1] in "[{" else None
+        except (ValueError, RecursionError):
+            data = None
+        if data is not None:
+            _flatten(data, "", units)
+        else:
+            units = sentences(text)[:_MAX_OBSERVATION_UNITS]
+        out.extend(" ".join(u.split())[:400] for u in units if u.strip())
+    return [s for s in dict.fromkeys(out) if s]
 
 
 # -- LLM judge -------------------------------------------------------------------------------------

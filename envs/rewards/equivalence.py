@@ -67,6 +67,9 @@ ABBREVIATIONS: dict[str, str] = {
     "pe": "pulmonary embolism", "mi": "myocardial infarction", "ptx": "pneumothorax",
     "mdd": "major depressive disorder", "gad": "generalized anxiety disorder", "ptsd": "posttraumatic stress disorder",
     "scc": "squamous cell carcinoma",
+    "ecg": "electrocardiogram", "ekg": "electrocardiogram", "cxr": "chest xray", "bp": "blood pressure",
+    "iv": "intravenous", "im": "intramuscular", "adrenaline": "epinephrine", "noradrenaline": "norepinephrine",
+    "paracetamol": "acetaminophen", "cpap": "continuous positive airway pressure",
     "emergent": "emergency", "stat": "emergency", "urgent cesarean": "emergency cesarean",
 }
 

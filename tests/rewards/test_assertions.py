@@ -56,7 +56,9 @@ def test_rule_grader_scores_good_and_bad_episodes():
 
 def test_rubric_points_weighting():
     task = TASK.model_copy(update={"evaluation_criteria": TASK.evaluation_criteria.model_copy(update={"nl_assertions": []})})
-    half = episode(task, turn(call("check_drug_interactions", {"patient_id": "P1"})), answer="paracetamol",
+    # "paracetamol" used to stand for a missing element here; it is acetaminophen's other name (the
+    # grader now reads both as one keyword), so a different drug plays that part
+    half = episode(task, turn(call("check_drug_interactions", {"patient_id": "P1"})), answer="tramadol",
                    reasoning="Checked interactions.")
     outcome = grade_assertions(EpisodeView(half, task), RuleGrader())
     assert [r.score for _, r in outcome.rubric_items][0] == 1.0
