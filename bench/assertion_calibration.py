@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import sys
 import time
@@ -118,6 +119,19 @@ def report(result: dict) -> dict:
             entry["gap_gold_minus_other"] = summary(gaps) if gaps else None
             section[scope] = entry
         out["grader"][name] = section
+    # criteria whose content the gold solution never produces: under a third of their keywords
+    # anywhere in the replay (calls, results, answer) and no sentence semantically close (< 0.5)
+    absent: dict[str, list[int]] = {}
+    for r in rows:
+        counts = absent.setdefault(r["domain"], [0, 0])
+        for _, score, why in r["gold_criteria"]:
+            counts[1] += 1
+            recall = float(re.search(r"keyword recall ([0-9.]+)", why).group(1))
+            semantic = re.search(r"semantic ([0-9.]+)", why)
+            if recall < 0.34 and (semantic is None or float(semantic.group(1)) < 0.5):
+                counts[0] += 1
+    out["gold_criteria_absent_from_replay"] = {d: f"{a}/{n}" for d, (a, n) in absent.items()}
+    out["gold_criteria_absent_total"] = f"{sum(a for a, _ in absent.values())}/{sum(n for _, n in absent.values())}"
     low = sorted(((c[1], r["task"], c[0], c[2]) for r in rows for c in r["gold_criteria"] if c[1] is not None and c[1] < 0.9))
     out["lowest_gold_criteria"] = [{"score": s, "task": t, "criterion": c, "reason": why} for s, t, c, why in low[:25]]
     return out
@@ -148,6 +162,8 @@ def main() -> None:
             gap = entry["gap_gold_minus_other"]
             print(f"{scope:<20} gold >= 0.9: {entry['gold_at_least_0.9']}; gold - other: "
                   + (f"min {gap['min']:.3f} median {gap['median']:.3f}" if gap else "n/a"))
+    print(f"\ngold-replay criteria whose content the replay never produces: {out['gold_criteria_absent_total']} "
+          + ", ".join(f"{d} {v}" for d, v in out["gold_criteria_absent_from_replay"].items()))
     print("\nlowest gold-replay criteria (calibrated):")
     for item in out["lowest_gold_criteria"]:
         print(f"  {item['score']:.2f} {item['task']}: {item['criterion'][:110]} ({item['reason']})")
