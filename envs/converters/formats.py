@@ -49,7 +49,7 @@ from envs.converters.base import (
     iter_json_records,
     iter_jsonl,
     iter_lines,
-    load_json,
+    read_text,
     require,
 )
 from envs.core.task import Task
@@ -346,10 +346,26 @@ def convert_pubmedqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conver
     """PubMedQA `ori_pqal.json` (and the unlabeled/artificial files, which share the layout):
     {pmid: {QUESTION, CONTEXTS [..], LABELS, MESHES, YEAR, reasoning_*_pred, final_decision, LONG_ANSWER}}."""
     result = ConversionResult()
-    data = load_json(path)
+    text = read_text(path)
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SourceFileError(f"{path}:{exc.lineno}: not valid JSON at line {exc.lineno} column {exc.colno}: "
+                              f"{exc.msg}") from None
     if not isinstance(data, dict):
         raise SourceFileError(f"{path}: expected an object of pmid -> record, got {type(data).__name__}")
-    for index, (pmid, row) in enumerate(data.items(), start=1):
+    searched = [0, 1]  # (position, line) of the last key found: records are found in file order
+
+    def line_of(pmid: str) -> int:
+        at = text.find(json.dumps(pmid), searched[0])
+        if at < 0:
+            return 0
+        searched[1] += text.count("\n", searched[0], at)
+        searched[0] = at
+        return searched[1]
+
+    for pmid, row in data.items():
+        index = line_of(str(pmid))
         result.rows_read += 1
         if not isinstance(row, dict):
             result.add_error(path, index, f"record {pmid}: expected an object")

@@ -59,7 +59,7 @@ def test_pubmedqa_yes_no_maybe():
     result = convert("pubmedqa", FIX / "pubmedqa.json")
     assert len(result.tasks) == 1 and result.tasks[0].correct_answer == "A"
     assert "Recurrence was lower" in result.tasks[0].ticket
-    assert "final_decision must be yes/no/maybe" in errors(result)[0][2]
+    assert errors(result)[0][1] == 2 and "final_decision must be yes/no/maybe" in errors(result)[0][2]  # the file line of record 87654321
 
 
 def test_medlfqa_rubric():
