@@ -245,6 +245,7 @@ QUALIFIERS = frozenset(
     "borderline possible probable likely unlikely early late partial complete total acute chronic "
     "primary secondary superimposed atypical risk".split()
 )
+_MAX_SHORT_ANSWER = 2_000
 _PAREN = re.compile(r"\([^()]*\)")
 _HEDGES = frozenset({"or", "either", "versus", "vs", "/"})
 _NUMBER_CONTEXT = frozenset({"score", "total", "value", "points", "result", "equals", "approximately", "about"})
@@ -433,6 +434,8 @@ def match_by_meaning(answer: str, golds: list[str]) -> tuple[str, str] | None:
     `how` is "equivalent" (same canonical form), "synonym" (a vocabulary synonym of the gold,
     stated) or "stated" (the gold's words, in order, in a short answer that adds nothing that
     changes its meaning)."""
+    if len(answer) > _MAX_SHORT_ANSWER:  # no short answer: cannot equal or state a gold (and is not cached)
+        return None
     answer_canon = canonical(answer)
     if not answer_canon:
         return None
