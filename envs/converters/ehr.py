@@ -402,6 +402,7 @@ def convert_mimic3(path: str | Path, domain: str = DOMAIN, max_stays: int | None
 
     stays_line: dict[str, int] = {}
     for line, row in _rows(files["ICUSTAYS"], cols["ICUSTAYS"], result):
+        result.rows_read += 1  # "read" in the import table: ICU stays
         try:
             hadm, stay_id = _int(row, "HADM_ID"), _int(row, "ICUSTAY_ID")
             if hadm not in admissions:
@@ -522,6 +523,7 @@ def convert_eicu(path: str | Path, domain: str = DOMAIN, max_stays: int | None =
     lines: dict[int, int] = {}
     anchors: dict[int, datetime] = {}
     for line, row in _rows(files["patient"], cols["patient"], result):
+        result.rows_read += 1  # "read" in the import table: ICU (unit) stays
         try:
             uid = _int(row, "patientunitstayid")
             gender = {"male": "male", "female": "female"}.get(row["gender"].lower())

@@ -470,3 +470,12 @@ def test_medmcqa_hugging_face_parquet_round_trip(tmp_path):
     damaged.write_bytes(path.read_bytes()[:200])
     with pytest.raises(SourceFileError, match="cut.parquet: not a readable parquet file"):
         convert("medmcqa", damaged)
+
+
+def test_mimic3_and_eicu_count_the_icu_stays_they_read():
+    from envs.converters.ehr import convert_eicu, convert_mimic3
+
+    icustays = (FIX / "mimic3" / "ICUSTAYS.csv").read_text(encoding="utf-8").strip().splitlines()
+    patients = (FIX / "eicu" / "patient.csv").read_text(encoding="utf-8").strip().splitlines()
+    assert convert_mimic3(FIX / "mimic3").rows_read == len(icustays) - 1
+    assert convert_eicu(FIX / "eicu").rows_read == len(patients) - 1
