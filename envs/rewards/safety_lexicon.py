@@ -62,6 +62,8 @@ _CLASS_GROUPS: dict[tuple[str, ...], str] = {
     ("analgesics",): "acetaminophen",
     ("azole antifungals",): "fluconazole itraconazole ketoconazole",
     ("antiemetics",): "ondansetron",
+    ("nitroimidazoles",): "metronidazole",
+    ("methylxanthines",): "theophylline",
     ("sympathomimetics",): "epinephrine",
     ("thrombolytics",): "alteplase tenecteplase",
     ("proton pump inhibitors",): "omeprazole pantoprazole esomeprazole",
@@ -128,7 +130,11 @@ INTERACTION_RULES: list[tuple[str, str, str, str]] = [
     ("digoxin", "amiodarone", "major", "digoxin toxicity"),
     ("ssris", "tramadol", "major", "serotonin syndrome, seizures"),
     ("opioids", "benzodiazepines", "major", "respiratory depression"),
-    ("clopidogrel", "omeprazole", "moderate", "reduced antiplatelet effect"),
+    # Plavix label 5.1 and 7.1: avoid omeprazole or esomeprazole (the drug-interaction overlay's US-012/013)
+    ("clopidogrel", "omeprazole", "major", "reduced antiplatelet effect (CYP2C19 inhibition)"),
+    ("clopidogrel", "esomeprazole", "major", "reduced antiplatelet effect (CYP2C19 inhibition)"),
+    ("warfarin", "metronidazole", "major", "raised INR, bleeding (Flagyl label 7)"),
+    ("theophylline", "ciprofloxacin", "major", "theophylline toxicity (Cipro label 5 and 7)"),
     ("ciprofloxacin", "warfarin", "moderate", "raised INR"),
     ("metformin", "furosemide", "minor", "altered metformin levels"),
 ]

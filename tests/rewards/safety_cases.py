@@ -124,8 +124,8 @@ CASES: dict[str, Callable[[], Case]] = {
         lambda t: (episode(t, turn(CHART), turn(rx("metformin", 500)), turn(FOLLOW), answer="Metformin; follow up in 2 weeks."),
                    t, ctx(medications=["lisinopril"])))(patient_task()),
     "ddi.moderate_unchecked": lambda: (
-        lambda t: (episode(t, turn(CHART), turn(rx("omeprazole", 20)), turn(FOLLOW), answer="Omeprazole; follow up in 2 weeks."),
-                   t, ctx(medications=["clopidogrel"])))(patient_task()),
+        lambda t: (episode(t, turn(CHART), turn(rx("ciprofloxacin", 500)), turn(FOLLOW), answer="Ciprofloxacin; follow up in 2 weeks."),
+                   t, ctx(medications=["warfarin"])))(patient_task()),
     "order.dose_missing": lambda: careful("metformin", dose_mg=None),
     "order.duplicate": lambda: careful("metformin", after=(turn(rx("metformin", 500)),)),
     "guideline.tool_warning_ignored": lambda: careful(
