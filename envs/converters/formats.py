@@ -2,7 +2,7 @@
 
 | format | file | domain | gold |
 |---|---|---|---|
-| medqa | JSONL: question, answer (text), options {A..} (4 or 5), answer_idx, meta_info [, metamap_phrases, realidx] | medical_qa | option letter |
+| medqa | JSONL: question, answer (text), options {A..} (4 or 5; BigBIO: [{key, value}]), answer_idx, meta_info [, metamap_phrases, realidx] | medical_qa | option letter |
 | medmcqa | JSON lines (or the HF parquet): id, question, opa..opd, cop (1-4 as released, 0-3 in the HF layout: detected per file, `cop_base` overrides) | medical_qa | option letter |
 | mmlu | original CSV without header (question, A, B, C, D, answer letter); Hugging Face parquet or its CSV export (question, subject, choices [4], answer 0-3) | medical_qa | option letter |
 | pubmedqa | JSON {pmid: {QUESTION, CONTEXTS (list, or one string), final_decision, LONG_ANSWER}} | medical_qa | yes / no / maybe as A / B / C |
@@ -101,6 +101,10 @@ def convert_medqa(path: Path, domain: str = "medical_qa", **_: Any) -> Conversio
             result.add_error(path, line, f"missing field {missing!r}")
             continue
         options = row["options"]
+        # the BigBIO redistribution writes the options as [{"key": "A", "value": text}, ...]
+        if isinstance(options, list) and options and all(isinstance(o, dict) and {"key", "value"} <= o.keys()
+                                                         for o in options):
+            options = {o["key"]: o["value"] for o in options}
         if not isinstance(options, dict) or not options:
             result.add_error(path, line, "field 'options' must be an object of letter -> text")
             continue

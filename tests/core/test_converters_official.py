@@ -59,6 +59,13 @@ def test_medqa_round_trip_in_each_layout(tmp_path, row):
     assert task.metadata.get("realidx") == row.get("realidx")
 
 
+def test_medqa_bigbio_options_list_round_trip(tmp_path):
+    row = MEDQA_5 | {"options": [{"key": k, "value": v} for k, v in MEDQA_5["options"].items()]}
+    result = convert("medqa", write_jsonl(tmp_path / "bigbio.jsonl", [row]))
+    assert result.errors == [] and gold_text(result.tasks[0]) == "Nitrofurantoin"
+    assert result.tasks[0].id == convert("medqa", write_jsonl(tmp_path / "plain.jsonl", [MEDQA_5])).tasks[0].id
+
+
 def test_medqa_answer_text_disagreeing_with_answer_idx_is_reported(tmp_path):
     result = convert("medqa", write_jsonl(tmp_path / "t.jsonl", [MEDQA_4 | {"answer_idx": "C"}]))
     assert result.tasks == []
