@@ -270,12 +270,15 @@ class RankWorker:
         batches = self._micro_batches(prep)
         n_updates = self.config.optim.updates_per_batch if update else 1
         cache: list[dict] = []
+        ref_s = 0.0  # where the step's time goes: reference forwards vs the policy's forward/backward
         for idx in batches:
             if not idx:
                 cache.append({})
                 continue
             t = self._tensors(prep, idx)
+            t_ref = time.perf_counter()
             entry = {"t": t, "idx": idx, "ref": self._reference_logprobs(t)}
+            ref_s += time.perf_counter() - t_ref
             if n_updates > 1:  # pi_old must stay fixed across the updates of this batch
                 entry["old"] = self._forward(t, grad=False).logprobs.detach()
             cache.append(entry)
@@ -288,6 +291,7 @@ class RankWorker:
 
         sums: dict[str, float] = {}
         grad_norms = []
+        t_update = time.perf_counter()
         for _ in range(n_updates):
             parts = []
             for entry in cache:
@@ -319,6 +323,8 @@ class RankWorker:
             "turns_kept": float(prep.turns_kept),
             "advantage_abs_mean": float(prep.advantages.abs().mean()),
             "learner_s": time.perf_counter() - t0,
+            "learner_ref_s": ref_s,
+            "learner_forward_backward_s": time.perf_counter() - t_update,
             "teacher_wait_s": teacher_wait,
         }
         if update:
