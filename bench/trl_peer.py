@@ -431,7 +431,8 @@ def main() -> None:
     ap.add_argument("--systems", default="trl,grpo,ttopd,grpo0")
     ap.add_argument("--work", default=str(ROOT / "runs/bench_trl_peer"))
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", help="write every run's figures here")
+    ap.add_argument("--json", help="write every run's figures here (rewritten after each run)")
+    ap.add_argument("--report", help="only print the report of a --json file written earlier")
     ap.add_argument("--role", choices=["driver", "trl", "prepare"], default="driver", help=argparse.SUPPRESS)
     ap.add_argument("--policy", help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
@@ -440,6 +441,10 @@ def main() -> None:
 
     if args.role == "trl":
         run_trl(Path(args.policy), Path(args.out), args.steps, args.seed)
+        return
+    if args.report:
+        rows = json.loads(Path(args.report).read_text())
+        report(rows, [s for s in SYSTEMS if any(r["system"] == s for r in rows)], args)
         return
     systems = [s.strip() for s in args.systems.split(",") if s.strip()]
     unknown = [s for s in systems if s not in SYSTEMS]
@@ -457,19 +462,20 @@ def main() -> None:
         for system in systems:  # A B A B ...: each round runs every system once, in the same order
             row = run_system(system, policy_dir, work, round_no, args.warmup, args.steps, args.seed + round_no)
             rows.append(row)
+            if args.json:  # after every run, so an interrupted bench keeps what it measured
+                Path(args.json).write_text(json.dumps(rows, indent=1))
             print(f"round {round_no} {system:6s} {row['s_per_step']:.2f} s/step  {row['completions_per_s']:.2f} compl/s  "
                   f"{row['generated_tok_per_s']:.0f} gen tok/s  {row['cpu_s_per_step']:.2f} CPU-s/step  "
                   f"{row['completions_per_cpu_s']:.2f} compl/CPU-s", flush=True)
     report(rows, systems, args)
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
 
 
 def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
     keys = ["s_per_step", "completions_per_s", "generated_tok_per_s", "trained_tok_per_s", "cpu_s_per_step",
             "completions_per_cpu_s", "generated_tok_per_cpu_s", "generated_tokens_per_completion", "turns_or_calls"]
     med = {s: {k: statistics.median(r[k] for r in rows if r["system"] == s) for k in keys} for s in systems}
-    print(f"\nmedians over {args.rounds} interleaved rounds of {args.steps} measured steps "
+    rounds = len({r["round"] for r in rows})
+    print(f"\nmedians over {rounds} interleaved rounds of {rows[0]['steps']} measured steps "
           f"(+{args.warmup} warm-up), {PROMPTS_PER_STEP} prompts x {GROUP_SIZE} completions a step")
     print("| system | s/step | completions/s | generated tok/s | trained tok/s | CPU-s/step | completions per CPU-s "
           "| generated tok per CPU-s | gen tokens per completion | turns (ours) / tool calls (TRL) per episode |")
