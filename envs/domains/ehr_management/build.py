@@ -206,7 +206,7 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
                         emergency=spec.get("emergency"),
                         description={"purpose": "EHR order-management workflow", "difficulty": "hard", "source": "authored",
                                      "category": "workflow", "task_type": "order_workflow",
-                                     "provenance": {"origin": "authored", "license": "project"}},
+                                     "provenance": {"origin": "authored", "license": "project", "guideline": spec["guideline"]}},
                         evaluation_criteria=crit))
     return out
 
