@@ -133,8 +133,11 @@ def _own_task_ids(domain: str) -> dict[str, str]:
             except DataFileError:
                 continue  # the domain's own file problem is reported when the domain loads
     if not any(path.is_file() for path in files) and hasattr(module, "get_tasks"):
-        # a domain whose tasks are made in code (cross_domain's pathways)
-        ids.update({t.id: f"the {domain!r} domain's tasks" for t in module.get_tasks()})
+        # a domain whose tasks are made in code (cross_domain's pathways); a domain not built yet has none
+        try:
+            ids.update({t.id: f"the {domain!r} domain's tasks" for t in module.get_tasks()})
+        except (DataFileError, KeyError, ValueError):
+            pass
     return ids
 
 

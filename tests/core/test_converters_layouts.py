@@ -174,3 +174,12 @@ def test_duplicate_ids_inside_one_file_keep_the_first(data_root, tmp_path, capsy
     assert main(["tasks", "import", "--format", "medqa", str(path)]) == 0
     out = capsys.readouterr().out
     assert "occurs more than once" in out and "imported 1 tasks" in out
+
+
+def test_import_into_a_domain_not_built_yet(data_root, capsys):
+    """visual_diagnosis has no authored task file: with no data build there is nothing to clash with, and
+    the import still lands (the suite commands of evals/suites print exactly this command)."""
+    images = FIX / "vqa_images"
+    assert main(["tasks", "import", "--format", "vqa-rad", "--image-dir", str(images), str(FIX / "vqa_rad.json")]) == 0
+    written = json.loads((data_root / "visual_diagnosis" / "vqa-rad-vqa_rad.json").read_text(encoding="utf-8"))
+    assert len(written) == 2
