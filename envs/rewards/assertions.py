@@ -7,15 +7,24 @@ chat endpoint judges instead. A judge failure (network, HTTP status, unparseable
 verdicts) is recorded in `RewardBreakdown.grader_errors` and the affected criteria are graded by
 the rules instead: a failure is never silently scored as "not met".
 
-Rule grading of a criterion against everything the agent wrote and called (its sentences, its
-submitted answer, and its successful tool calls rendered as "check drug interactions drug x"):
-  keyword = clip((recall of the criterion's content words - 0.2) / 0.6)
-  semantic = calibrated max cosine between the criterion and the agent's sentences (if available)
+Rule grading of a criterion against the episode's evidence: the agent's sentences, its submitted
+answer, its successful tool calls rendered as "check drug interactions drug x", and what those
+calls returned (JSON results flattened to one line per object, text split into sentences: what
+the agent established with its tools):
+  recall = share of the criterion's keywords in the evidence, a number weighing 3 ("ESI level 2"
+           is not met by "esi_level 3"); keywords are stemmed content words in the canonical
+           wording of `equivalence.canonical` ("ECG" = "electrocardiogram", "6-12 months" =
+           "6 to 12 months")
+  keyword = clip((recall - 0.2) / (0.7 - 0.2))
+  semantic = calibrated max cosine between the criterion and the evidence units (if available)
   score = max(keyword, semantic)
 Polarity must match: a criterion without a negation cue is matched only against sentences
 without one ("recommends ibuprofen" is not met by "avoid ibuprofen"). A negative criterion
-("does not recommend NSAIDs such as ibuprofen") scores 1 - presence of its positive part in
-sentences without negation, where naming half of its content words counts as full presence.
+("does not recommend NSAIDs such as ibuprofen") scores 1 - presence of its positive part in what
+the agent itself said or did (its sentences and answer without negation, and its acting calls:
+write tools, prescribing, orders, escalation...), not in read calls or their results (checking an
+interaction with sildenafil is not prescribing it); naming half of its keywords counts as full
+presence. `RuleGrader(use_observations=False)` leaves tool results out (the grader before issue 14).
 
 Rubric (HealthBench style): required elements and required tools earn their points times their
 score; forbidden elements (and any item with negative points) subtract |points| times their
