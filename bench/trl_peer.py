@@ -317,7 +317,9 @@ class TreeMeter:
         self.steps_path = steps_path
         self.poll_s = poll_s
         self.cpu_by_pid: dict[tuple[int, float], float] = {}
+        self.name_of: dict[tuple[int, float], str] = {}
         self.boundaries: list[tuple[int, float, float]] = []  # (steps done, wall, cpu-s)
+        self.snapshots: dict[int, dict[tuple[int, float], float]] = {}  # steps done -> cpu_by_pid then
         self.max_procs = 0
         self._thread = threading.Thread(target=self._loop, daemon=True)
 
@@ -332,7 +334,12 @@ class TreeMeter:
         for p in procs:
             try:
                 t = p.cpu_times()
-                self.cpu_by_pid[(p.pid, p.create_time())] = t.user + t.system
+                key = (p.pid, p.create_time())
+                self.cpu_by_pid[key] = t.user + t.system
+                if key not in self.name_of:  # Ray workers carry their actor in the process title
+                    cmd = p.cmdline()
+                    self.name_of[key] = (cmd[0].split(" ")[0] if cmd and cmd[0].startswith("ray::")
+                                         else p.name())
             except psutil.Error:
                 continue  # exited between listing and reading: its last reading stays
         return sum(self.cpu_by_pid.values())
@@ -350,8 +357,13 @@ class TreeMeter:
             done = self.steps_done()
             if done != last:
                 self.boundaries.append((done, time.perf_counter(), cpu))
+                self.snapshots[done] = dict(self.cpu_by_pid)
                 last = done
             time.sleep(self.poll_s)
+        done = self.steps_done()  # a last step written just before the exit (within one poll)
+        if done != last:
+            self.boundaries.append((done, time.perf_counter(), sum(self.cpu_by_pid.values())))
+            self.snapshots[done] = dict(self.cpu_by_pid)
 
     def start(self) -> None:
         self._thread.start()
@@ -414,12 +426,18 @@ def run_system(system: str, policy_dir: Path, work: Path, round_no: int, warmup:
         turns = statistics.mean(r["turns_mean"] for r in measured)
     wall = last[1] - first[1]
     cpu = last[2] - first[2]
+    by_process: dict[str, float] = {}  # CPU-s per step of each kind of process in the measured window
+    start, end = meter.snapshots[first[0]], meter.snapshots[last[0]]
+    for key, used in end.items():
+        name = meter.name_of.get(key, "?")
+        by_process[name] = by_process.get(name, 0.0) + (used - start.get(key, 0.0)) / n
     return {"system": system, "round": round_no, "steps": n, "s_per_step": wall / n,
             "completions_per_s": completions / wall, "generated_tok_per_s": generated / wall,
             "trained_tok_per_s": trained / wall, "cpu_s_per_step": cpu / n,
             "completions_per_cpu_s": completions / cpu, "generated_tok_per_cpu_s": generated / cpu,
             "turns_or_calls": turns,
             "generated_tokens_per_completion": generated / max(completions, 1), "phases": phases,
+            "cpu_s_per_step_by_process": dict(sorted(by_process.items(), key=lambda kv: -kv[1])),
             "max_processes": meter.max_procs}
 
 
@@ -497,6 +515,15 @@ def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
                 for k, v in r["phases"].items():
                     phases.setdefault(k, []).append(v)
         print(f"  {SYSTEMS[s]}: " + ", ".join(f"{k} {statistics.median(v):.2f}" for k, v in phases.items()))
+    print("\nCPU-seconds per step by process (median over rounds; processes under 0.05 CPU-s left out):")
+    for s in systems:
+        per: dict[str, list[float]] = {}
+        for r in rows:
+            if r["system"] == s:
+                for k, v in r.get("cpu_s_per_step_by_process", {}).items():
+                    per.setdefault(k, []).append(v)
+        shown = sorted(((k, statistics.median(v)) for k, v in per.items()), key=lambda kv: -kv[1])
+        print(f"  {SYSTEMS[s]}: " + ", ".join(f"{k} {v:.2f}" for k, v in shown if v >= 0.05))
 
 
 if __name__ == "__main__":
