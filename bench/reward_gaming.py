@@ -24,7 +24,8 @@ to the env's result; true accuracy = the task's accuracy criterion met (accuracy
 baseline in the same run is the rule the demo used before, `total >= 0.55` ("old correct"), which
 passed 44/44 "every tool + constant" episodes of which 5 were right.
 
-    python bench/reward_gaming.py [--split test] [--domains a,b] [--limit N] [--json out.json]
+    python bench/reward_gaming.py [--split test] [--domains a,b] [--limit N | --sample N] [--json out.json]
+    python bench/reward_gaming.py --domains triage_emergency --task-pattern '^tr_calc_'   # the demo's held-out tasks
 
 Free-text and assertion grading uses token overlap (HCGYM_EMBEDDINGS=0, as in the training configs)
 unless `--embeddings` is given.
@@ -35,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import statistics
 import sys
 import time
@@ -204,16 +206,21 @@ def correct_rule() -> Callable[[dict[str, Any]], bool]:
 
 
 def run(domains: list[str], split: str, limit: int | None, strategies: tuple[str, ...],
-        log: Callable[[str], None] = print, sample: int | None = None) -> dict[str, dict[str, dict[str, float]]]:
-    """The table domain -> strategy -> figures; `limit` takes the first tasks of each split, `sample`
-    that many tasks evenly spaced over it."""
+        log: Callable[[str], None] = print, sample: int | None = None,
+        task_pattern: str | None = None) -> dict[str, dict[str, dict[str, float]]]:
+    """The table domain -> strategy -> figures; `task_pattern` keeps the task ids it matches (the demo's
+    held-out tasks: `^tr_calc_`), `limit` takes the first tasks of each split, `sample` that many tasks
+    evenly spaced over it."""
     from envs import registry
     from envs.core.env import HealthcareGymEnv
 
     correct = correct_rule()
     table: dict[str, dict[str, dict[str, float]]] = {}
     for domain in domains:
-        tasks = registry.get_tasks(domain, split)[:limit] if limit else registry.get_tasks(domain, split)
+        tasks = registry.get_tasks(domain, split)
+        if task_pattern:
+            tasks = [t for t in tasks if re.search(task_pattern, t.id)]
+        tasks = tasks[:limit] if limit else tasks
         if sample and len(tasks) > sample:
             tasks = [tasks[i * len(tasks) // sample] for i in range(sample)]
         candidates = Candidates(domain)
@@ -279,6 +286,7 @@ def main() -> int:
     parser.add_argument("--domains", default="", help="comma-separated; default: every domain")
     parser.add_argument("--limit", type=int, default=None, help="the first N tasks per domain (default: the whole split)")
     parser.add_argument("--sample", type=int, default=None, help="N tasks per domain, evenly spaced over the split")
+    parser.add_argument("--task-pattern", default=None, help="only task ids matching this regex (the demo's: ^tr_calc_)")
     parser.add_argument("--strategies", default="", help="comma-separated; default: all")
     parser.add_argument("--embeddings", action="store_true", help="grade free text with the embedding model")
     parser.add_argument("--json", default=None, help="write the table here")
@@ -293,7 +301,7 @@ def main() -> int:
     if unknown:
         parser.error(f"--strategies: unknown {', '.join(unknown)}; known: {', '.join(GOLD + CHEAP)}")
     started = time.perf_counter()
-    table = run(domains, args.split, args.limit, strategies, sample=args.sample)
+    table = run(domains, args.split, args.limit, strategies, sample=args.sample, task_pattern=args.task_pattern)
     elapsed = time.perf_counter() - started
     episodes = sum(row["episodes"] for rows in table.values() for row in rows.values())
     print(f"\n{episodes} episodes over split {args.split!r} in {elapsed:.0f} s; cells: mean total / "
