@@ -10,7 +10,8 @@ Properties checked on every step:
   * an ended episode is scored (the five reward components and a finite total in [0, 1]; no
     grader error), and its trajectory stays JSON-serialisable.
 
-The examples are derandomized (the same ones on every run, so CI is reproducible) and bounded in
+Three calls in four start from the gold calls of the domain's tasks (so tool bodies run on valid ids)
+with at most one argument replaced. The examples are derandomized (the same ones on every run, so CI is reproducible) and bounded in
 number; `deadline=None` because a terminal step may load a grader model on first use.
 """
 
@@ -91,13 +92,22 @@ def arguments_for(draw, tool: dict | None) -> dict:
 
 # -- calls and actions --------------------------------------------------------------------------
 @st.composite
-def call(draw, tools: list[dict]) -> tuple[str, dict, str | None]:
-    """(tool name, arguments, raw hostile JSON replacing one argument value or None)."""
+def call(draw, tools: list[dict], gold: list[tuple[str, dict]]) -> tuple[str, dict, str | None]:
+    """(tool name, arguments, raw hostile JSON added as one more argument, or None). Three calls in
+    four start from a gold call of the domain's tasks (valid ids and values, so the tool body runs) with
+    at most one argument replaced; the others are built from the tool's schema."""
     names = [t["function"]["name"] for t in tools]
     by_name = {t["function"]["name"]: t for t in tools}
-    name = draw(st.one_of(st.sampled_from(names), st.just("submit_answer"), st.sampled_from(
-        ["no_such_tool", "submit", "Submit_Answer", "lookup", names[-1] + "x"])))
-    args = draw(arguments_for(by_name.get(name)))
+    # (hypothesis starts from the simplest draws, 0 here: the gold branch, unchanged arguments)
+    if gold and draw(st.integers(0, 3)) != 3:
+        name, args = draw(st.sampled_from(gold))
+        args = dict(args)
+        if args and draw(st.integers(0, 2)) == 2:
+            args[draw(st.sampled_from(sorted(args)))] = draw(JSON_VALUES)
+    else:
+        name = draw(st.one_of(st.sampled_from(names), st.just("submit_answer"), st.sampled_from(
+            ["no_such_tool", "submit", "Submit_Answer", "lookup", names[-1] + "x"])))
+        args = draw(arguments_for(by_name.get(name)))
     hostile = draw(st.one_of(st.none(), st.none(), st.none(), HOSTILE_JSON_TEXT))
     return name, args, hostile
 
@@ -143,14 +153,19 @@ def render(fmt: str, calls: list[tuple[str, dict, str | None]]) -> str:
 CALL_FORMATS = ["hermes", "fenced", "json_object", "json_list", "openai", "tool_calls", "function"]
 
 
+def gold_calls(env: HealthcareGymEnv) -> list[tuple[str, dict]]:
+    """The expected calls of the domain's tasks (names and arguments), as seeds for valid calls."""
+    return [(a.name, dict(a.arguments)) for task in env.tasks for a in task.evaluation_criteria.actions]
+
+
 @st.composite
-def action(draw, tools: list[dict]) -> str:
+def action(draw, tools: list[dict], gold: list[tuple[str, dict]] = ()) -> str:
     """One agent action in any accepted format, or free text, or text mixed with calls."""
     kind = draw(st.sampled_from(CALL_FORMATS + ["free_text", "mixed", "truncated"]))
     if kind == "free_text":
         return draw(st.one_of(st.text(max_size=200), st.sampled_from(
             ["", "   ", "The answer is B.", "submit_answer", "<tool_call>", "```", "(" * 300, "{" * 300, _deep(2000)])))
-    calls = draw(st.lists(call(tools), min_size=1, max_size=3))
+    calls = draw(st.lists(call(tools, list(gold)), min_size=1, max_size=3))
     if kind == "mixed":  # prose around calls, in a format that allows it
         fmt = draw(st.sampled_from(["hermes", "fenced", "function"]))
         before, after = draw(st.text(max_size=60)), draw(st.text(max_size=60))
@@ -168,7 +183,7 @@ def domain_envs():
     for domain in DOMAINS:
         env = HealthcareGymEnv(domain=domain, max_turns=MAX_TURNS)
         _, info = env.reset(seed=0)
-        out[domain] = (env, info["tools"])
+        out[domain] = (env, info["tools"], gold_calls(env))
     return out
 
 
@@ -198,14 +213,14 @@ def check_step(env: HealthcareGymEnv, act: str) -> bool:
 
 @pytest.mark.parametrize("domain", DOMAINS)
 def test_fuzzed_actions_never_raise_and_end_scored(domain_envs, domain):
-    env, _ = domain_envs[domain]
+    env, _, gold = domain_envs[domain]
 
     @FUZZ_SETTINGS
     @given(data=st.data())
     def episode(data):
         # the toolkit of the episode's task (cross_domain builds one per pathway)
         _, info = env.reset(seed=data.draw(st.integers(0, 10_000), label="seed"))
-        for act in data.draw(st.lists(action(info["tools"]), min_size=1, max_size=MAX_TURNS), label="actions"):
+        for act in data.draw(st.lists(action(info["tools"], gold), min_size=1, max_size=MAX_TURNS), label="actions"):
             if check_step(env, act):
                 break
 
@@ -215,18 +230,21 @@ def test_fuzzed_actions_never_raise_and_end_scored(domain_envs, domain):
 def test_fuzz_strategies_cover_every_format_and_terminal_steps(domain_envs):
     """The strategies reach what the property is about: every parser format, successful submits
     and turn-limit ends (a strategy that never produced them would make the fuzz test vacuous)."""
-    env, tools = domain_envs["drug_interaction"]
+    env, tools, gold = domain_envs["drug_interaction"]
     seen_formats: set[str] = set()
     ends = {"terminated": 0, "truncated": 0}
+    calls = {"ok": 0, "failed": 0}
 
     @settings(max_examples=150, deadline=None, derandomize=True, database=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(actions=st.lists(action(tools), min_size=1, max_size=MAX_TURNS))
+    @given(actions=st.lists(action(tools, gold), min_size=1, max_size=MAX_TURNS))
     def episode(actions):
         env.reset(seed=0)
         for act in actions:
             _, _, terminated, truncated, info = env.step(act)
             seen_formats.add(info["action_format"])
+            for record in env.trajectory().turns[-1].tool_calls:
+                calls["ok" if record.ok else "failed"] += 1
             if terminated or truncated:
                 ends["terminated" if terminated else "truncated"] += 1
                 break
@@ -234,3 +252,4 @@ def test_fuzz_strategies_cover_every_format_and_terminal_steps(domain_envs):
     episode()
     assert {"hermes", "fenced", "json", "openai", "function", "text"} <= seen_formats, seen_formats
     assert ends["terminated"] >= 5 and ends["truncated"] >= 5, ends
+    assert calls["ok"] >= 30 and calls["failed"] >= 30, calls  # tool bodies run, and errors are exercised
