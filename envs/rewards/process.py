@@ -6,10 +6,11 @@
 Only *needed* calls earn anything. A call is needed when it succeeded and is either
   * a call of a tool the task's expected actions use (`evaluation_criteria.actions`, submit and think
     excluded), or
-  * a call of a READ tool (`ToolCallRecord.tool_type == "read"`) about the task: one of its argument
-    values equals, after normalisation, an argument value of an expected action (the same patient id,
-    drug, lab, code...), so looking the patient up with a second chart tool counts while calling every
-    tool of the domain with junk arguments does not. A task without expected actions has nothing to
+  * a call of a READ tool (`ToolCallRecord.tool_type == "read"`) about the task: one of its text
+    argument values (or lists of text) equals, after normalisation, one of an expected action (the
+    same patient id, drug, lab, code...), so looking the patient up with a second chart tool counts
+    while calling every tool of the domain with junk arguments does not. Numbers and flags are not
+    compared: a junk call passing 1 or true would match a count or a flag. A task without expected actions has nothing to
     judge relevance by: every successful READ call is needed.
 Failed calls, `think` calls, other tools' calls and repeats earn nothing.
 
@@ -104,15 +105,18 @@ def expected_tools(view: EpisodeView) -> set[str]:
             if not ({"submit", "think"} & view.conv.families(a.name))}
 
 
+def _entity(value: Any) -> bool:
+    """A text value, or a list of them, that names something (a patient id, a drug, a lab, a code).
+    Numbers and flags do not: a junk call passing 1 or true would otherwise match a count or a flag."""
+    if isinstance(value, str):
+        return bool(value.strip())
+    return isinstance(value, list) and bool(value) and all(isinstance(v, str) for v in value)
+
+
 def _task_values(view: EpisodeView) -> set[Any]:
-    """Normalised argument values of the expected actions: what the task is about."""
-    values: set[Any] = set()
-    for action in view.task.evaluation_criteria.actions:
-        for value in action.arguments.values():
-            if isinstance(value, bool) or value is None or value == "" or value == [] or value == {}:
-                continue  # flags and empty values say nothing about what the task is about
-            values.add(norm_value(value))
-    return values
+    """Normalised text argument values of the expected actions: what the task is about."""
+    return {norm_value(value) for action in view.task.evaluation_criteria.actions
+            for value in action.arguments.values() if _entity(value)}
 
 
 def _is_read(call: CallRef) -> bool:
@@ -131,7 +135,7 @@ def counted_calls(view: EpisodeView) -> tuple[list[CallRef], list[CallRef]]:
         if ref.name.lower() in tools:
             needed.append(ref)
         elif _is_read(ref) and (values is None or any(norm_value(v) in values for v in ref.args.values()
-                                                      if not isinstance(v, bool))):
+                                                      if _entity(v))):
             needed.append(ref)
     return calls, needed
 

@@ -75,6 +75,16 @@ def test_a_write_tool_the_task_does_not_expect_is_not_needed():
     assert process_score(v).diversity == pytest.approx(0.5)
 
 
+def test_a_read_sharing_only_a_number_or_a_flag_with_the_task_is_not_about_it():
+    task = Task(ticket="Top 1 evidence for patient P7.", correct_answer="x", answer_type="exact",
+                evaluation_criteria={"actions": [{"name": "retrieve_evidence",
+                                                  "arguments": {"query": "warfarin bleeding", "top_k": 1, "full": True}}]})
+    junk = EpisodeView(episode(task, turn(read("lookup_drug", {"name": "zzz", "limit": 1, "full": True})), answer="x"), task)
+    about = EpisodeView(episode(task, turn(read("search_pubmed", {"query": "Warfarin  bleeding"})), answer="x"), task)
+    assert process_score(junk).diversity == 0.0
+    assert process_score(about).diversity == 1.0 and process_score(about).thoroughness == 1.0
+
+
 # -- format and coherence need a real attempt at an answer -------------------------------------------
 @pytest.mark.parametrize("answer, why", [
     ("", "no answer"),
