@@ -1,4 +1,6 @@
-"""Expose `envs.calculators` functions as toolkit methods under their own names.
+"""Expose `envs.calculators` functions as toolkit methods under their own names: the one way a
+domain offers a calculator as a tool (`calculate_bmi = calculator_method("calculate_bmi")` in its
+toolkit class body).
 
 The calculator's signature and Google-style docstring become the tool schema unchanged; the tool
 returns the calculator's `ScoreResult` as a dict. Input errors surface as the calculator's own

@@ -1,8 +1,11 @@
-"""Parse the registry packages into the medical-QA reference files (ICD-10-CM, HPO, drugs, guidelines).
+"""Parse registry packages into reference structures (ICD-10-CM, HPO, drugs, guidelines): build-time
+helpers shared by the domains' builders (medical_qa writes them as its reference files; psychiatry
+reads the FDA drug classes and the ICD-10-CM chapter 5 codes).
 
 Every parser reads a pinned package through `envs.data.registry.open_package` and returns plain
-JSON-ready structures; `build.py` writes them under `domain_build_dir("medical_qa")`. Nothing
-here is committed data: the package files are the source, read at build time.
+JSON-ready structures; the calling `build.py` writes what it needs under its own
+`domain_build_dir(...)`. Nothing here is committed data: the package files are the source, read at
+build time. A builder that uses a parser hashes this file into its build fingerprint.
 """
 
 from __future__ import annotations

@@ -2,7 +2,9 @@
 
 A builder is a module with `build(offline: bool = False, force: bool = False) -> dict` that
 writes its output under `envs.core.paths.data_dir()` deterministically and returns a summary of
-counts. To add one, append its module path to BUILDERS. Builders read registry packages only
+counts. To add one, append its module path to BUILDERS; a domain builder that reads another
+domain's built data declares it in its own `BUILD_REQUIRES` and runs after it
+(`envs.core.build_order.ordered_builders`), whatever its place in the list. Builders read registry packages only
 through `envs.data.registry.open_package`, which hands out a package's wheel after checking it
 against its pinned sha256 (a new package is pinned in `registry.SOURCES` first).
 """
@@ -12,14 +14,16 @@ from __future__ import annotations
 import importlib
 import time
 
+from envs.core.build_order import ordered_builders
+
 BUILDERS: list[str] = [
     "envs.domains.drug_interaction.build",
-    "envs.domains.clinical_diagnosis.build",   # before ehr_management, which reuses its ICD-10 index
+    "envs.domains.clinical_diagnosis.build",
     "envs.domains.triage_emergency.build",
     "envs.domains.ehr_management.build",
     "envs.domains.medical_qa.build",
-    "envs.domains.psychiatry.build",         # after medical_qa (reuses its parsers)
-    "envs.domains.obstetrics.build",         # obstetrics, radiology and visual reuse psychiatry's split helper
+    "envs.domains.psychiatry.build",
+    "envs.domains.obstetrics.build",
     "envs.domains.radiology_report.build",
     "envs.domains.visual_diagnosis.build",
     "kb_service.build_default",
@@ -29,7 +33,7 @@ BUILDERS: list[str] = [
 def run_builders(names: list[str] | None = None, *, offline: bool = False, force: bool = False,
                  echo=print) -> dict[str, dict]:
     summaries: dict[str, dict] = {}
-    for module_name in BUILDERS:
+    for module_name in ordered_builders(BUILDERS):
         short = module_name.rsplit(".", 2)[-2] if module_name.endswith(".build") else module_name
         if names and short not in names and module_name not in names:
             continue

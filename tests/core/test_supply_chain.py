@@ -160,8 +160,8 @@ def _package_with_vocabulary(path: Path, vocabulary: object) -> Archive:
 
 
 def _readers():
+    from envs.core.reference_parsers import load_drug_vocabulary
     from envs.domains.drug_interaction.ingest import read_vocabulary
-    from envs.domains.medical_qa.reference import load_drug_vocabulary
     from kb_service.sources.drugs import load_vocabulary
 
     return {"medical_qa.reference": load_drug_vocabulary, "drug_interaction.ingest": read_vocabulary,

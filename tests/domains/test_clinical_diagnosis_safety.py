@@ -16,8 +16,8 @@ registry.DOMAINS.setdefault("clinical_diagnosis", "envs.domains.clinical_diagnos
 from envs.core.task import Task  # noqa: E402
 from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord  # noqa: E402
 from envs.domains.clinical_diagnosis import build as cd_build  # noqa: E402
-from envs.domains.clinical_diagnosis.safety import (  # noqa: E402
-    ClinicalDiagnosisSafetyContext,
+from envs.domains.clinical_diagnosis.safety import ClinicalDiagnosisSafetyContext  # noqa: E402
+from envs.domains.drug_reference import (  # noqa: E402
     DrugReference,
     drug_reference,
     load_formulary,

@@ -17,6 +17,7 @@ import hashlib
 import json
 from pathlib import Path
 
+from envs.core import splits as split_helpers
 from envs.core.db import DataFileError
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
@@ -43,7 +44,8 @@ def _stamp() -> str:
     for name in PACKAGES:
         h.update(f"{name}=={SOURCES[name].version};".encode())
     for path in sorted(AUTHORED.glob("*.json")) + [HERE / "tasks.json", HERE / "split_tasks.json", HERE / "generate.py", HERE / "hpo.py",
-                                                   HERE / "icd10.py", HERE / "labs.py", HERE / "build.py"]:
+                                                   HERE / "icd10.py", HERE / "labs.py", HERE / "build.py",
+                                                   Path(split_helpers.__file__)]:
         if path.exists():
             h.update(path.name.encode() + path.read_bytes())
     h.update(GENERATOR_VERSION.encode())
@@ -155,7 +157,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
         tasks += kept
     dump_tasks(tasks, out_dir / "tasks.json")
     ids = {g: [t.id for t in items] for g, items in groups.items()}
-    splits = generate.assign_splits(ids, VALIDATION)
+    splits = split_helpers.grouped_splits(ids, VALIDATION)
     write_split(out_dir / "split_tasks.json", splits)
     stamp_file.write_text(stamp)
     return {"patients": len(db.patients), "hpo_diseases": len(hpo_data["diseases"]), "icd10_items": len(icd_items),

@@ -293,20 +293,3 @@ def lab_interpretation_tasks(catalog: LabCatalog, n: int, seed: int = 17) -> lis
             metadata={"test": key, "value": shown, "unit": unit, "sex": sex, "age": age},
         ))
     return tasks
-
-
-def assign_splits(groups: dict[str, list[str]], validation: dict[str, int], test_fraction: float = 0.2,
-                  seed: int = 23) -> dict[str, list[str]]:
-    """Seeded per-group split: `validation[group]` ids, then test_fraction of the rest to test."""
-    rng = random.Random(seed)
-    out: dict[str, list[str]] = {"train": [], "test": [], "validation": []}
-    for group in sorted(groups):
-        ids = sorted(groups[group])
-        rng.shuffle(ids)
-        n_val = validation.get(group, 0)
-        val, rest = ids[:n_val], ids[n_val:]
-        n_test = round(len(rest) * test_fraction)
-        out["validation"] += sorted(val)
-        out["test"] += sorted(rest[:n_test])
-        out["train"] += sorted(rest[n_test:])
-    return out

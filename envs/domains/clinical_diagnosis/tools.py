@@ -441,7 +441,7 @@ class ClinicalDiagnosisTools(BaseDomainTools):
             patient_id: The patient identifier.
             drug: The proposed drug (generic or brand name).
         """
-        from .safety import drug_reference
+        from envs.domains.drug_reference import drug_reference
 
         p = self._patient(patient_id)
         d = self._drug(drug)

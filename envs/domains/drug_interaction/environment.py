@@ -12,13 +12,14 @@ from pathlib import Path
 from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment, DomainTaskStore, read_policy
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.core.shared import shared_toolkits
+from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import DrugInteractionDB
 from .safety import DrugInteractionSafetyContext
 from .tools import DrugInteractionTools
+from .translate import fold
 
 NAME = "drug_interaction"
 HERE = Path(__file__).resolve().parent
@@ -53,6 +54,19 @@ def load_db() -> DrugInteractionDB:
     """A fresh database for one episode."""
     template, state = _template_db()
     return template.with_state(state)
+
+
+def drug_reference_source() -> tuple[DrugInteractionDB, DrugInteractionSafetyContext]:
+    """A database fork (used read-only) and this domain's safety context over it: what the shared drug
+    reference (`envs/domains/drug_reference.py`) reads, through `envs.registry`, to answer drug facts
+    for other domains. Raises `DataFileError` when the database is not built."""
+    db = load_db()
+    return db, DrugInteractionSafetyContext(lambda: db)
+
+
+def drug_name_key(name: str) -> str:
+    """The key of `DrugInteractionDB.name_index` for a drug name (the folding the build indexed with)."""
+    return fold(name)
 
 
 def get_environment() -> DomainEnvironment:

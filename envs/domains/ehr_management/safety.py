@@ -1,13 +1,13 @@
 """`SafetyContext` of the EHR domain: allergies, the active medication orders of the current
 admission, the active longitudinal conditions and the renal function from the latest creatinine;
-drug facts from the shared drug reference (`envs/domains/clinical_diagnosis/safety.py`: the
+drug facts from the shared drug reference (`envs/domains/drug_reference.py`: the
 authored formulary, then the drug-interaction database, then the reward's lexicon)."""
 
 from __future__ import annotations
 
 from typing import Any, Callable
 
-from envs.domains.clinical_diagnosis.safety import DrugReference, RecordSafetyContext, pregnant_in, renal_conditions
+from envs.domains.drug_reference import DrugReference, RecordSafetyContext, pregnant_in, renal_conditions
 
 
 class EHRSafetyContext(RecordSafetyContext):

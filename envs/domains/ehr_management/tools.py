@@ -493,7 +493,7 @@ class EHRTools(BaseDomainTools):
         name = " ".join(drug.strip().lower().split())
         if len(name) < 3:
             raise ToolError("drug is empty")
-        from envs.domains.clinical_diagnosis.safety import drug_reference
+        from envs.domains.drug_reference import drug_reference
 
         # The same drug reference the reward's safety context uses: same drug, its class or allergy group.
         allergy = drug_reference().allergy_conflict(p.allergies, name)
@@ -519,7 +519,7 @@ class EHRTools(BaseDomainTools):
             drug: The proposed drug (generic or brand name).
             hadm_id: Optional admission id (default: the latest admission).
         """
-        from envs.domains.clinical_diagnosis.safety import drug_reference
+        from envs.domains.drug_reference import drug_reference
 
         p = self._patient(patient_id)
         adm = self._admission(p, hadm_id)

@@ -14,16 +14,16 @@ from __future__ import annotations
 import hashlib
 import json
 import random
-from collections import Counter, defaultdict
+from collections import Counter
 from pathlib import Path
 
-from envs.core.contamination import find_leaks
+from envs.core import reference_parsers as R
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
 from envs.domains.medical_qa import generate as G
-from envs.domains.medical_qa import reference as R
 from envs.domains.medical_qa.data_model import MedicalQADB
 from envs.domains.medical_qa.knowledge import MedicalKnowledge
 
@@ -38,8 +38,10 @@ SPLIT_SIZES = {"validation": 149, "test": 200}
 
 def _fingerprint() -> str:
     h = hashlib.sha256()
-    for name in ("reference.py", "generate.py", "build.py", "knowledge.py", "guideline_questions.json"):
+    for name in ("generate.py", "build.py", "knowledge.py", "guideline_questions.json"):
         h.update((HERE / name).read_bytes())
+    for shared in (R, split_helpers):  # the shared build helpers this build runs
+        h.update(Path(shared.__file__).read_bytes())
     for p in PACKAGES:
         h.update(f"{p}=={SOURCES[p].version}".encode())
     h.update(json.dumps([COUNTS, SPLIT_SIZES, SEED]).encode())
@@ -72,49 +74,6 @@ def generate_tasks(kb: MedicalKnowledge, specs: list[dict]) -> list[dict]:
     return tasks
 
 
-def assign_splits(tasks: list[dict], sizes: dict[str, int], seed: int) -> dict[str, list[str]]:
-    """Stratified by task type, then held-out tasks that near-duplicate a training task are swapped out."""
-    rng = random.Random(seed)
-    by_type: dict[str, list[str]] = defaultdict(list)
-    for t in tasks:
-        by_type[t["description"]["task_type"]].append(t["id"])
-    total = len(tasks)
-    splits: dict[str, list[str]] = {"train": [], "test": [], "validation": []}
-    remaining = dict(sizes)
-    types = sorted(by_type)
-    for i, tt in enumerate(types):
-        ids = sorted(by_type[tt])
-        rng.shuffle(ids)
-        start = 0
-        for split, size in sizes.items():
-            if i == len(types) - 1:
-                take = remaining[split]
-            else:
-                take = min(round(size * len(ids) / total), remaining[split])
-            splits[split] += ids[start:start + take]
-            remaining[split] -= take
-            start += take
-        splits["train"] += ids[start:]
-    objs = {t["id"]: Task.model_validate(t) for t in tasks}
-    for _ in range(20):
-        train = [objs[i] for i in splits["train"]]
-        held = [objs[i] for s in ("test", "validation") for i in splits[s]]
-        leaks = {leak.held_out_id for leak in find_leaks(train, held)}
-        if not leaks:
-            break
-        for split in ("test", "validation"):
-            for tid in [i for i in splits[split] if i in leaks]:
-                tt = objs[tid].description.task_type
-                swap = next((c for c in splits["train"] if objs[c].description.task_type == tt and c not in leaks), None)
-                if swap is None:
-                    continue
-                splits[split][splits[split].index(tid)] = swap
-                splits["train"][splits["train"].index(swap)] = tid
-    else:
-        raise ValueError("medical_qa: could not remove near-duplicate leaks from the held-out splits")
-    return {k: sorted(v) for k, v in splits.items()}
-
-
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     manifest_path = out / "manifest.json"
@@ -142,7 +101,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     tasks = generate_tasks(kb, specs)
     for t in tasks:
         Task.model_validate(t)
-    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    splits = split_helpers.proportional_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
     write_split(out / "split_tasks.json", splits)
     MedicalQADB(reference_versions={"icd10cm": icd["version"], "hpo": hpo["version"],

@@ -21,8 +21,8 @@ from collections import defaultdict
 from typing import Any, Callable
 
 from envs.calculators import CALCULATORS
+from envs.core.reference_parsers import provenance
 from envs.domains.medical_qa.knowledge import MedicalKnowledge, norm
-from envs.domains.medical_qa.reference import provenance
 
 LETTERS = "ABCDE"
 MODES = ["Autosomal dominant inheritance", "Autosomal recessive inheritance", "X-linked recessive inheritance",

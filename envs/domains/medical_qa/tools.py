@@ -11,10 +11,10 @@ import itertools
 import math
 from typing import Any
 
+from envs.core.calculator_tools import calculator_method
 from envs.core.common_tools import BaseDomainTools
 from envs.core.fuzzy import names_starting_with
 from envs.core.tools import ToolError, ToolType, is_tool
-from envs.domains.medical_qa.calculator_tools import calculator_method
 from envs.domains.medical_qa.data_model import EvidenceNote, MedicalQADB
 from envs.domains.medical_qa.knowledge import ICD_CODE, MedicalKnowledge, norm, words
 

@@ -15,13 +15,13 @@ import json
 from collections import Counter
 from pathlib import Path
 
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
 from envs.domains.obstetrics import generate as G
 from envs.domains.obstetrics.data_model import DrugInteraction, ObstetricDrug, ObstetricsDB, Patient
-from envs.domains.psychiatry.build import assign_splits
 
 HERE = Path(__file__).parent
 NAME = "obstetrics"
@@ -34,6 +34,7 @@ def _fingerprint() -> str:
     h = hashlib.sha256()
     for name in ("build.py", "generate.py", "ctg.py", "rules.py", "data_model.py", "formulary.json", "patients_authored.json"):
         h.update((HERE / name).read_bytes())
+    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
     for p in PACKAGES:
         h.update(f"{p}=={SOURCES[p].version}".encode())
     return h.hexdigest()
@@ -77,7 +78,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     db.dump(out / "db.json")
     for t in tasks:
         Task.model_validate(t)
-    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
     write_split(out / "split_tasks.json", splits)
     summary = {"patients": len(all_patients), "tasks": len(tasks),

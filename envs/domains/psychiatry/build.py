@@ -13,16 +13,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-import random
-from collections import Counter, defaultdict
+from collections import Counter
 from pathlib import Path
 
-from envs.core.contamination import find_leaks
+from envs.core import reference_parsers as R
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
-from envs.domains.medical_qa import reference as R
 from envs.domains.psychiatry import generate as G
 from envs.domains.psychiatry.data_model import FormularyDrug, InteractionRule, Patient, PsychiatryDB
 
@@ -38,54 +37,11 @@ def _fingerprint() -> str:
     for name in ("build.py", "generate.py", "instruments.py", "data_model.py", "formulary.json", "interaction_rules.json",
                  "patients_authored.json"):
         h.update((HERE / name).read_bytes())
-    h.update((HERE.parent / "medical_qa" / "reference.py").read_bytes())
+    for shared in (R, split_helpers):  # the shared build helpers this build runs
+        h.update(Path(shared.__file__).read_bytes())
     for p in PACKAGES:
         h.update(f"{p}=={SOURCES[p].version}".encode())
     return h.hexdigest()
-
-
-def assign_splits(tasks: list[dict], sizes: dict[str, int], seed: int) -> dict[str, list[str]]:
-    """Stratified by task type; held-out tasks that near-duplicate a training task are swapped into train."""
-    rng = random.Random(seed)
-    by_type: dict[str, list[str]] = defaultdict(list)
-    for t in tasks:
-        by_type[t["description"]["task_type"]].append(t["id"])
-    splits: dict[str, list[str]] = {"train": [], "test": [], "validation": []}
-    order = sorted(by_type)
-    quota = {s: n for s, n in sizes.items()}
-    pools = {tt: sorted(ids) for tt, ids in by_type.items()}
-    for ids in pools.values():
-        rng.shuffle(ids)
-    # Round-robin over types so every held-out split covers every type.
-    for split in ("validation", "test"):
-        k = 0
-        while quota[split] > 0 and any(pools.values()):
-            tt = order[k % len(order)]
-            k += 1
-            if pools[tt] and len(pools[tt]) > 2:
-                splits[split].append(pools[tt].pop())
-                quota[split] -= 1
-            if k > 10000:
-                break
-    for ids in pools.values():
-        splits["train"] += ids
-    objs = {t["id"]: Task.model_validate(t) for t in tasks}
-    for _ in range(20):
-        train = [objs[i] for i in splits["train"]]
-        held = [objs[i] for s in ("test", "validation") for i in splits[s]]
-        leaks = {leak.held_out_id for leak in find_leaks(train, held)}
-        if not leaks:
-            break
-        for split in ("test", "validation"):
-            for tid in [i for i in splits[split] if i in leaks]:
-                tt = objs[tid].description.task_type
-                swap = next((c for c in splits["train"] if objs[c].description.task_type == tt and c not in leaks), None)
-                if swap is not None:
-                    splits[split][splits[split].index(tid)] = swap
-                    splits["train"][splits["train"].index(swap)] = tid
-    else:
-        raise ValueError("psychiatry: could not remove near-duplicate leaks from the held-out splits")
-    return {k: sorted(v) for k, v in splits.items()}
 
 
 def build(offline: bool = False, force: bool = False) -> dict:
@@ -119,7 +75,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     db.dump(out / "db.json")
     for t in tasks:
         Task.model_validate(t)
-    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
     write_split(out / "split_tasks.json", splits)
     summary = {"patients": len(all_patients), "tasks": len(tasks),

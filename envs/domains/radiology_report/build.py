@@ -15,10 +15,10 @@ import json
 from collections import Counter
 from pathlib import Path
 
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
-from envs.domains.psychiatry.build import assign_splits
 from envs.domains.radiology_report import generate as G
 from envs.domains.radiology_report.data_model import RadiologyDB, ReportTemplate, Study
 from envs.domains.radiology_report.tools import RadiologyTools
@@ -33,6 +33,7 @@ def _fingerprint() -> str:
     h = hashlib.sha256()
     for name in ("build.py", "generate.py", "tools.py", "data_model.py", "templates.json", "studies_authored.json", "tasks.json"):
         h.update((HERE / name).read_bytes())
+    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
     return h.hexdigest()
 
 
@@ -68,7 +69,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
             t["evaluation_criteria"]["expected_db_hash"] = expected_hash(db, t)
             t["evaluation_criteria"]["reward_basis"] = [*t["evaluation_criteria"]["reward_basis"], "DB"]
         Task.model_validate(t)
-    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
     write_split(out / "split_tasks.json", splits)
     summary = {"studies": len(all_studies), "tasks": len(tasks),

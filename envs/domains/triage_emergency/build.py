@@ -12,6 +12,7 @@ import hashlib
 import json
 from pathlib import Path
 
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import dump_tasks, load_tasks
@@ -29,14 +30,12 @@ VALIDATION = {"handbook": 5, "vignette": 4, "calculator": 7}  # + 4 authored in 
 def _stamp() -> str:
     h = hashlib.sha256(f"medeval-harness=={SOURCES['medeval-harness'].version};v1".encode())
     for path in [HERE / "authored" / "patients.json", HERE / "tasks.json", HERE / "split_tasks.json",
-                 HERE / "generate.py", HERE / "build.py"]:
+                 HERE / "generate.py", HERE / "build.py", Path(split_helpers.__file__)]:
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
 
 
 def build(offline: bool = False, force: bool = False) -> dict:
-    from envs.domains.clinical_diagnosis.generate import assign_splits
-
     out_dir = domain_build_dir(NAME)
     stamp = _stamp()
     stamp_file = out_dir / "build_stamp.txt"
@@ -71,7 +70,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
         groups[group] = kept
         tasks += kept
     dump_tasks(tasks, out_dir / "tasks.json")
-    splits = assign_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=37)
+    splits = split_helpers.grouped_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=37)
     write_split(out_dir / "split_tasks.json", splits)
     stamp_file.write_text(stamp)
     return {"patients": len(patients), "handbook_cases": len(cases), **{f"tasks_{g}": len(v) for g, v in groups.items()},

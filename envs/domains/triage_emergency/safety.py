@@ -1,11 +1,11 @@
 """`SafetyContext` of the triage domain: the ED patients' allergies, home medications and the
 medications given at triage, and their history; drug facts from the shared drug reference
-(`envs/domains/clinical_diagnosis/safety.py`: the authored formulary, then the drug-interaction
+(`envs/domains/drug_reference.py`: the authored formulary, then the drug-interaction
 database, then the reward's lexicon)."""
 
 from __future__ import annotations
 
-from envs.domains.clinical_diagnosis.safety import RecordSafetyContext, pregnant_in
+from envs.domains.drug_reference import RecordSafetyContext, pregnant_in
 
 
 class TriageSafetyContext(RecordSafetyContext):

@@ -526,7 +526,7 @@ class TriageTools(BaseDomainTools):
             route: oral, sublingual, intravenous, intramuscular, subcutaneous, inhaled or intranasal.
             indication: Why it is given, e.g. "suspected acute coronary syndrome".
         """
-        from envs.domains.clinical_diagnosis.safety import drug_reference
+        from envs.domains.drug_reference import drug_reference
 
         p = self._patient(patient_id)
         reference = drug_reference()

@@ -16,10 +16,10 @@ import shutil
 from collections import Counter
 from pathlib import Path
 
+from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
-from envs.domains.psychiatry.build import assign_splits
 from envs.domains.visual_diagnosis import generate as G
 from envs.domains.visual_diagnosis.data_model import ImagingSign, Study, VisualDB
 
@@ -33,6 +33,7 @@ def _fingerprint() -> str:
     h = hashlib.sha256()
     for name in ("build.py", "generate.py", "render.py", "analysis.py", "png.py", "data_model.py", "signs.json", "authored.py"):
         h.update((HERE / name).read_bytes())
+    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
     return h.hexdigest()
 
 
@@ -58,7 +59,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     VisualDB(studies=all_studies, archive=archive, signs=signs).dump(out / "db.json")
     for t in [*tasks, *a_tasks]:
         Task.model_validate(t)
-    splits = assign_splits(tasks, SPLIT_SIZES, SEED)
+    splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     ids = [t["id"] for t in a_tasks]
     splits["train"] = sorted(splits["train"] + [i for k, i in enumerate(ids) if k % 3 != 1])
     splits["test"] = sorted(splits["test"] + [i for k, i in enumerate(ids) if k % 3 == 1])
