@@ -12,7 +12,8 @@ answer, its successful tool calls rendered as "check drug interactions drug x", 
 calls returned (JSON results flattened to one line per object, text split into sentences: what
 the agent established with its tools):
   recall = share of the criterion's keywords in the evidence, a number weighing 3 ("ESI level 2"
-           is not met by "esi_level 3"); keywords are stemmed content words in the canonical
+           is not met by "esi_level 3"), or of the keywords outside its parentheses if higher (a
+           gloss such as "(or equivalent tests)" elaborates); keywords are stemmed content words in the canonical
            wording of `equivalence.canonical` ("ECG" = "electrocardiogram", "6-12 months" =
            "6 to 12 months")
   keyword = clip((recall - 0.2) / (0.7 - 0.2))
@@ -138,7 +139,10 @@ class RuleGrader:
                 # "recommends avoiding NSAIDs" is
                 plain_only = not has_negation(positive)
                 pool = plain_tokens if plain_only else all_tokens
-                recall = _weighted_recall(words, pool)
+                # a parenthesised gloss ("(or equivalent confirmatory tests)", "(shock index > 1)")
+                # elaborates the requirement: meeting the main clause is enough
+                main = [w for w in _keyword_tokens([_PAREN.sub(" ", positive)]) if w not in _FILLER]
+                recall = max(_weighted_recall(words, pool), _weighted_recall(main, pool) if main else 0.0)
                 keyword = clip01((recall - KEYWORD_FLOOR) / (KEYWORD_FULL - KEYWORD_FLOOR))
                 if sims is not None:
                     row = sims[i, plain_idx] if plain_only else sims[i]
@@ -167,6 +171,7 @@ def _weighted_recall(words: list[str], pool: set[str]) -> float:
 
 
 NUMBER_WEIGHT = 3.0
+_PAREN = re.compile(r"\([^()]*\)")
 #: Keyword recall at or below the floor scores 0, at or above `KEYWORD_FULL` scores 1.
 KEYWORD_FLOOR, KEYWORD_FULL = 0.2, 0.7
 _MAX_EVIDENCE = 600

@@ -48,6 +48,8 @@ _SPELLING: list[tuple[str, str]] = [
     (r"\bfine[\s\-]+needle\b", "fine needle"), (r"\bti[\s\-]?rads\b", "tirads"), (r"\bx[\s\-]ray\b", "xray"),
     (r"\bunfavourable\b", "unfavorable"), (r"\bfavourable\b", "favorable"),
     (r"\bcritically\s+(high|low)\b", r"critical \1"),
+    (r"\bicd[\s\-]?10(?:[\s\-]?cm)?\b", "icd10"),                       # ICD-10-CM, ICD-10, icd10
+    (r"\b12[\s\-]*leads?\s+(ecg|ekg|electrocardiogram)\b", r"\1"),       # a standard ECG has 12 leads
 ]
 
 #: Abbreviations expanded to the words guidelines use (whole words, case-insensitive).

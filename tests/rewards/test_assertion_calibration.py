@@ -74,8 +74,10 @@ def test_numbers_in_a_criterion_must_match():
 
 
 def test_abbreviations_and_their_expansion_are_one_keyword():
-    task = _task("The agent obtains a 12-lead ECG.")
-    replay = episode(task, turn(call("order_electrocardiogram", {"patient_id": "P5", "leads": 12})), answer="A")
+    # "12-lead ECG" and "ECG" both read "electrocardiogram" (a standard ECG has 12 leads): keywords
+    # order, electrocardiogram, both in "order electrocardiogram ..." -> 1.0
+    task = _task("The agent orders a 12-lead ECG.")
+    replay = episode(task, turn(call("order_ecg", {"patient_id": "P5"})), answer="A")
     assert _scores(replay, task) == [1.0]
 
 
@@ -121,3 +123,11 @@ def test_gold_replays_score_above_other_episodes_on_a_sample():
     assert statistics.mean(gold) >= statistics.mean(r["other"] for r in rows) + 0.15
     assert statistics.mean(gold) >= statistics.mean(r["no_tools"] for r in rows) + 0.3
     assert all(r["gold"] >= r["no_tools"] for r in rows)
+
+
+def test_a_parenthesised_gloss_is_optional():
+    task = _task("The agent orders a CK (or equivalent confirmatory tests).")
+    replay = episode(task, turn(call("order_lab", {"patient_id": "P5", "test": "ck"})), answer="A")
+    # all keywords: order, ck, equivalent, confirmatory, test -> 2/5 = 0.4 -> (0.4 - 0.2) / 0.5 = 0.4;
+    # outside the parentheses: order, ck -> 2/2 -> 1.0, the higher one counts
+    assert _scores(replay, task) == [1.0]
