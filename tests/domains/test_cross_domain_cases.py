@@ -134,3 +134,13 @@ def test_a_missing_case_file_is_named(tmp_path):
     (folder / "diabetic.yaml").unlink()
     with pytest.raises(DataFileError, match=r"diabetic\.yaml: case file not found"):
         authoring.load_cases(folder)
+
+
+def test_every_pathway_task_names_its_guideline_in_provenance():
+    from envs.domains.cross_domain import environment as cross
+
+    pathways = cross.load_pathways.__wrapped__(cross.PATHWAY_FILE)  # the committed file, not a cached copy
+    by_id = {case.id: case for _, case in authoring.load_cases()}
+    for pathway_id, pathway in pathways.items():
+        task = cross.pathway_task(pathway)
+        assert task.description.provenance["guideline"] == by_id[pathway_id].guideline, pathway_id

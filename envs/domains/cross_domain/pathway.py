@@ -40,6 +40,8 @@ class Pathway(BaseModel):
     model_config = ConfigDict(extra="forbid")
     id: str
     title: str
+    # The published guideline(s) or label(s) the pathway's decisions follow (the task's provenance).
+    guideline: str = ""
     presentation: str
     patient_id: str
     patients: dict[str, dict[str, Any]] = Field(default_factory=dict)  # domain -> record for add_patient

@@ -179,7 +179,7 @@ def pathway(case: Case, title: str) -> dict[str, Any]:
     if records.drug_interaction:
         patients["drug_interaction"] = pharmacy_record(person, records.drug_interaction, inpatient)
     return {
-        "id": case.id, "title": title, "presentation": case.presentation, "patient_id": person.patient_id,
+        "id": case.id, "title": title, "guideline": case.guideline, "presentation": case.presentation, "patient_id": person.patient_id,
         "patients": patients, "phases": [phase(p) for p in case.phases],
         "final_question": case.final_question, "final_answer": case.final_answer,
         "answer_aliases": list(case.answer_aliases), "emergency": case.emergency,
