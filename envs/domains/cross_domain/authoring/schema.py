@@ -57,9 +57,8 @@ class Person(StrictModel):
     creatinine_mg_dl: Number = 0.9
 
 
-class Vitals(StrictModel):
-    """One set of observations in the triage shape; the diagnostic chart shows the same row without
-    GCS and AVPU."""
+class Observations(StrictModel):
+    """The observations every vital-sign row has, in the order the records list them."""
 
     time: str
     heart_rate: Number
@@ -68,6 +67,12 @@ class Vitals(StrictModel):
     respiratory_rate: Number
     temperature_c: Number
     spo2: Number
+
+
+class Vitals(Observations):
+    """One set of observations in the triage shape; the diagnostic chart shows the same row without
+    GCS and AVPU."""
+
     on_supplemental_oxygen: bool = False
     gcs_eye: int | None = None
     gcs_verbal: int | None = None
@@ -143,16 +148,9 @@ class PharmacyRecord(StrictModel):
     notes: str = ""
 
 
-class EHRVitals(StrictModel):
+class EHRVitals(Observations):
     """A charted observation; the mean arterial pressure is computed from the blood pressure."""
 
-    time: str
-    heart_rate: Number
-    systolic_bp: Number
-    diastolic_bp: Number
-    respiratory_rate: Number
-    temperature_c: Number
-    spo2: Number
     gcs: int = Field(default=15, ge=3, le=15)
     fio2: Number | None = None
     urine_output_ml: Number | None = None
