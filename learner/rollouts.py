@@ -60,14 +60,20 @@ class Rollouts:
                     on_accepted: Callable[[Group], None] | None = None) -> Group:
         """Roll out group `seq`, score it, and call `on_accepted` (teacher submission) if it is kept.
 
-        Never raises: a lost env actor or an over-long prompt marks the group failed; any other
-        error is kept in `group.error` and surfaced by the consumer with its group.
+        Never raises: a lost env actor, an over-long prompt or an episode ended by an env error
+        (`metadata["env_error"]`, see actors/env_actor.py) marks the group failed (dropped and
+        logged); any other error is kept in `group.error` and surfaced by the consumer with its group.
         """
         cfg = self.cfg
         group = Group(seq=seq, task=task, admit_version=version)
         try:
             samples = await self.episodes(episode_specs(cfg.seed, seq, task, version, cfg.rollout.group_size),
                                           self.ledger)
+            broken = [s.metadata["env_error"] for s in samples if s.metadata.get("env_error")]
+            if broken:  # an env bug ended these episodes unscored: drop the group, do not train on it
+                group.failed = f"env_error in {len(broken)} of {len(samples)} episodes: {broken[0]}"
+                group.completed_at = time.perf_counter()
+                return group
             for s in samples:
                 s.correct = is_correct(s, cfg)
                 s.reward = shape_reward(s, cfg)

@@ -160,3 +160,35 @@ def test_finish_after_the_episode_ended_returns_an_env_error(ray_cluster):
     finally:
         ray.kill(actor)
     assert pong["env_errors"] == 1 and pong["active"] == 1
+
+
+def test_a_group_with_an_env_error_is_dropped_not_trained_on(ray_cluster, ward_policy_dir, tmp_path):
+    """Training side: a group in which an env error ended an episode is marked failed (the batching
+    consumer drops and logs it) instead of training on its unscored reward 0 or stopping the run."""
+    from learner.config import RunConfig
+    from learner.model import load_tokenizer
+    from learner.rollouts import Rollouts
+    from learner.tasks import TaskRef
+
+    tokenizer = load_tokenizer(ward_policy_dir)
+    limits = RolloutLimits(max_turns=5)
+    actions = {t.id: gold_turn_actions(t, limits.max_turns) for t in ward.get_tasks(None)}
+    actions["ward_choice"] = [CRASH]
+    cfg = RunConfig.model_validate({"rollout": {"group_size": 2}})
+
+    async def go():
+        pool = EnvPool(1, 4, limits.max_turns, domain_modules=DOMAINS, max_restarts=0, env_vars=NO_EMBEDDINGS)
+        await pool.ready()
+        rollouts = Rollouts(cfg, AgentLoop(tokenizer, limits), pool, GoldReplayPolicy(tokenizer, actions), tmp_path,
+                            log=lambda _: None)
+        broken = await rollouts.group(0, TaskRef("ward_faulty", "ward_choice", None), 0)
+        healthy = await rollouts.group(1, TaskRef("ward_faulty", "ward_dose", None), 0)
+        for actor in pool.actors:
+            ray_cluster.kill(actor)
+        return broken, healthy, rollouts.ledger.balance()
+
+    broken, healthy, balance = asyncio.run(go())
+    assert broken.failed.startswith("env_error in 2 of 2 episodes: env actor 0: step of episode")
+    assert broken.error is None and not broken.samples
+    assert not healthy.failed and len(healthy.samples) == 2 and all(s.correct for s in healthy.samples)
+    assert balance["completed"] == 4 and balance["failed"] == 0
