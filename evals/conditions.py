@@ -88,6 +88,8 @@ def _apply_final(outcome: EpisodeOutcome, final: dict[str, Any]) -> None:
     outcome.safety_violations = dict(final.get("safety_violations") or {})
     if outcome.correct is None:
         outcome.correct = bool(final.get("is_correct", False))
+    if final.get("env_error"):  # an env actor ended the episode unscored (a toolkit/scorer bug)
+        outcome.error_kind, outcome.extra["env_error"] = "env_error", final["env_error"]
 
 
 async def _submit(env, answer: str) -> tuple[dict[str, Any], bool]:

@@ -192,3 +192,16 @@ def test_a_group_with_an_env_error_is_dropped_not_trained_on(ray_cluster, ward_p
     assert broken.error is None and not broken.samples
     assert not healthy.failed and len(healthy.samples) == 2 and all(s.correct for s in healthy.samples)
     assert balance["completed"] == 4 and balance["failed"] == 0
+
+
+def test_an_eval_episode_ended_by_an_env_error_says_so():
+    from evals.conditions import EpisodeOutcome, _apply_final
+
+    outcome = EpisodeOutcome(end_reason="turn_limit")
+    _apply_final(outcome, {"reward": 0.0, "reward_components": {}, "is_correct": False,
+                           "env_error": "env actor 0: step of episode 'k' (ward_faulty/ward_choice) failed: RuntimeError: x"})
+    assert outcome.error_kind == "env_error" and "RuntimeError: x" in outcome.extra["env_error"]
+    assert outcome.reward == 0.0 and outcome.correct is False
+    plain = EpisodeOutcome(end_reason="answer")
+    _apply_final(plain, {"reward": 1.0, "is_correct": True})
+    assert plain.error_kind is None and "env_error" not in plain.extra
