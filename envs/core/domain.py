@@ -11,6 +11,7 @@ then shared tools) and an optional safety context used by the reward.
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -167,6 +168,12 @@ class BuiltDomain:
                     db.reference_hash()  # computed once, shared by every fork
                 self._template = (path, stamp, db)
             return self._template[2]
+
+    def episode_db(self) -> DB:
+        """A fresh database for one episode: a fork of the parsed template where the database
+        class forks (shared reference tables, copied state), else a full copy of it."""
+        template = self.template()
+        return template.fork() if hasattr(template, "fork") else copy.deepcopy(template)
 
     def policy(self) -> str:
         if self._policy is None:

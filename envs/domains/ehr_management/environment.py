@@ -10,23 +10,26 @@ are readable through the tools without entering the episode state (see `EHRTools
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 from envs.core.db import DataFileError
-from envs.core.domain import DomainEnvironment, DomainTaskStore, read_policy
+from envs.core.domain import BuiltDomain, DomainEnvironment
 from envs.core.paths import domain_build_dir
 from envs.core.shared import shared_toolkits
 from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
-from .data_model import EHRPatient
+from .data_model import EHRDB, EHRPatient
 from .safety import EHRSafetyContext
 from .store import PatientStore, patient_store
 from .tools import EHRTools
 
 NAME = "ehr_management"
-HERE = Path(__file__).parent
+# Policy, tasks and splits; the episode database comes from the indexed `PatientStore` instead of
+# `DOMAIN.episode_db()` (a full copy of ~2,700 charts per episode would dominate reset).
+DOMAIN = BuiltDomain(NAME, Path(__file__).parent, EHRDB)
+get_tasks = DOMAIN.get_tasks
+get_splits = DOMAIN.get_splits
 #: Where an imported task carries its patient record (an `EHRPatient` as a dict).
 IMPORTED_PATIENT_KEY = "ehr_patient"
 
@@ -37,14 +40,6 @@ def database_path() -> Path:
 
 def store() -> PatientStore:
     return patient_store(database_path())
-
-
-@lru_cache(maxsize=1)
-def _policy() -> str:
-    return read_policy(HERE)
-
-
-_STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
 
 
 def task_patient(task: Task) -> EHRPatient | None:
@@ -78,13 +73,5 @@ def get_environment() -> DomainEnvironment:
     records = store()
     tools = EHRTools(records.empty_db(), records)
     toolkit = CompositeToolkit(tools, *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit, on_reset=open_chart,
+    return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit, on_reset=open_chart,
                              safety_context=EHRSafetyContext(tools.chart), extras={"ehr_tools": tools})
-
-
-def get_tasks(split: str | None = None) -> list[Task]:
-    return _STORE.tasks(split)
-
-
-def get_splits() -> dict[str, list[str]]:
-    return _STORE.splits()

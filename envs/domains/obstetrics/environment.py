@@ -23,7 +23,7 @@ get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    tools = ObstetricsTools(DOMAIN.template().fork())
+    tools = ObstetricsTools(DOMAIN.episode_db())
     toolkit = CompositeToolkit(tools, *shared_toolkits())
     return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit,
                              safety_context=ObstetricsSafetyContext(lambda: tools.db))

@@ -23,7 +23,7 @@ get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    tools = PsychiatryTools(DOMAIN.template().fork())
+    tools = PsychiatryTools(DOMAIN.episode_db())
     toolkit = CompositeToolkit(tools, *shared_toolkits())
     return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit,
                              safety_context=PsychiatrySafetyContext(lambda: tools.db))

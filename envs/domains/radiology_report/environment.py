@@ -22,6 +22,6 @@ get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    tools = RadiologyTools(DOMAIN.template().fork())
+    tools = RadiologyTools(DOMAIN.episode_db())
     toolkit = CompositeToolkit(tools, *shared_toolkits())
     return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit)

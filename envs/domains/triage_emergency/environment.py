@@ -1,15 +1,14 @@
-"""Entry point of the triage and emergency domain: a fresh database and toolkit per episode."""
+"""Entry point of the triage and emergency domain: `get_environment()`, `get_tasks(split)`, `get_splits()`.
+
+The built database is parsed once per process (`BuiltDomain`); every episode gets its own copy.
+"""
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
-from envs.core.db import DataFileError
-from envs.core.domain import DomainEnvironment, DomainTaskStore, read_policy
-from envs.core.paths import domain_build_dir
+from envs.core.domain import BuiltDomain, DomainEnvironment
 from envs.core.shared import shared_toolkits
-from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 
 from .data_model import TriageDB
@@ -17,36 +16,13 @@ from .safety import TriageSafetyContext
 from .tools import TriageTools
 
 NAME = "triage_emergency"
-HERE = Path(__file__).parent
-
-
-@lru_cache(maxsize=1)
-def _db_json() -> str:
-    path = domain_build_dir(NAME) / "db.json"
-    if not path.exists():
-        raise DataFileError(f"{path}: database not built (run `hcgym data build {NAME}`)")
-    return path.read_text(encoding="utf-8")
-
-
-@lru_cache(maxsize=1)
-def _policy() -> str:
-    return read_policy(HERE)
-
-
-_STORE = DomainTaskStore(NAME, HERE, domain_build_dir(NAME))
+DOMAIN = BuiltDomain(NAME, Path(__file__).parent, TriageDB)
+get_tasks = DOMAIN.get_tasks
+get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    db = TriageDB.model_validate_json(_db_json())
-    tools = TriageTools(db)
+    tools = TriageTools(DOMAIN.episode_db())
     toolkit = CompositeToolkit(tools, *shared_toolkits())
-    return DomainEnvironment(name=NAME, policy=_policy(), toolkit=toolkit,
+    return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit,
                              safety_context=TriageSafetyContext(lambda: tools.db))
-
-
-def get_tasks(split: str | None = None) -> list[Task]:
-    return _STORE.tasks(split)
-
-
-def get_splits() -> dict[str, list[str]]:
-    return _STORE.splits()

@@ -23,6 +23,6 @@ get_splits = DOMAIN.get_splits
 
 
 def get_environment() -> DomainEnvironment:
-    tools = VisualTools(DOMAIN.template().fork(), domain_build_dir(NAME))
+    tools = VisualTools(DOMAIN.episode_db(), domain_build_dir(NAME))
     toolkit = CompositeToolkit(tools, *shared_toolkits())
     return DomainEnvironment(name=NAME, policy=DOMAIN.policy(), toolkit=toolkit)
