@@ -100,10 +100,12 @@ class FuzzyIndex:
         if not isinstance(word, str):
             raise TypeError(f"word must be a str, got {type(word).__name__}")
         best: list[tuple[float, str]] = []  # a min-heap of the n best (ratio, name) so far
+        rows, bounds = self.candidates(word, cutoff)
+        if not len(rows):  # e.g. a 100,000-character "name": nothing can match, nothing more to build
+            return []
         matcher = difflib.SequenceMatcher()
         matcher.set_seq2(word)  # difflib's side too: the query is the indexed sequence b
         lcs = _LcsBound(word)
-        rows, bounds = self.candidates(word, cutoff)
         for row, bound in zip(rows.tolist(), bounds.tolist()):
             # Candidates come best bound first: once the bound is below the n-th best ratio found,
             # no later name can enter the top n (ratio <= bound).
