@@ -324,11 +324,11 @@ class AgentLoop:
             sample_id=spec.sample_id, task_id=spec.task_id, domain=spec.domain, group_id=spec.group_id,
             seed=spec.seed, prompt_length=prompt_length, input_ids=ids, loss_mask=mask,
             sampling_logprobs=logprobs, policy_versions=versions, turns=turns,
+            env_reward=float(final["reward"]), env_correct=bool(final["is_correct"]),
             reward=float(final["reward"]), reward_components=dict(final["reward_components"]),
             correct=bool(final["is_correct"]), truncated=bool(truncation), num_tool_calls=num_tool_calls,
             response_tokens=response_tokens, episode=final.get("episode"),
-            metadata={"truncation": truncation, "env_reward": float(final["reward"]),
-                      "is_correct": bool(final["is_correct"]), "num_turns": len(turns),
+            metadata={"truncation": truncation, "num_turns": len(turns),
                       "group_index": spec.group_index, "split": spec.split, **timings,
                       **({"env_error": final["env_error"]} if final.get("env_error") else {})},
         )

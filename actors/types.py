@@ -39,9 +39,14 @@ class RolloutSample(BaseModel):
     sampling_logprobs: list[float]         # generator log-prob per position (0.0 where mask is 0)
     policy_versions: list[int]             # policy version that sampled each position (-1 where mask 0)
     turns: list[TurnSpan] = Field(default_factory=list)
-    reward: float = 0.0                    # the RL reward (5D total or cosine length reward)
+    # What the env said, set once by the agent loop from the episode's final info:
+    env_reward: float = 0.0                # the env's 5D total
+    env_correct: bool = False              # the env's grader: the task's accuracy criterion met
     reward_components: dict[str, float] = Field(default_factory=dict)
-    correct: bool = False                  # outcome used for hints and dynamic sampling
+    # What training uses, set by `learner.batching.score_sample` from the run's reward config (the
+    # agent loop starts them at the env's values, which is what they stay outside training):
+    reward: float = 0.0                    # the RL reward (5D total or cosine length reward)
+    correct: bool = False                  # outcome used for hints, dynamic sampling and accuracy
     truncated: bool = False                # episode hit a turn or token limit
     num_tool_calls: int = 0
     response_tokens: int = 0               # assistant tokens over all turns (the L of Eq. 4)

@@ -197,8 +197,8 @@ def correct_rule() -> Callable[[dict[str, Any]], bool]:
 
     def rule(result: dict[str, Any]) -> bool:
         sample = SimpleNamespace(reward=result["total"], correct=result["is_correct"],
-                                 reward_components=result["components"],
-                                 metadata={"env_reward": result["total"], "is_correct": result["is_correct"]})
+                                 env_reward=result["total"], env_correct=result["is_correct"],
+                                 reward_components=result["components"], metadata={})
         return bool(is_correct(sample, cfg))
 
     rule.name = f"correct_if={cfg.reward.correct_if}"  # type: ignore[attr-defined]

@@ -40,7 +40,7 @@ def is_correct(sample: RolloutSample, cfg: RunConfig) -> bool:
     """
     rule = cfg.reward.correct_if
     if rule == "is_correct":
-        return bool(sample.metadata.get("is_correct", sample.correct))
+        return bool(sample.env_correct)
     accuracy = sample.reward_components.get("accuracy")
     return accuracy is not None and float(accuracy) >= cfg.reward.accuracy_threshold
 
@@ -48,14 +48,22 @@ def is_correct(sample: RolloutSample, cfg: RunConfig) -> bool:
 def shape_reward(sample: RolloutSample, cfg: RunConfig) -> float:
     """The RL reward: the env's 5D total, or the cosine length reward of Eq. 4."""
     if cfg.reward.kind == "total":
-        return float(sample.metadata.get("env_reward", sample.reward))
+        return float(sample.env_reward)
     from envs.rewards import cosine_length_reward
 
     return float(cosine_length_reward(
-        sample.correct, sample.response_tokens, cfg.cosine_max_length,
+        is_correct(sample, cfg), sample.response_tokens, cfg.cosine_max_length,
         truncated=sample.metadata.get("truncation") in cfg.reward.penalize,
         r_max=cfg.reward.r_max, r_min=cfg.reward.r_min, r_penalty=cfg.reward.r_penalty,
     ))
+
+
+def score_sample(sample: RolloutSample, cfg: RunConfig) -> RolloutSample:
+    """Set the sample's training outcome and RL reward from the env's verdict and the run's reward
+    config: the one place `sample.correct` and `sample.reward` are decided for training."""
+    sample.correct = is_correct(sample, cfg)
+    sample.reward = shape_reward(sample, cfg)
+    return sample
 
 
 def mixed_outcomes(samples: list[RolloutSample], cfg: RunConfig) -> bool:

@@ -18,7 +18,7 @@ from actors.agent_loop import AgentLoop, EpisodeSpec, PromptTooLongError
 from actors.env_actor import EnvActorLost, EnvPool, EpisodeLedger, run_episode
 from actors.generator import GeneratorClient
 from actors.types import RolloutSample
-from learner.batching import Group, is_correct, mixed_outcomes, shape_reward
+from learner.batching import Group, mixed_outcomes, score_sample
 from learner.config import RunConfig
 from learner.metrics import json_record, rollout_metrics, write_samples
 from learner.tasks import TaskRef, episode_specs
@@ -75,8 +75,7 @@ class Rollouts:
                 group.completed_at = time.perf_counter()
                 return group
             for s in samples:
-                s.correct = is_correct(s, cfg)
-                s.reward = shape_reward(s, cfg)
+                score_sample(s, cfg)
                 s.metadata["group_seq"] = seq
                 s.metadata["admit_version"] = version
             group.samples = samples
@@ -104,8 +103,7 @@ class Rollouts:
         self.val_ledger = EpisodeLedger()
         samples = await self.episodes(specs, self.val_ledger)
         for s in samples:
-            s.correct = is_correct(s, cfg)
-            s.reward = shape_reward(s, cfg)
+            score_sample(s, cfg)
         metrics = rollout_metrics(samples, cfg.rollout.max_response_tokens, prefix="val_")
         metrics["val_env_reward_mean"] = metrics.pop("val_env_reward_mean", 0.0)
         metrics["val_time_s"] = time.perf_counter() - t0

@@ -41,7 +41,7 @@ from actors.agent_loop import AgentLoop, RolloutLimits
 from actors.env_actor import EnvPool, register_domains
 from actors.generator import GeneratorClient
 from actors.types import TeacherOutput
-from learner.batching import BatchScheduler, Group, is_correct, mixed_outcomes, shape_reward
+from learner.batching import BatchScheduler, Group, is_correct, mixed_outcomes, score_sample, shape_reward
 from learner.config import RunConfig, dump_config, load_config
 from learner.metrics import MetricsSink, write_samples
 from learner.rollouts import Rollouts
@@ -62,7 +62,7 @@ from learner.teacher_client import TeacherClient
 from learner.weight_publisher import WeightPublisher
 
 __all__ = ["Trainer", "train", "main", "replay_loss", "load_task_refs", "prompt_lengths", "TaskSampler", "TaskRef",
-           "episode_seed", "Group", "is_correct", "shape_reward", "mixed_outcomes"]
+           "episode_seed", "Group", "is_correct", "shape_reward", "score_sample", "mixed_outcomes"]
 
 
 class Trainer:

@@ -20,9 +20,10 @@ def sample(seq: int, i: int, *, correct: bool, reward: float = 0.5, truncation: 
         sample_id=f"t{seq}:{i}:{seq * 10 + i}", task_id=f"t{seq}", domain="ward", group_id=f"g{seq}",
         seed=seq * 10 + i, prompt_length=6, input_ids=ids, loss_mask=mask, sampling_logprobs=[0.0] * len(ids),
         policy_versions=[-1] * 6 + [0] * length, turns=[TurnSpan(start=6, end=6 + length)], reward=reward,
+        env_reward=reward, env_correct=correct,
         reward_components={"accuracy": float(correct), "total": reward}, correct=correct,
         truncated=bool(truncation), response_tokens=length,
-        metadata={"truncation": truncation, "env_reward": reward, "is_correct": correct},
+        metadata={"truncation": truncation},
     )
 
 
