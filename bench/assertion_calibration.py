@@ -79,9 +79,14 @@ def run(domains: list[str], limit: int | None) -> dict:
     rows: list[dict] = []
     replays: dict[str, list[tuple[Task, Trajectory]]] = {}
     started = time.perf_counter()
+    unavailable: dict[str, str] = {}
     for domain in domains:
-        tasks = [t for t in registry.get_tasks(domain) if t.evaluation_criteria.nl_assertions]
-        replays[domain] = [(t, gold_replay(t, domain)[0]) for t in (tasks[:limit] if limit else tasks)]
+        try:
+            tasks = [t for t in registry.get_tasks(domain) if t.evaluation_criteria.nl_assertions]
+            replays[domain] = [(t, gold_replay(t, domain)[0]) for t in (tasks[:limit] if limit else tasks)]
+        except Exception as exc:  # a domain that cannot load here is reported, the others still measured
+            unavailable[domain] = f"{type(exc).__name__}: {exc}"[:200]
+            replays.pop(domain, None)
     replay_s = time.perf_counter() - started
     graders = {"calibrated": RuleGrader(), "baseline_no_observations": RuleGrader(use_observations=False)}
     started = time.perf_counter()
@@ -101,12 +106,13 @@ def run(domains: list[str], limit: int | None) -> dict:
                         row["gold_criteria"] = [(r.text, r.score, r.reason) for r in results]
             rows.append(row)
     grade_s = time.perf_counter() - started
-    return {"rows": rows, "replay_s": round(replay_s, 1), "grade_s": round(grade_s, 1)}
+    return {"rows": rows, "replay_s": round(replay_s, 1), "grade_s": round(grade_s, 1), "unavailable": unavailable}
 
 
 def report(result: dict) -> dict:
     rows = result["rows"]
-    out: dict = {"episodes": len(rows), "replay_s": result["replay_s"], "grade_s": result["grade_s"], "grader": {}}
+    out: dict = {"episodes": len(rows), "replay_s": result["replay_s"], "grade_s": result["grade_s"], "grader": {},
+                 "unavailable_domains": result["unavailable"]}
     for name in ("calibrated", "baseline_no_observations"):
         section: dict = {}
         for scope in ["all", *dict.fromkeys(r["domain"] for r in rows)]:
@@ -151,6 +157,8 @@ def main() -> None:
     out["embeddings"] = embedding_status()
     print(f"embeddings: {out['embeddings']}; {out['episodes']} tasks with NL assertions; "
           f"replays {out['replay_s']} s, grading {out['grade_s']} s")
+    for domain, why in out["unavailable_domains"].items():
+        print(f"domain {domain} not measured: {why}")
     for name, section in out["grader"].items():
         print(f"\n== {name}")
         print(f"{'scope':<20} {'kind':<22} {'n':>4} {'min':>6} {'p10':>6} {'median':>7} {'mean':>6}")
