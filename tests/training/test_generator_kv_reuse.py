@@ -1,4 +1,5 @@
-"""actors/generator.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache).
+"""actors/generator.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache),
+and tokens are drawn by the inverse CDF at per-request uniforms.
 
 Turn t+1 of an episode is turn t's context plus the sampled turn and the tool result; with reuse the
 generator encodes only those new tokens. The sampled tokens and their log-probs must be the ones a
@@ -99,3 +100,32 @@ def test_the_cache_stays_within_its_token_budget():
     assert sum(len(e.token_ids) for e in gen._prefixes.values()) == gen._cached_tokens
     with pytest.raises(ValueError):
         HFGenerator(model_dir, SamplingConfig(), [0], options={"kv_cache_max_tokens": -1})
+
+
+def test_sampling_follows_the_distribution_and_each_requests_seed():
+    """Tokens are drawn by the inverse CDF at per-request uniforms: over many seeds the most probable
+    tokens come up as often as their probability says (3 sigma), and a seed gives the same token in any
+    batch. A low temperature makes the untrained model's distribution peaked enough to test."""
+    from actors.generator import processed_logprobs
+
+    model_dir = tiny_model_dir()
+    tok = load_tokenizer(model_dir)
+    sampling = SamplingConfig(temperature=0.05)
+    gen = HFGenerator(model_dir, sampling, [tok.convert_tokens_to_ids(IM_END)])
+    prompt = _prompt(tok, TICKETS[1])
+    with torch.no_grad():
+        probs = processed_logprobs(gen.model(torch.tensor([prompt])).logits[:, -1], sampling)[0].exp()
+    n = 1200
+    results = []
+    for lo in range(0, n, 300):
+        results += gen.generate([GenerationRequest(request_id=f"s{i}", prompt_ids=prompt, max_new_tokens=1, seed=i)
+                                 for i in range(lo, lo + 300)])
+    drawn = torch.tensor([r.token_ids[0] for r in results])
+    top = torch.topk(probs, 3).indices.tolist()
+    assert probs[top[0]] < 0.9 and probs[top[2]] > 0.03  # several tokens in play, each often drawn
+    for token in top:
+        p = float(probs[token])
+        freq = float((drawn == token).float().mean())
+        assert abs(freq - p) <= 3 * (p * (1 - p) / n) ** 0.5 + 1e-3, (token, freq, p)
+    alone = gen.generate([GenerationRequest(request_id="x", prompt_ids=prompt, max_new_tokens=1, seed=7)])[0]
+    assert alone.token_ids == results[7].token_ids
