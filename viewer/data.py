@@ -178,15 +178,30 @@ def per_turn_kl(sample: dict[str, Any]) -> list[float | None]:
 
 
 @dataclass
-class RunSource:
-    """A training run folder."""
+class _Source:
+    """What both kinds of folder share: an id, a path, and a table of episodes built once."""
 
     id: str
     path: Path
-    kind: str = "run"
-    _index: pa.Table | None = field(default=None, repr=False)
     _facets: dict[str, list[Any]] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def index(self) -> pa.Table:
+        raise NotImplementedError
+
+    def episodes(self, query: EpisodeQuery) -> dict[str, Any]:
+        """One page of the episode table under `query`, with the match count and the filter values."""
+        out = _page(self.index(), query)
+        out["facets"] = self._facets
+        return out
+
+
+@dataclass
+class RunSource(_Source):
+    """A training run folder."""
+
+    kind: str = "run"
+    _index: pa.Table | None = field(default=None, repr=False)
 
     @staticmethod
     def looks_like(path: Path) -> bool:
@@ -250,12 +265,6 @@ class RunSource:
                                                      "safety_max_severity"))
             return self._index
 
-    def episodes(self, query: EpisodeQuery) -> dict[str, Any]:
-        table = self.index()
-        out = _page(table, query)
-        out["facets"] = self._facets
-        return out
-
     def episode(self, file: int, row: int) -> dict[str, Any]:
         files = self.files()
         if not 0 <= file < len(files):
@@ -311,17 +320,13 @@ class RunSource:
 
 
 @dataclass
-class EvalSource:
+class EvalSource(_Source):
     """An evaluation results folder."""
 
-    id: str
-    path: Path
     kind: str = "eval"
     _rows: pa.Table | None = field(default=None, repr=False)
     _results: dict[str, dict[str, Any]] = field(default_factory=dict, repr=False)
-    _facets: dict[str, list[Any]] = field(default_factory=dict, repr=False)
     _summary: dict[str, Any] | None = field(default=None, repr=False)
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     @staticmethod
     def looks_like(path: Path) -> bool:
@@ -360,12 +365,6 @@ class EvalSource:
                 self._facets = _facets(self._rows, ("benchmark", "domain", "end_reason", "error_kinds",
                                                     "safety_max_severity"))
             return self._rows
-
-    def episodes(self, query: EpisodeQuery) -> dict[str, Any]:
-        table = self.index()
-        out = _page(table, query)
-        out["facets"] = self._facets
-        return out
 
     def summary(self) -> dict[str, Any]:
         with self._lock:
