@@ -18,6 +18,16 @@ method raise anyway (a bug in a domain's toolkit or scorer), `EnvActor.step` / `
 episode as truncated with reward 0 and `final["env_error"]` naming the failure, instead of raising
 into the agent loop, which would fail the episode's whole group. The actor keeps serving (a Python
 exception never kills it) and does not reuse that episode's env.
+
+Batched calls. By default (`EnvPool(batch_calls=True)`) an episode's calls do not each cost an
+actor round trip: `RemoteEnv` hands them to the pool's `_ActorBatcher` for its actor, which sends
+every call queued for that actor in one `EnvActor.batch` call (calls queued in the same event-loop
+tick always travel together, so `asyncio.gather` over many episodes coalesces at no added latency;
+at most `max_batches_in_flight` batches per actor are outstanding, and calls arriving meanwhile wait
+for the next one). The actor runs the calls in order and answers each one separately: every call's
+arguments and result are pickled on their own, so an exception, a bad argument or an unpicklable
+result fails only that call's episode, never the batch (`EnvActor.batch`). A batch lost with its
+actor fails each of its calls with `EnvActorLost`, as single calls would.
 """
 
 from __future__ import annotations
@@ -25,6 +35,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import pickle
 import uuid
 from dataclasses import dataclass, field
 from typing import Any
@@ -74,12 +85,14 @@ class EnvActor:
         self._idle: dict[tuple[str, str | None], list[Any]] = {}
         self.episodes_started = 0
         self.env_errors = 0  # episodes ended because their env raised (see `step`)
+        self.batches = 0  # `batch` calls served, and the calls they carried
+        self.batched_calls = 0
         self._broken: set[str] = set()
 
     def ping(self) -> dict[str, Any]:
         return {"actor_index": self.actor_index, "pid": os.getpid(), "incarnation": self.incarnation,
                 "active": len(self._active), "episodes_started": self.episodes_started,
-                "env_errors": self.env_errors}
+                "env_errors": self.env_errors, "batches": self.batches, "batched_calls": self.batched_calls}
 
     def _env_for(self, domain: str, split: str | None):
         idle = self._idle.setdefault((domain, split), [])
@@ -154,6 +167,43 @@ class EnvActor:
             self._idle.setdefault(where, []).append(env)
         self._broken.discard(key)
 
+    def batch(self, calls: list[bytes]) -> list[tuple[bool, bytes]]:
+        """Run several episodes' calls in one actor call, in order; answer each one on its own.
+
+        Each call is `pickle.dumps((method, key, args))` with `method` one of `BATCHED_METHODS`;
+        each answer is `(True, pickle.dumps(result))` or `(False, pickle.dumps(exception))`.
+        Pickling per call is what keeps episodes isolated: a call whose payload does not unpickle,
+        names an unknown method, raises (an unknown episode, busy slots, a bad spec), or returns
+        something unpicklable fails alone, and the calls after it still run.
+        """
+        self.batches += 1
+        self.batched_calls += len(calls)
+        return [self._run_batched(payload) for payload in calls]
+
+    def _run_batched(self, payload: bytes) -> tuple[bool, bytes]:
+        try:
+            method, key, args = pickle.loads(payload)
+            if method not in BATCHED_METHODS:
+                raise ValueError(f"env actor {self.actor_index}: batched call to {method!r}; "
+                                 f"expected one of {sorted(BATCHED_METHODS)}")
+            return True, pickle.dumps(getattr(self, method)(key, *args), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:
+            return False, _pickled_exception(exc, f"env actor {self.actor_index}")
+
+
+#: What `EnvActor.batch` may call (never `batch` itself or `ping`).
+BATCHED_METHODS = frozenset({"reset", "step", "finish", "release"})
+
+
+def _pickled_exception(exc: Exception, where: str) -> bytes:
+    """`exc` pickled, or a RuntimeError carrying its type and message if it does not pickle."""
+    try:
+        data = pickle.dumps(exc, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)  # some exceptions pickle but cannot be rebuilt (required __init__ args)
+        return data
+    except Exception:
+        return pickle.dumps(RuntimeError(f"{where}: {type(exc).__name__}: {str(exc)[:500]}"))
+
 
 def _is_actor_failure(exc: BaseException) -> bool:
     from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError
@@ -161,17 +211,105 @@ def _is_actor_failure(exc: BaseException) -> bool:
     return isinstance(exc, (RayActorError, ActorDiedError, ActorUnavailableError, EpisodeNotFoundError))
 
 
+class _ActorBatcher:
+    """Coalesces the calls of all episodes waiting on one env actor into `EnvActor.batch` calls.
+
+    A call is queued and a send is scheduled for the end of the current event-loop tick, so every
+    call made in the same tick (e.g. the resets of an `asyncio.gather` of episodes) travels in one
+    batch without any timer. At most `max_in_flight` batches are outstanding per actor: while they
+    run, new calls queue and leave together when one returns, so the batch size follows the load
+    (one call when the actor is idle, many when it is busy). With two in flight the actor works on
+    one batch while the driver consumes the previous one's results. Batches are submitted in
+    queue order and a Ray actor runs one caller's calls in submission order, so an episode's calls
+    (and a release before the next reset of its slot) keep their order.
+    """
+
+    def __init__(self, actor: Any, actor_index: int, max_batch: int, max_in_flight: int) -> None:
+        self.actor = actor
+        self.actor_index = actor_index
+        self.max_batch = max_batch
+        self.max_in_flight = max_in_flight
+        self.loop = asyncio.get_running_loop()
+        self._queue: list[tuple[bytes, asyncio.Future]] = []
+        self._in_flight = 0
+        self._scheduled = False
+
+    def submit(self, method: str, key: str, args: tuple) -> asyncio.Future:
+        """Queue one call; its future resolves with the call's result or raises its exception.
+
+        Raises:
+            TypeError: the arguments cannot be pickled (raised here, for this episode only).
+        """
+        try:
+            payload = pickle.dumps((method, key, args), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:
+            raise TypeError(f"env actor {self.actor_index}: the arguments of {method} for episode {key!r} "
+                            f"cannot be sent ({type(exc).__name__}: {exc})") from exc
+        future = self.loop.create_future()
+        self._queue.append((payload, future))
+        if not self._scheduled:
+            self._scheduled = True
+            self.loop.call_soon(self._pump)
+        return future
+
+    def _pump(self) -> None:
+        self._scheduled = False
+        while self._queue and self._in_flight < self.max_in_flight:
+            batch, self._queue = self._queue[:self.max_batch], self._queue[self.max_batch:]
+            self._in_flight += 1
+            try:
+                ref = self.actor.batch.remote([payload for payload, _ in batch])
+            except Exception as exc:  # submission itself failed: fail this batch's calls only
+                self._in_flight -= 1
+                self._settle(batch, None, exc)
+                continue
+            asyncio.ensure_future(self._collect(ref, batch))
+
+    async def _collect(self, ref: Any, batch: list[tuple[bytes, asyncio.Future]]) -> None:
+        try:
+            answers, error = await ref, None
+        except Exception as exc:  # the actor died (or the call failed as a whole): every call fails
+            answers, error = None, exc
+        self._in_flight -= 1
+        self._settle(batch, answers, error)
+        self._pump()
+
+    @staticmethod
+    def _settle(batch: list[tuple[bytes, asyncio.Future]], answers: list[tuple[bool, bytes]] | None,
+                error: BaseException | None) -> None:
+        for index, (_, future) in enumerate(batch):
+            if future.done():  # its episode was cancelled meanwhile
+                continue
+            if error is not None:
+                future.set_exception(error)
+                continue
+            ok, data = answers[index]
+            try:
+                value = pickle.loads(data)
+            except Exception as exc:
+                future.set_exception(RuntimeError(f"an env actor answer did not unpickle: {type(exc).__name__}: {exc}"))
+                continue
+            if ok:
+                future.set_result(value)
+            else:
+                future.set_exception(value)
+
+
 class RemoteEnv:
-    """The agent loop's `EnvHandle` for one episode on one `EnvActor`."""
+    """The agent loop's `EnvHandle` for one episode on one `EnvActor` (calls batched by the pool's
+    `_ActorBatcher` for that actor, or one actor call each with `EnvPool(batch_calls=False)`)."""
 
     def __init__(self, pool: "EnvPool", actor_index: int, key: str) -> None:
         self.pool = pool
         self.actor_index = actor_index
         self.key = key
         self.actor = pool.actors[actor_index]
+        self.batcher = pool.batcher(actor_index)
 
     async def _call(self, method: str, *args):
         try:
+            if self.batcher is not None:
+                return await self.batcher.submit(method, self.key, args)
             return await getattr(self.actor, method).remote(self.key, *args)
         except Exception as exc:
             if _is_actor_failure(exc):
@@ -189,11 +327,21 @@ class RemoteEnv:
         return await self._call("finish", reason)
 
     async def close(self) -> None:
+        if self.batcher is not None:
+            # Not awaited: the release travels with the actor's next batch, ahead of any later
+            # reset on this slot (calls keep their order), and a dead actor has nothing to release.
+            self.batcher.submit("release", self.key, ()).add_done_callback(_ignore_result)
+            return
         try:
             await self.actor.release.remote(self.key)
         except Exception as exc:  # a dead actor has nothing to release
             if not _is_actor_failure(exc):
                 raise
+
+
+def _ignore_result(future: asyncio.Future) -> None:
+    if not future.cancelled():
+        future.exception()  # retrieved, so asyncio does not log it as never retrieved
 
 
 class EnvPool:
@@ -210,17 +358,30 @@ class EnvPool:
         kb_service: Name of a running knowledge-base service (kb_service.service) the actors' knowledge
             tools share, instead of each opening the KB.
         env_vars: Environment variables of the actor processes.
+        batch_calls: Send the calls of all episodes waiting on an actor together (`_ActorBatcher`);
+            False sends each reset / step / finish / release as its own actor call.
+        max_batch: Most calls in one batch.
+        max_batches_in_flight: Batches outstanding per actor (2: the actor runs one while the
+            driver consumes the other's results).
     """
 
     def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
                  max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None,
-                 env_vars: dict[str, str] | None = None) -> None:
+                 env_vars: dict[str, str] | None = None, batch_calls: bool = True, max_batch: int = 64,
+                 max_batches_in_flight: int = 2) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
             raise ValueError(f"env pool needs num_actors >= 1 and slots_per_actor >= 1, got "
                              f"{num_actors} and {slots_per_actor}")
+        if max_batch < 1 or max_batches_in_flight < 1:
+            raise ValueError(f"env pool needs max_batch >= 1 and max_batches_in_flight >= 1, got "
+                             f"{max_batch} and {max_batches_in_flight}")
+        self.batch_calls = batch_calls
+        self.max_batch = max_batch
+        self.max_batches_in_flight = max_batches_in_flight
+        self._batchers: dict[int, _ActorBatcher] = {}
         options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": num_cpus}
         variables = dict(env_vars or {})
         if kb_service:
@@ -303,6 +464,17 @@ class EnvPool:
 
     def loads(self) -> list[int]:
         return [len(s) for s in self.in_flight]
+
+    def batcher(self, index: int) -> _ActorBatcher | None:
+        """The call batcher of actor `index` in the running event loop (None without batching).
+        A pool used from a new event loop (another `asyncio.run`) gets new batchers."""
+        if not self.batch_calls:
+            return None
+        batcher = self._batchers.get(index)
+        if batcher is None or batcher.loop is not asyncio.get_running_loop():
+            batcher = self._batchers[index] = _ActorBatcher(self.actors[index], index, self.max_batch,
+                                                            self.max_batches_in_flight)
+        return batcher
 
 
 def _has_loop() -> bool:

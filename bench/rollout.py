@@ -1,12 +1,16 @@
 """Rollout throughput with the scripted gold-replay policy: a plain in-process loop vs the Ray
-env-actor pool with 1 and 2 actors, on the same episodes.
+env-actor pool with 1 and 2 actors, each with batched calls (`EnvPool(batch_calls=True)`, the
+default) and with one actor call per reset / step / release, on the same episodes.
 
 The policy is `GoldReplayPolicy` (no model), so the figures measure the rollout machinery itself:
-(each mode runs `--repeats` times, the median is reported; actor start-up is excluded)
 environment steps, tool execution, grading, TITO tokenization and, for Ray, the actor round trips.
-The overhead figure is the Ray pipeline's wall time per episode minus the plain loop's.
+Every mode runs `--repeats` times, interleaved round by round in one process (the starting mode
+rotates), and the median is reported; actor start-up is excluded (the two pools are started and
+warmed up first and reused). The overhead figure is the Ray pipeline's wall time per episode minus
+the plain loop's; every pass of every Ray mode must give the plain loop's trajectories token for token.
 
-    python bench/rollout.py [--domain triage_emergency] [--episodes 96] [--pattern ^tr_calc_] [--json out.json]
+    python bench/rollout.py [--domain triage_emergency] [--episodes 96] [--pattern ^tr_calc_] [--prompt compact]
+        [--repeats 5] [--json out.json]
 """
 
 from __future__ import annotations
@@ -50,27 +54,51 @@ async def plain_loop(loop, policy, episode_specs, max_turns):
     return [await loop.run(spec, env, policy) for spec in episode_specs]
 
 
-async def ray_pool(loop, policy, episode_specs, max_turns, actors, slots, env_vars):
-    import ray
+async def pool_pass(pool, loop, policy, episode_specs):
+    """One timed pass of every episode over `pool` (all admitted at once, as the trainer does)."""
+    from actors.env_actor import EpisodeLedger, run_episode
 
-    from actors.env_actor import EnvPool, EpisodeLedger, run_episode
-
-    pool = EnvPool(actors, slots, max_turns, env_vars=env_vars)
-    await pool.ready()
-    # Warm-up: one episode per actor, so actor start and first imports are not timed.
-    warm = EpisodeLedger()
-    for spec in episode_specs[:actors]:
-        warm.admit(spec.sample_id)
-    await asyncio.gather(*[run_episode(s, loop, pool, policy, warm) for s in episode_specs[:actors]])
     ledger = EpisodeLedger()
     for spec in episode_specs:
         ledger.admit(spec.sample_id)
     started = time.perf_counter()
     samples = await asyncio.gather(*[run_episode(s, loop, pool, policy, ledger) for s in episode_specs])
-    elapsed = time.perf_counter() - started
-    for actor in pool.actors:
-        ray.kill(actor)
-    return samples, elapsed, ledger.balance()
+    return samples, time.perf_counter() - started, ledger.balance()
+
+
+MODES = ("plain", "ray_1_unbatched", "ray_1_batched", "ray_2_unbatched", "ray_2_batched")
+
+
+async def measure(loop, policy, episode_specs, args) -> dict[str, list]:
+    """Every mode `args.repeats` times, interleaved (the start mode rotates each round), so load from
+    other processes on a shared machine falls on all modes alike. Returns mode -> [(samples, s, ledger)]."""
+    from actors.env_actor import EnvPool, EpisodeLedger, run_episode
+
+    pools = {}
+    for actors in (1, 2):
+        pool = EnvPool(actors, args.slots, args.max_turns, env_vars={"HCGYM_EMBEDDINGS": "0"})
+        await pool.ready()
+        # Warm-up: a few episodes per actor, so actor start and first imports are not timed.
+        warm = EpisodeLedger()
+        for spec in episode_specs[: 2 * actors]:
+            warm.admit(spec.sample_id)
+        await asyncio.gather(*[run_episode(s, loop, pool, policy, warm) for s in episode_specs[: 2 * actors]])
+        pools[actors] = pool
+    await plain_loop(loop, policy, episode_specs[:4], args.max_turns)  # warm-up (imports, first env)
+    runs: dict[str, list] = {mode: [] for mode in MODES}
+    for round_index in range(args.repeats):
+        for mode in MODES[round_index % len(MODES):] + MODES[:round_index % len(MODES)]:
+            if mode == "plain":
+                started = time.perf_counter()
+                samples = await plain_loop(loop, policy, episode_specs, args.max_turns)
+                runs[mode].append((samples, time.perf_counter() - started, None))
+                continue
+            _, actors, batching = mode.split("_")
+            pool = pools[int(actors)]
+            pool.batch_calls = batching == "batched"
+            runs[mode].append(await pool_pass(pool, loop, policy, episode_specs))
+    stats = {actors: await pool.ready() for actors, pool in pools.items()}
+    return runs, stats
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -82,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slots", type=int, default=16)
     parser.add_argument("--prompt", choices=["env", "compact"], default="env",
                         help="system prompt style of the agent loop (the tiny configs use compact)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed passes per mode; the median is reported")
+    parser.add_argument("--repeats", type=int, default=5, help="timed passes per mode; the median is reported")
     parser.add_argument("--json", default=None, help="also write the figures here")
     args = parser.parse_args(argv)
     os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
@@ -102,42 +130,46 @@ def main(argv: list[str] | None = None) -> int:
     loop = AgentLoop(tokenizer, limits, args.prompt)
     episode_specs = specs(refs, args.episodes)
 
-    asyncio.run(plain_loop(loop, policy, episode_specs[:4], args.max_turns))  # warm-up (imports, first env)
-    times = []
-    for _ in range(args.repeats):
-        started = time.perf_counter()
-        plain = asyncio.run(plain_loop(loop, policy, episode_specs, args.max_turns))
-        times.append(time.perf_counter() - started)
-    plain_s = statistics.median(times)
-    results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
-               "prompt": args.prompt,
-               "turns_mean": statistics.mean(len(s.turns) for s in plain),
-               "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
-               "plain": {"wall_s": plain_s, "episodes_per_s": args.episodes / plain_s}}
     from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only
 
     init_ray(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        for actors in (1, 2):
-            runs = [asyncio.run(ray_pool(loop, policy, episode_specs, args.max_turns, actors, args.slots,
-                                         {"HCGYM_EMBEDDINGS": "0"})) for _ in range(args.repeats)]
-            samples, _, balance = runs[0]
-            elapsed = statistics.median(r[1] for r in runs)
-            same = all(a.input_ids == b.input_ids and a.reward == b.reward for a, b in zip(samples, plain))
-            results[f"ray_{actors}_actors"] = {
-                "wall_s": elapsed, "episodes_per_s": args.episodes / elapsed,
-                "overhead_ms_per_episode": 1000 * (elapsed - plain_s) / args.episodes,
-                "same_trajectories_as_plain_loop": same, "ledger": balance,
-            }
+        runs, pings = asyncio.run(measure(loop, policy, episode_specs, args))
     finally:
         ray.shutdown()
+    plain = runs["plain"][0][0]
+    wall = {mode: statistics.median(r[1] for r in runs[mode]) for mode in MODES}
+    results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
+               "prompt": args.prompt, "repeats": args.repeats, "load_average": os.getloadavg(),
+               "turns_mean": statistics.mean(len(s.turns) for s in plain),
+               "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
+               "plain": {"wall_s": wall["plain"], "episodes_per_s": args.episodes / wall["plain"],
+                         "passes_s": [r[1] for r in runs["plain"]]}}
+    for mode in MODES[1:]:
+        same = all(a.input_ids == b.input_ids and a.reward == b.reward and a.episode == b.episode
+                   for run in runs[mode] for a, b in zip(run[0], plain))
+        results[mode] = {
+            "wall_s": wall[mode], "episodes_per_s": args.episodes / wall[mode], "passes_s": [r[1] for r in runs[mode]],
+            "vs_plain": wall["plain"] / wall[mode],
+            "overhead_ms_per_episode": 1000 * (wall[mode] - wall["plain"]) / args.episodes,
+            "same_trajectories_as_plain_loop": same, "ledger": runs[mode][0][2],
+        }
+    results["batched_vs_unbatched"] = {a: wall[f"ray_{a}_unbatched"] / wall[f"ray_{a}_batched"] for a in (1, 2)}
+    results["two_vs_one_actor"] = {b: wall[f"ray_1_{b}"] / wall[f"ray_2_{b}"] for b in ("unbatched", "batched")}
+    results["calls_per_batch"] = {a: sum(p["batched_calls"] for p in ps) / max(1, sum(p["batches"] for p in ps))
+                                  for a, ps in pings.items()}
     print(f"rollout benchmark: {args.episodes} gold-replay episodes of {args.domain} ({pattern}, {args.prompt} prompt), "
-          f"{results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs")
-    print(f"  plain loop         {plain_s:7.2f} s  {results['plain']['episodes_per_s']:7.2f} episodes/s")
-    for actors in (1, 2):
-        r = results[f"ray_{actors}_actors"]
-        print(f"  Ray, {actors} env actor(s) {r['wall_s']:7.2f} s  {r['episodes_per_s']:7.2f} episodes/s  "
-              f"overhead {r['overhead_ms_per_episode']:+.1f} ms/episode  identical={r['same_trajectories_as_plain_loop']}")
+          f"{results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs, "
+          f"medians of {args.repeats} interleaved passes, load average {results['load_average'][0]:.1f}")
+    print(f"  plain loop                   {wall['plain']:7.3f} s  {results['plain']['episodes_per_s']:7.1f} episodes/s")
+    for mode in MODES[1:]:
+        r = results[mode]
+        print(f"  Ray, {mode[4]} actor(s), {mode[6:]:9s} {r['wall_s']:7.3f} s  {r['episodes_per_s']:7.1f} episodes/s  "
+              f"{r['vs_plain']:.2f}x plain  overhead {r['overhead_ms_per_episode']:+.1f} ms/episode  "
+              f"identical={r['same_trajectories_as_plain_loop']}")
+    print("  batched / unbatched: " + ", ".join(f"{a} actor(s) {v:.2f}x" for a, v in results["batched_vs_unbatched"].items())
+          + "; 2 / 1 actors: " + ", ".join(f"{b} {v:.2f}x" for b, v in results["two_vs_one_actor"].items())
+          + "; calls per batch: " + ", ".join(f"{a} actor(s) {v:.1f}" for a, v in results["calls_per_batch"].items()))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 0
