@@ -213,7 +213,7 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
     """
     from actors.env_actor import register_domains
     from learner.model import build_tiny_model, load_tokenizer, train_tokenizer
-    from learner.train import load_task_refs
+    from learner.tasks import load_task_refs
 
     register_domains(cfg.data.domain_modules)
     root = Path(run_dir) / "model"

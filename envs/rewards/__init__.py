@@ -26,6 +26,11 @@ from envs.rewards.safety_patterns import PATTERNS, Pattern, register_pattern
 from envs.rewards.score import score_episode, score_episodes
 from envs.rewards.types import DEFAULT_WEIGHTS, RewardBreakdown, RewardWeights, Violation
 
+# The built-in safety checks register themselves with `safety_check` when imported. Importing them
+# here (any import of envs.rewards.* runs this file first) keeps the dependency one way:
+# checks -> safety, never safety -> checks.
+from envs.rewards import checks  # noqa: F401  isort: skip
+
 __all__ = [
     "score_episode", "score_episodes", "RewardWeights", "RewardBreakdown", "Violation", "cosine_length_reward", "extract_choice",
     "SafetyContext", "BaseSafetyContext", "StaticSafetyContext", "detect_violations", "safety_check",

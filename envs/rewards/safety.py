@@ -388,8 +388,6 @@ def safety_check(fn: Check) -> Check:
 def detect_violations(trajectory: Trajectory | EpisodeView, task: Task | None = None, context: Any = None,
                       conventions: ToolConventions | None = None) -> tuple[list[Violation], list[str]]:
     """All violations in an episode, and the errors met while looking (context failures)."""
-    from envs.rewards import checks  # noqa: F401  (registers the checks)
-
     view = trajectory if isinstance(trajectory, EpisodeView) else EpisodeView(trajectory, task, conventions)  # type: ignore[arg-type]
     errors: list[str] = []
     ticket = ticket_facts(view.task.ticket) if view.is_management else None

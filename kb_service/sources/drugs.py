@@ -22,7 +22,7 @@ from typing import Iterator
 
 from envs.data.registry import SOURCES, Archive
 
-from kb_service.sources import provenance
+from kb_service.sources.common import provenance
 
 VERSION = "1"
 NER = SOURCES["drug-named-entity-recognition"]

@@ -14,7 +14,7 @@ from typing import Iterator
 
 from envs.data.registry import SOURCES, Archive
 
-from kb_service.sources import provenance
+from kb_service.sources.common import provenance
 
 VERSION = "1"
 PACKAGE = SOURCES["simple-icd-10-cm"]
