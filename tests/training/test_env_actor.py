@@ -63,14 +63,17 @@ def test_pool_spreads_episodes_and_balances(ray_cluster, setup):
     assert ledger.balance() == {"admitted": 8, "completed": 8, "failed": 0, "in_flight": 0, "reruns": 0, "attempts": 8}
 
 
-def test_killed_actor_episodes_rerun_from_start_exactly_once(ray_cluster, setup):
+@pytest.mark.parametrize("batch_calls", [True, False], ids=["batched", "unbatched"])
+def test_killed_actor_episodes_rerun_from_start_exactly_once(ray_cluster, setup, batch_calls):
     """Kill an env actor while every episode is mid-rollout: Ray restarts it, its episodes are
-    re-run from the start with the same seed, and the ledger balances (nothing lost or doubled)."""
+    re-run from the start with the same seed, and the ledger balances (nothing lost or doubled),
+    with calls batched per actor and with one actor call each."""
     tokenizer, limits, tasks, actions = setup
     specs = specs_for(tasks, 8)
 
     async def go():
-        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, max_restarts=2, env_vars=NO_EMBEDDINGS)
+        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, max_restarts=2, env_vars=NO_EMBEDDINGS,
+                       batch_calls=batch_calls)
         before = await pool.ready()
         loop = AgentLoop(tokenizer, limits)
         policy = GoldReplayPolicy(tokenizer, actions)
