@@ -25,9 +25,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+from envs.core.files import replace_atomic, write_text_atomic
 from evals.conditions import CONDITION_RUNNERS, ConditionSettings, EpisodeOutcome, is_multiple_choice
-from evals.types import (CONDITIONS, RESULTS_FILE, SPEC_FILE, TRAJECTORIES_FILE, EvalItem, EvalSpec, ResultRow,
-                         read_results, results_schema, row_to_record)
+from evals.types import (
+    CONDITIONS,
+    RESULTS_FILE,
+    SPEC_FILE,
+    TRAJECTORIES_FILE,
+    EvalItem,
+    EvalSpec,
+    ResultRow,
+    read_results,
+    results_schema,
+    row_to_record,
+)
 
 
 def trajectory_schema():
@@ -113,9 +124,8 @@ class ResultsStore:
             return
         for name, records, schema in ((TRAJECTORIES_FILE, self.trajectories, trajectory_schema()),
                                       (RESULTS_FILE, [row_to_record(r) for r in self.rows], results_schema())):
-            tmp = self.dir / f".{name}.tmp"
-            pq.write_table(pa.Table.from_pylist(records, schema=schema), tmp)
-            os.replace(tmp, self.dir / name)  # readers never see half a file
+            table = pa.Table.from_pylist(records, schema=schema)
+            replace_atomic(self.dir / name, lambda tmp, table=table: pq.write_table(table, tmp))
         self._dirty = False
         self._last_flush = time.monotonic()
 
@@ -312,10 +322,7 @@ def write_spec(output_dir: Path, spec: EvalSpec) -> None:
                                  f"{getattr(spec, name)!r}; use another --output")
         spec = spec.model_copy(update={"seeds": sorted(set(old.get("seeds", [])) | set(spec.seeds)),
                                        "created_at": old.get("created_at")})
-    output_dir.mkdir(parents=True, exist_ok=True)
-    tmp = output_dir / f".{SPEC_FILE}.tmp"
-    tmp.write_text(json.dumps(spec.model_dump(), indent=1))
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(spec.model_dump(), indent=1))
 
 
 def package_versions() -> dict[str, str]:

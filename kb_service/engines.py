@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from envs.core.files import write_text_atomic
+
 K1 = 1.2
 B = 0.75
 METHOD = "lucene"  # idf = log(1 + (N - df + 0.5) / (df + 0.5)): always > 0, as tantivy/Lucene
@@ -363,6 +365,4 @@ class TantivySearcher:
 
 
 def write_json(path: Path, obj: dict) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=2, ensure_ascii=False, sort_keys=False))
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(obj, indent=2, ensure_ascii=False, sort_keys=False))

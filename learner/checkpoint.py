@@ -23,11 +23,13 @@ import re
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
+
+from envs.core.files import replace_atomic
 
 LATEST = "latest"
 STEP_DIR_PATTERN = re.compile(r"step_\d{6,}")
@@ -79,19 +81,6 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
         Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, TypeError):
             raise TypeError(f"{path}: {exc}") from exc
-        raise
-
-
-def replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """`write(tmp)` then rename over `path`, so readers never see half a file; the temporary file
-    (`.NAME.tmp` next to `path`) is removed if anything fails, and the previous file stays."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
         raise
 
 

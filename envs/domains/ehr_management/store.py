@@ -22,6 +22,7 @@ import threading
 from pathlib import Path
 
 from envs.core.db import DataFileError
+from envs.core.files import write_text_atomic
 
 from .data_model import EHRDB, EHRPatient
 
@@ -39,9 +40,7 @@ def write_db(db: EHRDB, path: Path) -> None:
                             separators=(",", ":"))
         lines.append(f"{json.dumps(pid)}: {record}{',' if i < len(ids) - 1 else ''}")
     lines.append("}}")
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 class PatientStore:
