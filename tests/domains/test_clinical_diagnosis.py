@@ -14,7 +14,7 @@ registry.DOMAINS.setdefault("clinical_diagnosis", "envs.domains.clinical_diagnos
 
 from envs.domains.clinical_diagnosis import build as cd_build  # noqa: E402
 from envs.domains.clinical_diagnosis.hpo import PhenotypeIndex, frequency_value, parse_hpoa, parse_obo  # noqa: E402
-from envs.domains.clinical_diagnosis.icd10 import ICD10Index, normalise_code, parse_tabular  # noqa: E402
+from envs.core.icd10 import ICD10Index, normalise_code, parse_tabular  # noqa: E402
 from envs.domains.clinical_diagnosis.labs import LabCatalog  # noqa: E402
 
 

@@ -17,9 +17,11 @@ import hashlib
 import json
 from pathlib import Path
 
+from envs.core import icd10 as icd10_module
 from envs.core import splits as split_helpers
 from envs.core.db import DataFileError
 from envs.core.domain import write_split
+from envs.core.icd10 import ICD10Index, parse_tabular
 from envs.core.paths import domain_build_dir
 from envs.core.task import dump_tasks, load_tasks
 from envs.data.registry import SOURCES, open_package
@@ -27,7 +29,6 @@ from envs.data.registry import SOURCES, open_package
 from . import generate
 from .data_model import ClinicalDiagnosisDB
 from .hpo import PhenotypeIndex, compile_hpo, parse_hpoa, parse_obo
-from .icd10 import ICD10Index, parse_tabular
 from .labs import LabCatalog, join_labunits
 
 NAME = "clinical_diagnosis"
@@ -44,8 +45,8 @@ def _stamp() -> str:
     for name in PACKAGES:
         h.update(f"{name}=={SOURCES[name].version};".encode())
     for path in sorted(AUTHORED.glob("*.json")) + [HERE / "tasks.json", HERE / "split_tasks.json", HERE / "generate.py", HERE / "hpo.py",
-                                                   HERE / "icd10.py", HERE / "labs.py", HERE / "build.py",
-                                                   Path(split_helpers.__file__)]:
+                                                   HERE / "labs.py", HERE / "build.py",
+                                                   Path(split_helpers.__file__), Path(icd10_module.__file__)]:
         if path.exists():
             h.update(path.name.encode() + path.read_bytes())
     h.update(GENERATOR_VERSION.encode())

@@ -22,10 +22,10 @@ import re
 
 import numpy as np
 
+from envs.core.icd10 import ICD10Index
 from envs.core.task import Task
 
 from .hpo import PhenotypeIndex, frequency_label
-from .icd10 import ICD10Index
 from .labs import FLAGS, LabCatalog
 
 LETTERS = "ABCDE"

@@ -9,13 +9,13 @@ from datetime import datetime, timedelta
 from typing import Literal
 
 from envs.core.common_tools import BaseDomainTools
+from envs.core.icd10 import normalise_code
 from envs.core.tools import ToolError, ToolType, is_tool
 
 from . import knowledge
 from .data_model import (
     ClinicalDiagnosisDB, ClinicalNote, DiagnosisRecord, FollowUp, LabOrder, LabResult, Patient, Prescription,
 )
-from .icd10 import normalise_code
 
 # Doses per day for the usual frequency abbreviations (None: as needed / single dose).
 FREQUENCY_PER_DAY: dict[str, int | None] = {

@@ -25,6 +25,7 @@ from pathlib import Path
 from envs.core import splits as split_helpers
 from envs.core.build_order import build_required_domains
 from envs.core.domain import write_split
+from envs.core.icd10 import built_icd10_index
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task, dump_tasks
 
@@ -32,7 +33,7 @@ from .data_model import EHRDB
 
 NAME = "ehr_management"
 HERE = Path(__file__).parent
-# Reads the built ICD-10-CM index of clinical_diagnosis (`knowledge.icd10_index()`) in its generated
+# Reads the built ICD-10-CM index of clinical_diagnosis (`built_icd10_index`) in its generated
 # coding tasks and in the lookup_icd10 / assign_icd10_code tools; built first (envs/core/build_order.py).
 BUILD_REQUIRES = ("clinical_diagnosis",)
 # 25 validation tasks in all (the paper's EHR share): 18 ICU-record tasks and 7 timeline tasks.
@@ -109,10 +110,8 @@ def _searchable(icd, text: str, code: str) -> str:
 
 
 def generated_tasks(db: EHRDB, scenarios: dict[str, dict], seed: int = 53) -> dict[str, list[Task]]:
-    from envs.domains.clinical_diagnosis import knowledge
-
     rng = random.Random(seed)
-    icd = knowledge.icd10_index()
+    icd = built_icd10_index(BUILD_REQUIRES[0])
     groups: dict[str, list[Task]] = {k: [] for k in ("trend", "sofa", "apache", "news2", "icd", "summary")}
     for pid in sorted(scenarios):
         patient = db.patients[pid]
@@ -232,9 +231,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     # Load (and gc.freeze) the ICD-10-CM index before duckdb is imported: objects frozen while duckdb is loaded
     # outlive interpreter shutdown and its bindings then report them as leaks.
-    from envs.domains.clinical_diagnosis import knowledge
-
-    knowledge.icd10_index()
+    built_icd10_index(BUILD_REQUIRES[0])
     db = _db()
     timelines = synthea.read_timelines(synthea.extract_database(out_dir, offline=offline))
     for raw in timelines:

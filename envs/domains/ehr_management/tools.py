@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Literal
 
 from envs.calculators import calculate_apache2, calculate_news2, calculate_sofa
 from envs.core.common_tools import BaseDomainTools
+from envs.core.icd10 import built_icd10_index, normalise_code
 from envs.core.tools import ToolError, ToolType, is_tool
 
 from .data_model import EHRDB, Admission, EHRPatient, Escalation, MedicationOrder, Note, Order
@@ -33,9 +34,8 @@ def _t(text: str) -> datetime:
 
 
 def _icd():
-    from envs.domains.clinical_diagnosis import knowledge
-
-    return knowledge.icd10_index()
+    # clinical_diagnosis's built index: a declared built-data dependency (build.py BUILD_REQUIRES).
+    return built_icd10_index("clinical_diagnosis")
 
 
 class EHRTools(BaseDomainTools):
@@ -435,8 +435,6 @@ class EHRTools(BaseDomainTools):
             icd10_code: A billable ICD-10-CM code.
             hadm_id: Optional admission id.
         """
-        from envs.domains.clinical_diagnosis.icd10 import normalise_code
-
         adm = self._admission(self._patient(patient_id, write=True), hadm_id)
         code = normalise_code(icd10_code)
         item = _icd().get(code)

@@ -7,14 +7,27 @@ subcodes and returns one record per item with its description, parent, kind, whe
 Runtime: :class:`ICD10Index` loads that JSON once per process; `get` returns a code with its
 hierarchy, `search` ranks codes for free text with a word index (prefix matching), preferring
 billable codes whose description or inclusion terms cover every query word.
+
+Shared by domains: clinical_diagnosis builds the index (`icd10cm.json` in its build folder);
+ehr_management reads that built file through `built_icd10_index("clinical_diagnosis")`, a built-data
+dependency it declares in its `build.py` (`BUILD_REQUIRES`). Both get the same parsed index.
 """
 
 from __future__ import annotations
 
 import bisect
+import json
 import re
 import xml.etree.ElementTree as ET
 from collections import defaultdict
+from functools import lru_cache
+from pathlib import Path
+
+from envs.core.db import DataFileError
+from envs.core.frozen import frozen
+from envs.core.paths import domain_build_dir
+
+ICD10_INDEX_FILE = "icd10cm.json"
 
 _WORD = re.compile(r"[a-z0-9]+")
 _STOP = {"of", "the", "and", "or", "with", "without", "in", "to", "a", "an", "for", "by", "due", "not", "other",
@@ -167,3 +180,23 @@ class ICD10Index:
     def siblings(self, code: str) -> list[str]:
         parent = self.items[code]["parent"]
         return [c for c in self.children.get(parent, []) if c != code]
+
+
+@lru_cache(maxsize=2)
+def _index_at(path: Path) -> ICD10Index:
+    index = ICD10Index(json.loads(path.read_text(encoding="utf-8")))
+    index.search("warm up")  # builds the word index now, not inside the first agent call
+    return frozen(index)
+
+
+def built_icd10_index(domain: str) -> ICD10Index:
+    """The ICD-10-CM index a domain's build wrote (`<build folder>/icd10cm.json`), parsed once per
+    process (and kept out of the garbage collector's scans).
+
+    Args:
+        domain: The domain whose build folder holds the index, e.g. "clinical_diagnosis".
+    """
+    path = domain_build_dir(domain) / ICD10_INDEX_FILE
+    if not path.exists():
+        raise DataFileError(f"{path}: missing built knowledge file (run `hcgym data build {domain}`)")
+    return _index_at(path)
