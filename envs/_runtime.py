@@ -31,12 +31,6 @@ CPU_RUNTIME_DEFAULTS: dict[str, str] = {
 }
 
 
-def _has_nvidia_device() -> bool:
-    if os.environ.get("CUDA_VISIBLE_DEVICES", None) in ("", "-1"):
-        return False
-    return os.path.exists("/dev/nvidia0") or os.path.exists("/proc/driver/nvidia/version")
-
-
 def configure_cpu_runtime(overrides: dict[str, str] | None = None) -> dict[str, str]:
     """Set the CPU-path environment variables that are not already set.
 

@@ -106,9 +106,6 @@ class StoreWriter:
             (name, fingerprint, rows_done, int(done), inserted, duplicates, rejected),
         )
 
-    def reset_input(self, name: str) -> None:
-        self.conn.execute("DELETE FROM ingest_progress WHERE input=?", (name,))
-
     def commit(self) -> None:
         self.conn.commit()
 

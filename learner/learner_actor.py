@@ -220,9 +220,6 @@ class Learner:
         """Version of the current weights: 0 at start, +1 per `train_step`."""
         return self._version
 
-    def step_count(self) -> int:
-        return self._step
-
     # -- weights -------------------------------------------------------------------------------
     def get_state_dict(self) -> dict[str, torch.Tensor]:
         """Full CPU weights (ZeRO-3: gathered module by module, never the whole model at once).
@@ -232,9 +229,6 @@ class Learner:
         return self._all("full_state_dict")[0]
 
     get_weights = get_state_dict
-
-    def get_weights_versioned(self) -> tuple[dict[str, torch.Tensor], int]:
-        return self.get_state_dict(), self._version
 
     def set_weights(self, state: dict[str, torch.Tensor]) -> None:
         """Overwrite the policy weights (the optimizer state is kept)."""

@@ -5,7 +5,7 @@ time (ZeRO-3 gathers a module, the pair is consumed, the module is released), an
 them by name.
 
 * CPU / small models, `object_store`: the learner returns a CPU state dict, the caller passes the
-  `ObjectRef` straight to the receivers (`publish_state_dict`, `load_state_dict_into`).
+  `ObjectRef` straight to the receivers (`load_state_dict_into`).
 * GPUs, `collective`: a private torch.distributed group (NCCL on GPUs; gloo works too and is
   what the CPU tests run) between the learner's rank 0 and the receivers. Tensors travel in
   dtype-homogeneous buckets capped at `bucket_mb`, so neither side ever materialises the whole
@@ -49,13 +49,6 @@ class WeightSyncError(RuntimeError):
 # ----------------------------------------------------------------------------------------------
 # Object store (CPU)
 # ----------------------------------------------------------------------------------------------
-
-
-def publish_state_dict(state: dict[str, torch.Tensor]):
-    """Put a CPU state dict into the Ray object store once; hand the ref to every receiver."""
-    import ray
-
-    return ray.put({k: v.detach().to("cpu").contiguous() for k, v in state.items()})
 
 
 def load_state_dict_into(module: torch.nn.Module, state: dict[str, torch.Tensor]) -> None:

@@ -154,9 +154,6 @@ class ToolConventions:
             self._cache[key] = hit
         return hit
 
-    def is_a(self, name: str, family: str) -> bool:
-        return family in self.families(name)
-
     def extend(self, **changes: Any) -> "ToolConventions":
         """A copy with more names per family (`prescribing=["x"]`), more substrings
         (`prescribing_substrings=["y"]`) or replaced scalar settings (`critical_dose_ratio=3`)."""

@@ -12,12 +12,9 @@ Flags, for a numeric result x with interval [low, high] and critical limits cl /
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
-HERE = Path(__file__).parent
 FLAGS = ("critical low", "low", "normal", "high", "critical high")
 
 
@@ -48,11 +45,6 @@ class LabCatalog:
             for label in [a["key"], a["name"], *a.get("aliases", []), a.get("loinc") or ""]:
                 if label:
                     self._names.setdefault(_norm(label), a["key"])
-
-    @classmethod
-    def from_file(cls, path: Path | None = None) -> "LabCatalog":
-        path = path or HERE / "authored" / "reference_ranges.json"
-        return cls(json.loads(path.read_text(encoding="utf-8"))["analytes"])
 
     def resolve(self, name: str) -> str | None:
         key = self._names.get(_norm(name))
