@@ -69,26 +69,37 @@ def esi_handbook_tasks(cases: list[dict], source: dict) -> list[Task]:
         pid = case["case_id"]
         level = case["expected"]["esi_level"]
         tol = case["expected"].get("tolerance", 0)
+        emergency = _handbook_emergency(case)
         ticket = (f"Patient {pid} has just arrived at the emergency department triage desk. Review the presentation "
-                  f"and vital signs, assign an Emergency Severity Index (ESI v4) level with assign_triage_level, and "
-                  f"answer with the level (1-5).")
+                  f"and vital signs, assign an Emergency Severity Index (ESI v4) level with assign_triage_level, "
+                  + ("activate the emergency pathway the presentation calls for, " if emergency == "stroke" else "")
+                  + "and answer with the level (1-5).")
+        actions = [
+            {"action_id": "present", "name": "get_patient_presentation", "arguments": {"patient_id": pid},
+             "compare_args": ["patient_id"]},
+            {"action_id": "vitals", "name": "get_vital_signs", "arguments": {"patient_id": pid},
+             "compare_args": ["patient_id"]}]
+        guideline = ESI_GUIDELINE
+        if emergency == "stroke":
+            # A suspected acute stroke at triage activates the stroke code (stroke team, immediate
+            # non-contrast CT) as well as the ESI level, like every other stroke task of the domain:
+            # AHA/ASA 2019 acute ischaemic stroke guideline (Powers et al., Stroke 2019), 1.3-1.4 and 2.1.
+            actions.append({"action_id": "stroke", "name": "activate_stroke_code",
+                            "arguments": {"patient_id": pid, "deficits": case["input"]["complaint"]},
+                            "compare_args": ["patient_id"]})
+            guideline = f"{ESI_GUIDELINE}; {STROKE_GUIDELINE}"
+        actions.append({"action_id": "assign", "name": "assign_triage_level",
+                        "arguments": {"patient_id": pid, "esi_level": level, "rationale": "ESI v4 algorithm"},
+                        "compare_args": ["patient_id"]})
         tasks.append(Task(
             id=f"tr_esi_handbook_{pid.lower().replace('-', '_')}", ticket=ticket, answer_type="numeric",
             correct_answer=str(level), answer_tolerance=float(tol), answer_unit="ESI level", patient_id=pid,
-            emergency=_handbook_emergency(case),
+            emergency=emergency,
             description={"purpose": "ESI triage of a handbook case", "difficulty": "medium", "source": "medeval_esi",
                          "category": "esi_triage", "task_type": "esi_handbook",
                          "provenance": {**source, "case_id": pid, "handbook_source": case.get("source", ""),
-                                        "guideline": ESI_GUIDELINE}},
-            evaluation_criteria={"actions": [
-                {"action_id": "present", "name": "get_patient_presentation", "arguments": {"patient_id": pid},
-                 "compare_args": ["patient_id"]},
-                {"action_id": "vitals", "name": "get_vital_signs", "arguments": {"patient_id": pid},
-                 "compare_args": ["patient_id"]},
-                {"action_id": "assign", "name": "assign_triage_level",
-                 "arguments": {"patient_id": pid, "esi_level": level, "rationale": "ESI v4 algorithm"},
-                 "compare_args": ["patient_id"]}],
-                "reward_basis": ["ACTION", "ANSWER"]},
+                                        "guideline": guideline}},
+            evaluation_criteria={"actions": actions, "reward_basis": ["ACTION", "ANSWER"]},
             metadata={"decision_path": case["expected"]["decision_path"], "title": case["title"]},
         ))
     return tasks
@@ -218,6 +229,8 @@ def _vitals_text(v: dict, assisted: bool) -> str:
 
 
 ESI_GUIDELINE = "Emergency Severity Index v4 Implementation Handbook (Gilboy et al., AHRQ Publication 12-0014, 2012)"
+STROKE_GUIDELINE = ("AHA/ASA 2019 guidelines for the early management of acute ischemic stroke (Powers et al., Stroke 2019;50:e344), "
+                    "sections 1.3-1.4 (EMS and hospital stroke teams) and 2.1 (emergency evaluation)")
 
 
 def esi_vignette_tasks(n: int, seed: int = 41) -> list[Task]:
