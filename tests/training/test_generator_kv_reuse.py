@@ -92,7 +92,7 @@ def test_the_cache_stays_within_its_token_budget():
     model_dir = tiny_model_dir()
     tok = load_tokenizer(model_dir)
     gen = HFGenerator(model_dir, SamplingConfig(), [tok.convert_tokens_to_ids(IM_END)],
-                      options={"kv_cache_max_tokens": 60})
+                      options={"reuse_kv_cache": True, "kv_cache_max_tokens": 60})
     prompts = [_prompt(tok, t) for t in TICKETS]
     gen.generate([GenerationRequest(request_id=f"e{i}:t0", prompt_ids=p, max_new_tokens=4, seed=i)
                   for i, p in enumerate(prompts)])
