@@ -36,6 +36,7 @@ import asyncio
 import json
 import os
 import pickle
+import time
 import uuid
 from dataclasses import dataclass, field
 from typing import Any
@@ -180,6 +181,22 @@ class EnvActor:
         self.batched_calls += len(calls)
         return [self._run_batched(payload) for payload in calls]
 
+    def batch_stream(self, calls: list[bytes], flush_after_s: float = 0.002):
+        """`batch`, streamed: yields `(first_index, answers)` chunks as the calls finish, a chunk
+        whenever `flush_after_s` of work has passed since the last one (and one at the end), so the
+        driver can carry on with the episodes already answered while slow calls (a search-heavy
+        step) still run, and cheap calls still travel back together."""
+        self.batches += 1
+        self.batched_calls += len(calls)
+        start, chunk, last = 0, [], time.perf_counter()
+        for index, payload in enumerate(calls):
+            chunk.append(self._run_batched(payload))
+            now = time.perf_counter()
+            if now - last >= flush_after_s and index + 1 < len(calls):
+                yield start, chunk
+                start, chunk, last = index + 1, [], time.perf_counter()
+        yield start, chunk
+
     def _run_batched(self, payload: bytes) -> tuple[bool, bytes]:
         try:
             method, key, args = pickle.loads(payload)
@@ -224,11 +241,13 @@ class _ActorBatcher:
     (and a release before the next reset of its slot) keep their order.
     """
 
-    def __init__(self, actor: Any, actor_index: int, max_batch: int, max_in_flight: int) -> None:
+    def __init__(self, actor: Any, actor_index: int, max_batch: int, max_in_flight: int,
+                 stream_after_s: float | None = None) -> None:
         self.actor = actor
         self.actor_index = actor_index
         self.max_batch = max_batch
         self.max_in_flight = max_in_flight
+        self.stream_after_s = stream_after_s
         self.loop = asyncio.get_running_loop()
         self._queue: list[tuple[bytes, asyncio.Future]] = []
         self._in_flight = 0
@@ -257,8 +276,12 @@ class _ActorBatcher:
         while self._queue and self._in_flight < self.max_in_flight:
             batch, self._queue = self._queue[:self.max_batch], self._queue[self.max_batch:]
             self._in_flight += 1
+            payloads = [payload for payload, _ in batch]
             try:
-                ref = self.actor.batch.remote([payload for payload, _ in batch])
+                if self.stream_after_s is None:
+                    ref = self.actor.batch.remote(payloads)
+                else:
+                    ref = self.actor.batch_stream.remote(payloads, self.stream_after_s)
             except Exception as exc:  # submission itself failed: fail this batch's calls only
                 self._in_flight -= 1
                 self._settle(batch, None, exc)
@@ -266,13 +289,20 @@ class _ActorBatcher:
             asyncio.ensure_future(self._collect(ref, batch))
 
     async def _collect(self, ref: Any, batch: list[tuple[bytes, asyncio.Future]]) -> None:
+        settled = 0
         try:
-            answers, error = await ref, None
-        except Exception as exc:  # the actor died (or the call failed as a whole): every call fails
-            answers, error = None, exc
-        self._in_flight -= 1
-        self._settle(batch, answers, error)
-        self._pump()
+            if self.stream_after_s is None:
+                self._settle(batch, await ref, None)
+            else:
+                async for chunk_ref in ref:  # chunks in order, as the actor finishes them
+                    start, answers = await chunk_ref
+                    self._settle(batch[start:start + len(answers)], answers, None)
+                    settled = start + len(answers)
+        except Exception as exc:  # the actor died (or the call failed as a whole): the calls not yet
+            self._settle(batch[settled:], None, exc)  # answered fail, each with the same error
+        finally:
+            self._in_flight -= 1
+            self._pump()
 
     @staticmethod
     def _settle(batch: list[tuple[bytes, asyncio.Future]], answers: list[tuple[bool, bytes]] | None,
@@ -363,13 +393,16 @@ class EnvPool:
         max_batch: Most calls in one batch.
         max_batches_in_flight: Batches outstanding per actor (2: the actor runs one while the
             driver consumes the other's results).
+        stream_after_s: Stream each batch's answers back in chunks, one whenever this much actor
+            time has passed since the last (`EnvActor.batch_stream`), so slow calls do not hold back
+            the episodes already answered; None returns each batch's answers at once (`EnvActor.batch`).
     """
 
     def __init__(self, num_actors: int, slots_per_actor: int, max_turns: int,
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
                  max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None,
                  env_vars: dict[str, str] | None = None, batch_calls: bool = True, max_batch: int = 64,
-                 max_batches_in_flight: int = 2) -> None:
+                 max_batches_in_flight: int = 2, stream_after_s: float | None = 0.002) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
@@ -381,6 +414,9 @@ class EnvPool:
         self.batch_calls = batch_calls
         self.max_batch = max_batch
         self.max_batches_in_flight = max_batches_in_flight
+        if stream_after_s is not None and stream_after_s < 0:
+            raise ValueError(f"env pool needs stream_after_s >= 0 or None, got {stream_after_s}")
+        self.stream_after_s = stream_after_s
         self._batchers: dict[int, _ActorBatcher] = {}
         options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": num_cpus}
         variables = dict(env_vars or {})
@@ -425,9 +461,15 @@ class EnvPool:
                 if loads:
                     _, index = min(loads)
                     break
-                await self._free.wait()
+                try:
+                    await self._free.wait()
+                except asyncio.CancelledError:  # pass on a wake-up this waiter may have consumed
+                    self._free.notify(1)
+                    raise
             key = f"{spec.sample_id}#{uuid.uuid4().hex[:6]}"  # unique per attempt
             self.in_flight[index].add(key)
+            if len(loads) > 1 or loads[0][0] + 1 < self.slots:  # room left: wake the next waiter
+                self._free.notify(1)
         return RemoteEnv(self, index, key)
 
     async def give_back(self, env: RemoteEnv, lost: bool = False) -> None:
@@ -438,7 +480,9 @@ class EnvPool:
             await env.close()
         async with self._free:
             self.in_flight[env.actor_index].discard(env.key)
-            self._free.notify_all()
+            # One slot freed: wake one waiter (each lease wakes the next while room is left).
+            # notify_all here woke every waiting episode per finished one (quadratic in the queue).
+            self._free.notify(1)
 
     def _mark_down(self, index: int) -> None:
         self.healthy[index] = False
@@ -471,9 +515,10 @@ class EnvPool:
         if not self.batch_calls:
             return None
         batcher = self._batchers.get(index)
-        if batcher is None or batcher.loop is not asyncio.get_running_loop():
+        if (batcher is None or batcher.loop is not asyncio.get_running_loop()
+                or batcher.stream_after_s != self.stream_after_s):
             batcher = self._batchers[index] = _ActorBatcher(self.actors[index], index, self.max_batch,
-                                                            self.max_batches_in_flight)
+                                                            self.max_batches_in_flight, self.stream_after_s)
         return batcher
 
 

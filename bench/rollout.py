@@ -1,6 +1,7 @@
 """Rollout throughput with the scripted gold-replay policy: a plain in-process loop vs the Ray
-env-actor pool with 1 and 2 actors, each with batched calls (`EnvPool(batch_calls=True)`, the
-default) and with one actor call per reset / step / release, on the same episodes.
+env-actor pool with 1 and 2 actors, each with one actor call per reset / step / release
+(unbatched), with the calls waiting on an actor batched into one call (batched) and batched with
+the answers streamed back as they finish (streamed, the `EnvPool` default), on the same episodes.
 
 The policy is `GoldReplayPolicy` (no model), so the figures measure the rollout machinery itself:
 environment steps, tool execution, grading, TITO tokenization and, for Ray, the actor round trips.
@@ -39,6 +40,29 @@ def build_tokenizer(domain: str, pattern: str | None) -> object:
     return load_tokenizer(out)
 
 
+#: Queries of the search-heavy workload (`--searches`): clinical phrases, rotated per task; the
+#: vague ones (only common words: "left", "unspecified", "injury") are the costly searches (1-14 ms).
+SEARCH_QUERIES = (
+    "left right bilateral unspecified", "other specified injury of unspecified part",
+    "unspecified injury of left lower leg", "chronic disease of other site",
+    "type 2 diabetes with chronic kidney disease", "acute myocardial infarction", "community acquired pneumonia",
+    "sepsis due to urinary tract infection", "chronic obstructive pulmonary disease with acute exacerbation",
+    "iron deficiency anemia", "major depressive disorder recurrent", "atrial fibrillation",
+    "acute kidney injury", "hypertensive heart disease with heart failure", "cellulitis of lower limb",
+    "pulmonary embolism", "migraine without aura", "gastrointestinal hemorrhage", "hypothyroidism",
+    "asthma with status asthmaticus",
+)
+
+
+def with_searches(actions: list[str], searches: int, index: int) -> list[str]:
+    """The gold actions with `searches` ICD-10 searches (one result each, so the observation stays
+    small and the cost is the search itself) made in the first turn before its gold calls."""
+    calls = ["<tool_call>" + json.dumps({"name": "search_icd10", "arguments": {
+        "query": SEARCH_QUERIES[(index + i) % len(SEARCH_QUERIES)], "limit": 1}}) + "</tool_call>"
+        for i in range(searches)]
+    return ["\n".join(calls + actions[:1])] + actions[1:]
+
+
 def specs(refs, n):
     from actors.agent_loop import EpisodeSpec
 
@@ -66,7 +90,13 @@ async def pool_pass(pool, loop, policy, episode_specs):
     return samples, time.perf_counter() - started, ledger.balance()
 
 
-MODES = ("plain", "ray_1_unbatched", "ray_1_batched", "ray_2_unbatched", "ray_2_batched")
+#: `ray_<actors>_<calls>`: unbatched = one actor call per reset / step / release; batched = the
+#: calls waiting on an actor in one call, answered at once; streamed = batched, answers streamed
+#: back in chunks as they finish (the `EnvPool` default).
+MODES = ("plain", "ray_1_unbatched", "ray_1_batched", "ray_1_streamed",
+         "ray_2_unbatched", "ray_2_batched", "ray_2_streamed")
+CALLS = {"unbatched": {"batch_calls": False}, "batched": {"batch_calls": True, "stream_after_s": None},
+         "streamed": {"batch_calls": True, "stream_after_s": 0.002}}
 
 
 async def measure(loop, policy, episode_specs, args) -> dict[str, list]:
@@ -93,9 +123,10 @@ async def measure(loop, policy, episode_specs, args) -> dict[str, list]:
                 samples = await plain_loop(loop, policy, episode_specs, args.max_turns)
                 runs[mode].append((samples, time.perf_counter() - started, None))
                 continue
-            _, actors, batching = mode.split("_")
+            _, actors, calls = mode.split("_")
             pool = pools[int(actors)]
-            pool.batch_calls = batching == "batched"
+            for name, value in CALLS[calls].items():
+                setattr(pool, name, value)
             runs[mode].append(await pool_pass(pool, loop, policy, episode_specs))
     stats = {actors: await pool.ready() for actors, pool in pools.items()}
     return runs, stats
@@ -111,8 +142,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--prompt", choices=["env", "compact"], default="env",
                         help="system prompt style of the agent loop (the tiny configs use compact)")
     parser.add_argument("--repeats", type=int, default=5, help="timed passes per mode; the median is reported")
+    parser.add_argument("--searches", type=int, default=0,
+                        help="medical_qa only: ICD-10 searches each episode makes in its first turn besides the "
+                             "gold calls (a knowledge-search-heavy workload: env work dominates)")
     parser.add_argument("--json", default=None, help="also write the figures here")
     args = parser.parse_args(argv)
+    if args.searches and args.domain != "medical_qa":
+        parser.error(f"--searches uses medical_qa's search_icd10 tool; got --domain {args.domain}")
+    if not 0 <= args.searches < 32:
+        parser.error(f"--searches must be 0-31 (an action may make at most 32 tool calls), got {args.searches}")
     os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
 
     import ray
@@ -126,7 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     tokenizer = build_tokenizer(args.domain, pattern)
     limits = RolloutLimits(max_turns=args.max_turns)
     tasks = {t.id: t for t in registry.get_tasks(args.domain, "train")}
-    policy = GoldReplayPolicy(tokenizer, {r.task_id: gold_turn_actions(tasks[r.task_id], args.max_turns) for r in refs})
+    policy = GoldReplayPolicy(tokenizer, {r.task_id: with_searches(gold_turn_actions(tasks[r.task_id], args.max_turns),
+                                                                   args.searches, index)
+                                          for index, r in enumerate(refs)})
     loop = AgentLoop(tokenizer, limits, args.prompt)
     episode_specs = specs(refs, args.episodes)
 
@@ -140,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     plain = runs["plain"][0][0]
     wall = {mode: statistics.median(r[1] for r in runs[mode]) for mode in MODES}
     results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
-               "prompt": args.prompt, "repeats": args.repeats, "load_average": os.getloadavg(),
+               "prompt": args.prompt, "searches": args.searches, "repeats": args.repeats, "load_average": os.getloadavg(),
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
                "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
                "plain": {"wall_s": wall["plain"], "episodes_per_s": args.episodes / wall["plain"],
@@ -154,12 +194,13 @@ def main(argv: list[str] | None = None) -> int:
             "overhead_ms_per_episode": 1000 * (wall[mode] - wall["plain"]) / args.episodes,
             "same_trajectories_as_plain_loop": same, "ledger": runs[mode][0][2],
         }
-    results["batched_vs_unbatched"] = {a: wall[f"ray_{a}_unbatched"] / wall[f"ray_{a}_batched"] for a in (1, 2)}
-    results["two_vs_one_actor"] = {b: wall[f"ray_1_{b}"] / wall[f"ray_2_{b}"] for b in ("unbatched", "batched")}
+    results["vs_unbatched"] = {f"{c}, {a} actor(s)": wall[f"ray_{a}_unbatched"] / wall[f"ray_{a}_{c}"]
+                               for a in (1, 2) for c in ("batched", "streamed")}
+    results["two_vs_one_actor"] = {c: wall[f"ray_1_{c}"] / wall[f"ray_2_{c}"] for c in CALLS}
     results["calls_per_batch"] = {a: sum(p["batched_calls"] for p in ps) / max(1, sum(p["batches"] for p in ps))
                                   for a, ps in pings.items()}
     print(f"rollout benchmark: {args.episodes} gold-replay episodes of {args.domain} ({pattern}, {args.prompt} prompt), "
-          f"{results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs, "
+          f"{args.searches} extra searches, {results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs, "
           f"medians of {args.repeats} interleaved passes, load average {results['load_average'][0]:.1f}")
     print(f"  plain loop                   {wall['plain']:7.3f} s  {results['plain']['episodes_per_s']:7.1f} episodes/s")
     for mode in MODES[1:]:
@@ -167,8 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  Ray, {mode[4]} actor(s), {mode[6:]:9s} {r['wall_s']:7.3f} s  {r['episodes_per_s']:7.1f} episodes/s  "
               f"{r['vs_plain']:.2f}x plain  overhead {r['overhead_ms_per_episode']:+.1f} ms/episode  "
               f"identical={r['same_trajectories_as_plain_loop']}")
-    print("  batched / unbatched: " + ", ".join(f"{a} actor(s) {v:.2f}x" for a, v in results["batched_vs_unbatched"].items())
-          + "; 2 / 1 actors: " + ", ".join(f"{b} {v:.2f}x" for b, v in results["two_vs_one_actor"].items())
+    print("  vs unbatched: " + ", ".join(f"{k} {v:.2f}x" for k, v in results["vs_unbatched"].items())
+          + "; 2 / 1 actors: " + ", ".join(f"{c} {v:.2f}x" for c, v in results["two_vs_one_actor"].items())
           + "; calls per batch: " + ", ".join(f"{a} actor(s) {v:.1f}" for a, v in results["calls_per_batch"].items()))
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))

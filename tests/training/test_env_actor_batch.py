@@ -1,6 +1,7 @@
-"""Batched env-actor calls (issue 17, item 1): `EnvActor.batch` answers every call on its own (one
-bad episode never fails the batch), `_ActorBatcher` coalesces concurrent episodes' calls, and the
-batched pool gives the same trajectories as the unbatched pool and the in-process loop.
+"""Batched env-actor calls (issue 17, item 1): `EnvActor.batch` / `batch_stream` answer every call
+on its own (one bad episode never fails the batch), `_ActorBatcher` coalesces concurrent episodes'
+calls, and the batched and streamed pools give the same trajectories as the unbatched pool and the
+in-process loop.
 
 The first tests run `EnvActor` in this process (no Ray): a batch is a list of pickled calls.
 """
@@ -91,6 +92,26 @@ def test_batch_answers_an_unpicklable_result_as_that_calls_error(actor, monkeypa
     assert isinstance(got[2][1], Exception) and "pickle" in f"{type(got[2][1]).__name__}: {got[2][1]}".lower()
 
 
+def test_batch_stream_yields_every_answer_once_in_order_in_chunks(actor):
+    """The streamed batch answers the same calls the same way as `batch`, in order, each exactly
+    once: a chunk per call when every call takes longer than the flush interval, one chunk when none does."""
+    action = '<tool_call>{"name": "list_patients", "arguments": {}}</tool_call>'
+    calls = [call("reset", "s1", spec("ward_dose", 0)), call("step", "nobody", action),
+             call("reset", "s2", spec("ward_dose", 1)), call("step", "s1", action), call("step", "s2", action)]
+    every = list(actor.batch_stream(calls, 0.0))
+    assert [start for start, _ in every] == [0, 1, 2, 3, 4] and all(len(chunk) == 1 for _, chunk in every)
+    assert [ok for _, chunk in every for ok, _ in chunk] == [True, False, True, True, True]
+    for key in ("s1", "s2"):
+        actor.release(key)
+    whole = list(actor.batch_stream(calls, 3600.0))
+    assert len(whole) == 1 and whole[0][0] == 0
+    again = [(ok, pickle.loads(data)) for ok, data in whole[0][1]]
+    first = [(ok, pickle.loads(data)) for _, chunk in every for ok, data in chunk]
+    assert [ok for ok, _ in again] == [ok for ok, _ in first]
+    assert again[3][1][0] == first[3][1][0]  # the same observation from the same seed
+    assert actor.ping()["batches"] == 2 and actor.ping()["batched_calls"] == 10
+
+
 def _ward_tasks():
     from envs import registry
 
@@ -113,7 +134,7 @@ def ward_specs(n: int) -> list[EpisodeSpec]:
 
 
 @pytest.mark.ray
-def test_batched_pool_gives_the_unbatched_pools_and_the_plain_loops_trajectories(ray_cluster, ward_policy_dir,
+def test_batched_and_streamed_pools_give_the_unbatched_pools_and_the_plain_loops_trajectories(ray_cluster, ward_policy_dir,
                                                                                   monkeypatch):
     monkeypatch.setenv("HCGYM_EMBEDDINGS", "0")
     tokenizer, limits, actions = ward_setup(ward_policy_dir)
@@ -124,8 +145,9 @@ def test_batched_pool_gives_the_unbatched_pools_and_the_plain_loops_trajectories
         env = LocalEnv(limits.max_turns)
         return [await loop.run(s, env, policy) for s in specs]
 
-    async def pooled(batch_calls: bool):
-        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, env_vars=NO_EMBEDDINGS, batch_calls=batch_calls)
+    async def pooled(batch_calls: bool, stream_after_s: float | None):
+        pool = EnvPool(2, 4, limits.max_turns, domain_modules=WARD, env_vars=NO_EMBEDDINGS, batch_calls=batch_calls,
+                       stream_after_s=stream_after_s)
         await pool.ready()
         ledger = EpisodeLedger()
         for s in specs:
@@ -137,8 +159,8 @@ def test_batched_pool_gives_the_unbatched_pools_and_the_plain_loops_trajectories
         return samples, ledger.balance(), pings, pool.loads()
 
     reference = asyncio.run(plain())
-    for batch_calls in (True, False):
-        samples, balance, pings, loads = asyncio.run(pooled(batch_calls))
+    for batch_calls, stream_after_s in ((True, 0.002), (True, 0.0), (True, None), (False, None)):
+        samples, balance, pings, loads = asyncio.run(pooled(batch_calls, stream_after_s))
         assert balance["completed"] == 12 and balance["reruns"] == 0 and loads == [0, 0]
         for got, want in zip(samples, reference):
             assert got.sample_id == want.sample_id
