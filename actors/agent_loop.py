@@ -61,7 +61,7 @@ def compact_system_prompt(tools: list[dict[str, Any]]) -> str:
     4K-token prompt on every turn, so the tiny configs use this instead (`rollout.system_prompt`)
     and learn the arguments from the gold-replay warm start.
     """
-    from envs.core.env import CALL_FORMAT_HELP
+    from envs.env import CALL_FORMAT_HELP
 
     names = [schema.get("function", schema)["name"] for schema in tools]
     return f"{CALL_FORMAT_HELP}\nTools: " + ", ".join(names)
@@ -150,7 +150,7 @@ def make_env(domain: str, split: str | None, max_turns: int, env_kwargs: dict[st
     having run its registration in this process (a stale editable install can import `envs` as a
     namespace package, which skips it).
     """
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     return HealthcareGymEnv(domain=domain, split=split, max_turns=max_turns, **(env_kwargs or {}))
 
@@ -342,7 +342,7 @@ class AgentLoop:
 def gold_turn_actions(task, max_turns: int) -> list[str]:
     """The gold solution as at most `max_turns` assistant actions: the expected tool calls (packed
     several per turn when there are more than `max_turns - 1`), then `submit_answer`."""
-    from envs.core.validate import gold_actions_as_text, gold_answer_text
+    from envs.validate import gold_actions_as_text, gold_answer_text
 
     calls = gold_actions_as_text(task)
     submit = "<tool_call>" + json.dumps(

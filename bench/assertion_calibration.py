@@ -4,7 +4,7 @@ For each task with NL assertions in every domain, three episodes are graded agai
 assertions with `RuleGrader` (the default grader without an LLM judge):
 
 * **gold replay**: the task's expected actions run in a fresh environment, then the gold answer
-  submitted (`envs.core.validate.gold_replay`, the replay `hcgym tasks validate` uses);
+  submitted (`envs.validate.gold_replay`, the replay `hcgym tasks validate` uses);
 * **other task's replay** (a wrong episode): the gold replay of another task of the same domain with
   a different gold answer, graded against this task's assertions: a well-formed, competent-looking
   episode about the wrong patient or question;
@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from envs import registry  # noqa: E402
 from envs.core.task import Task  # noqa: E402
 from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord  # noqa: E402
-from envs.core.validate import gold_replay  # noqa: E402
+from envs.validate import gold_replay  # noqa: E402
 from envs.rewards.assertions import RuleGrader, grade_assertions  # noqa: E402
 from envs.rewards.view import EpisodeView  # noqa: E402
 

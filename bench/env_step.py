@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import envs  # noqa: E402,F401
 from envs import registry  # noqa: E402
-from envs.core.env import HealthcareGymEnv  # noqa: E402
+from envs.env import HealthcareGymEnv  # noqa: E402
 from envs.core.tools import ToolType  # noqa: E402
 
 KNOWLEDGE_TOOLS = {"search", "search_pubmed", "retrieve_evidence", "search_medical_wiki", "browse_article",

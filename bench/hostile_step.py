@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def step_seconds(calls: int, repeats: int) -> tuple[float, int, str]:
     """(median seconds of the step, calls run, the observation)."""
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     action = "\n".join(f'lookup_drug(name="zq{i:04d}xkv")' for i in range(calls))
     times, ran, first = [], 0, ""
@@ -49,7 +49,7 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     import envs  # noqa: F401  (runtime defaults)
-    import envs.core.env as env_module
+    import envs.env as env_module
     import envs.domains.drug_interaction.logic as logic
 
     capped, ran_capped, first_capped = step_seconds(args.calls, args.repeats)

@@ -143,7 +143,7 @@ CONSTANT = {"choice": "A", "numeric": "0"}   # anything else: "none"
 
 
 def strategy_actions(name: str, task, definitions: dict, candidates: Candidates) -> list[str]:
-    from envs.core.validate import gold_actions_as_text
+    from envs.validate import gold_actions_as_text
 
     gold = task.correct_answer or ""
     if name == "gold_replay":
@@ -212,7 +212,7 @@ def run(domains: list[str], split: str, limit: int | None, strategies: tuple[str
     held-out tasks: `^tr_calc_`), `limit` takes the first tasks of each split, `sample` that many tasks
     evenly spaced over it."""
     from envs import registry
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     correct = correct_rule()
     table: dict[str, dict[str, dict[str, float]]] = {}

@@ -115,7 +115,7 @@ def cmd_tasks_show(args: argparse.Namespace) -> int:
 
 
 def cmd_tasks_validate(args: argparse.Namespace) -> int:
-    from envs.core.validate import validate_domain
+    from envs.validate import validate_domain
 
     failed = total = 0
     for domain in _domains(args.domain):
@@ -162,7 +162,7 @@ def cmd_tasks_import(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     env = HealthcareGymEnv(domain=args.domain, task_id=args.task_id, split=args.split,
                            max_turns=args.max_turns, render_mode="ansi")
@@ -201,7 +201,7 @@ def cmd_env_info(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Replay gold solutions through the environment and print the transcripts."""
     from envs import registry
-    from envs.core.validate import gold_replay
+    from envs.validate import gold_replay
 
     for domain in registry.list_domains():
         tasks = registry.get_tasks(domain, "test") or registry.get_tasks(domain)

@@ -15,6 +15,7 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
+from envs.core.contamination import Leak, find_leaks
 from envs.core.task import Task
 from envs.core.tools import ToolArgumentError
 
@@ -46,7 +47,7 @@ def gold_actions_as_text(task: Task) -> list[str]:
 
 def gold_replay(task: Task, domain: str, max_turns: int | None = None) -> tuple[Any, dict[str, Any]]:
     """Run the gold solution in a fresh environment; returns (trajectory, final info)."""
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     actions = gold_actions_as_text(task)
     turns = max_turns or len(actions) + 2
@@ -62,7 +63,10 @@ def gold_replay(task: Task, domain: str, max_turns: int | None = None) -> tuple[
             break
     if not env._done:
         answer = gold_answer_text(task) or ""
-        submit = {"name": "submit_answer", "arguments": {"answer": answer, "reasoning": "gold replay"}}
+        # a task's reference rationale (metadata.gold_reasoning: the recommendation its ticket asks for in
+        # the reasoning) is part of the gold submission, so NL assertions on it can be met by the gold
+        reasoning = str(task.metadata.get("gold_reasoning") or "gold replay")
+        submit = {"name": "submit_answer", "arguments": {"answer": answer, "reasoning": reasoning}}
         _, _, _, _, info = env.step("<tool_call>" + json.dumps(submit, ensure_ascii=False) + "</tool_call>")
     return env.trajectory(), info
 
@@ -141,3 +145,17 @@ def validate_domain(domain: str, *, replay: bool = True, limit: int | None = Non
     for task in tasks[:limit] if limit else tasks:
         reports.append(validate_task(task, domain, per_task(task) if per_task else definitions, replay=replay))
     return reports
+
+
+def check_domain_contamination(domain: str, threshold: float = 0.8) -> list[Leak]:
+    """Leaks between a registered domain's train split and its held-out splits: an id in both, or a
+    held-out task whose text nearly repeats a training task's (see envs.core.contamination)."""
+    from envs import registry
+
+    splits = registry.get_splits(domain)
+    by_id = {t.id: t for t in registry.get_tasks(domain)}
+    train = [by_id[i] for i in splits.get("train", [])]
+    held = [by_id[i] for name in ("test", "validation") for i in splits.get(name, [])]
+    overlap = set(splits.get("train", [])) & {t.id for t in held}
+    leaks = [Leak(i, i, "same id", 1.0) for i in sorted(overlap)]
+    return leaks + find_leaks(train, [t for t in held if t.id not in overlap], threshold)

@@ -7,7 +7,7 @@ base_url=..., model=...))`.
 
 What it does per request (`reply`):
 * Messages are sent as they are, except that the gym's image parts (`{"type": "image", "image":
-  PATH}`, see `envs.core.env`) become OpenAI `image_url` parts with a base64 data URL (or, with
+  PATH}`, see `envs.env`) become OpenAI `image_url` parts with a base64 data URL (or, with
   `images="path_text"`, a text note for text-only endpoints).
 * Tools: `tool_mode="native"` sends `tools=` and returns the endpoint's `tool_calls`;
   `tool_mode="text"` sends no `tools=` (the gym's system prompt already lists them) and the

@@ -76,7 +76,7 @@ class ScriptedPolicy:
 
     def answer_for(self, task, seed: int, benchmark: str | None) -> str:
         """The answer this baseline gives on `task` ("" = abstains: no option letters to draw from)."""
-        from envs.core.validate import gold_answer_text
+        from envs.validate import gold_answer_text
 
         if self.kind == "gold":
             return gold_answer_text(task) or ""

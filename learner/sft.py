@@ -35,8 +35,8 @@ def task_corpus(domains: list[str], split: str | None, pattern: str | None = Non
     gold actions and the real tool results of gold replays."""
     from actors.agent_loop import compact_system_prompt
     from envs import registry
-    from envs.core.env import build_system_prompt, render_ticket
-    from envs.core.validate import gold_replay
+    from envs.env import build_system_prompt, render_ticket
+    from envs.validate import gold_replay
 
     texts: list[str] = []
     for domain in domains:

@@ -51,7 +51,7 @@ def load_task_refs(domains: list[str], split: str | None, limit: int | None = No
 def prompt_lengths(refs: list[TaskRef], loop: AgentLoop) -> list[int]:
     """Token length of each task's rendered prompt (system prompt + ticket), as the agent loop renders it."""
     from envs import registry
-    from envs.core.env import prompt_parts
+    from envs.env import prompt_parts
 
     domain_envs: dict[str, Any] = {}
     tasks: dict[tuple[str, str | None], dict[str, Any]] = {}

@@ -12,7 +12,7 @@ registry.DOMAINS.setdefault("ward", "tests.fixtures.ward_domain.environment")
 
 @pytest.fixture
 def ward_env():
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     env = HealthcareGymEnv(domain="ward", max_turns=6, render_mode="ansi")
     yield env

@@ -5,7 +5,7 @@ folder (`<data>/imported/<domain>/<format>-<source name>.json`, loaded with the 
 `imported`). For each job:
 1. convert (a benchmark converter, or the reference importer); rows that cannot be read are reported
    with file and line;
-2. check every task statically (`envs.core.validate.static_problems`): tasks naming tools the domain lacks
+2. check every task statically (`envs.validate.static_problems`): tasks naming tools the domain lacks
    are never imported; ungradeable ones (no gold answer, nothing to grade, required arguments missing or
    empty, arguments that do not fit) are reported by reason and left out unless `keep_ungradeable`;
 3. drop ids already used in the domain (its own tasks or another import) or repeated in the file,
@@ -151,7 +151,7 @@ def _definitions(domain: str):
 
 def screen(job: ImportJob, tasks: list[Task], *, keep_ungradeable: bool) -> list[Task]:
     """Static validation of every task (step 2 of the module docstring)."""
-    from envs.core.validate import UNKNOWN_TOOL, static_problems
+    from envs.validate import UNKNOWN_TOOL, static_problems
 
     loaded: list[Any] = []  # the domain's tools, loaded on the first task with expected actions
     kept = []
@@ -182,10 +182,10 @@ def screen(job: ImportJob, tasks: list[Task], *, keep_ungradeable: bool) -> list
 
 
 def replay_gold(job: ImportJob, tasks: list[Task], *, keep_ungradeable: bool) -> list[Task]:
-    """`--replay`: run each task's gold solution in a fresh episode (`envs.core.validate.validate_task`):
+    """`--replay`: run each task's gold solution in a fresh episode (`envs.validate.validate_task`):
     expected actions that fail (e.g. a patient the domain does not have) or a gold answer the grader does
     not give full marks are reported as `gold replay fails`."""
-    from envs.core.validate import REPLAY_FAILS, validate_task
+    from envs.validate import REPLAY_FAILS, validate_task
 
     definitions, per_task = _definitions(job.domain)
     kept = []
@@ -289,7 +289,7 @@ def _run_jobs(args: Any, sources: list[tuple[str, Path]], jobs: list[ImportJob])
 
 def _convert(args: Any, job: ImportJob) -> list[Task]:
     if args.format == "reference":
-        from envs.core.importers import import_reference_tasks
+        from envs.converters.reference import import_reference_tasks
 
         result = import_reference_tasks(job.source, domain=job.domain)
         job.read, job.notes = result.rows_read, list(result.notes)

@@ -16,7 +16,7 @@ Differences we absorb (facts about its files: ../shared/reference/reference_impl
 Tasks whose expected actions still name tools the domain lacks are reported with the missing names and
 left out of the result (never silently dropped), as are rows that fail the task schema. Whether the rest
 can be graded (gold answer, argument fit) is checked by `hcgym tasks import` with
-`envs.core.validate.static_problems`, for every imported task whatever its format.
+`envs.validate.static_problems`, for every imported task whatever its format.
 """
 
 from __future__ import annotations

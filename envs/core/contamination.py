@@ -80,15 +80,3 @@ def find_leaks(train: list[Task], held_out: list[Task], threshold: float = 0.8) 
                 leaks.append(Leak(task.id, other.id, "near", similarity))
                 break
     return leaks
-
-
-def check_domain(domain: str, threshold: float = 0.8) -> list[Leak]:
-    from envs import registry
-
-    splits = registry.get_splits(domain)
-    by_id = {t.id: t for t in registry.get_tasks(domain)}
-    train = [by_id[i] for i in splits.get("train", [])]
-    held = [by_id[i] for name in ("test", "validation") for i in splits.get(name, [])]
-    overlap = set(splits.get("train", [])) & {t.id for t in held}
-    leaks = [Leak(i, i, "same id", 1.0) for i in sorted(overlap)]
-    return leaks + find_leaks(train, [t for t in held if t.id not in overlap], threshold)

@@ -3,7 +3,7 @@
 A task is what the agent is asked (`ticket`), how it is graded (`evaluation_criteria`, and for
 questions with a single right answer `correct_answer` with `answer_type`), and where it comes
 from (`description.source`). Field names follow the reference implementation's files so those
-files import (see `envs/core/importers.py`).
+files import (see `envs/converters/reference.py`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 import pytest
 
 from envs import registry
-from envs.core.contamination import check_domain, find_leaks, normalise
+from envs.core.contamination import find_leaks, normalise
+from envs.validate import check_domain_contamination
 from envs.core.task import Task
 
 
@@ -26,7 +27,7 @@ def test_exact_and_near_duplicates_are_found():
 
 @pytest.mark.parametrize("domain", registry.list_domains())
 def test_no_held_out_task_appears_in_train(domain):
-    leaks = check_domain(domain)
+    leaks = check_domain_contamination(domain)
     assert leaks == [], f"{domain}: {len(leaks)} held-out tasks leak into train, e.g. {leaks[:3]}"
 
 

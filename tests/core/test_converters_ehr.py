@@ -138,7 +138,7 @@ def ehr_env():
 
 
 def test_imported_tasks_replay_and_pass_the_validator(ehr_env, monkeypatch):
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     imported = convert_mimic3(FIX / "mimic3").tasks + convert_eicu(FIX / "eicu").tasks
     built = ehr_env.get_tasks()

@@ -12,10 +12,10 @@ import pytest
 
 from envs import registry
 from envs.cli import main
-from envs.core.importers import REFERENCE_TOOL_RENAMES, convert_reference_task, import_reference_tasks
+from envs.converters.reference import REFERENCE_TOOL_RENAMES, convert_reference_task, import_reference_tasks
 from envs.core.paths import data_dir
 from envs.core.task import Task
-from envs.core.validate import EMPTY_REQUIRED, NO_GOLD, static_problems
+from envs.validate import EMPTY_REQUIRED, NO_GOLD, static_problems
 
 BUILT = data_dir() / "domains" / "ehr_management" / "db.json"
 needs_build = pytest.mark.skipif(not BUILT.is_file(), reason="needs `hcgym data build` (the EHR and KB builds)")
@@ -160,7 +160,7 @@ def test_reference_folder_import_table_reasons_and_cross_domain_loading(built_da
     assert "unknown tool 1" in lines["ehr_management"] and "no gold answer 1" in lines["ehr_management"]
     assert "reference tool renamed get_patient_summary -> summarize_admission" in out
     # imported cross-domain tasks load with the domain (split 'imported') and replay to full accuracy
-    from envs.core.validate import gold_replay
+    from envs.validate import gold_replay
 
     imported = registry.get_tasks("cross_domain", "imported")
     assert [t.id for t in imported] == ["evid_cross_domain_ok"]

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import envs
 from envs import registry
-from envs.core.env import HealthcareGymEnv
+from envs.env import HealthcareGymEnv
 from envs.core.trajectory import read_trajectories, write_trajectories
 
 

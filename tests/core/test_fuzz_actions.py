@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from envs import registry
-from envs.core.env import MAX_CALLS_PER_ACTION, HealthcareGymEnv
+from envs.env import MAX_CALLS_PER_ACTION, HealthcareGymEnv
 
 DOMAINS = registry.list_domains()
 MAX_TURNS = 2  # every second step of an episode is terminal (truncated) unless it submitted earlier

@@ -106,7 +106,7 @@ def test_prefix_suggestions_equal_the_sorted_scan(names, prefix, limit):
 
 
 def test_medical_qa_unknown_names_get_prefix_suggestions():
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     env = HealthcareGymEnv(domain="medical_qa")
     env.reset(seed=0)

@@ -12,7 +12,7 @@ import pytest
 
 from envs import registry
 from envs.core.actions import MAX_INTEGER_DIGITS, MAX_NESTING_DEPTH, parse_action
-from envs.core.env import MAX_CALLS_PER_ACTION, HealthcareGymEnv
+from envs.env import MAX_CALLS_PER_ACTION, HealthcareGymEnv
 from envs.core.tools import safe_repr
 from envs.rewards.accuracy import _numbers
 from envs.rewards.similarity import _encodable

@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 
 from envs.core.db import DataFileError
-from envs.core.importers import import_reference_tasks
+from envs.converters.reference import import_reference_tasks
 from envs.core.task import Task, load_tasks, parse_tasks
 from envs import registry
 
@@ -71,14 +71,14 @@ def test_domain_import_failure_names_the_domain(monkeypatch):
 
 
 def test_validator_on_ward_domain():
-    from envs.core.validate import validate_domain
+    from envs.validate import validate_domain
 
     reports = validate_domain("ward")
     assert [r.problems for r in reports] == [[], [], []]
     bad = Task(id="bad", ticket="q", correct_answer="x", answer_type="exact",
                evaluation_criteria={"actions": [{"name": "get_patient", "arguments": {"patient_id": 3, "oops": 1}},
                                                 {"name": "no_such_tool"}]})
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     report = validate_task(bad, "ward", registry.get_environment("ward").toolkit.definitions)
     text = " | ".join(report.problems)

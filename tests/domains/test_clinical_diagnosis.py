@@ -292,7 +292,7 @@ def test_gold_actions_replay_without_errors(built, monkeypatch):
 @pytest.mark.skipif(importlib.util.find_spec("envs.rewards") is None, reason="rewards package not present yet")
 def test_core_validator_on_a_sample(built, monkeypatch):
     import envs.domains.clinical_diagnosis.environment as m
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     monkeypatch.setattr(m, "shared_toolkits", lambda: [])
 

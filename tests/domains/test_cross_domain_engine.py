@@ -63,7 +63,7 @@ def test_unknown_domain_rejected_and_tools_switch():
 
 def test_pathway_episode_reward_is_the_pathway_score(monkeypatch):
     from envs import registry
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     monkeypatch.setattr(cross, "load_pathways", lambda path=None: {PATHWAY.id: PATHWAY})
     monkeypatch.setitem(registry.DOMAINS, "cross_domain", "envs.domains.cross_domain.environment")

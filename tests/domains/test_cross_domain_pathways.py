@@ -14,8 +14,8 @@ from envs import registry
 registry.DOMAINS.setdefault("cross_domain", "envs.domains.cross_domain.environment")
 
 from envs.core.db import DataFileError  # noqa: E402
-from envs.core.env import HealthcareGymEnv  # noqa: E402
-from envs.core.validate import gold_replay, validate_task  # noqa: E402
+from envs.env import HealthcareGymEnv  # noqa: E402
+from envs.validate import gold_replay, validate_task  # noqa: E402
 from envs.domains.cross_domain import authoring  # noqa: E402
 from envs.domains.cross_domain import environment as cross  # noqa: E402
 from envs.rewards.checks.emergency import normalise_emergency  # noqa: E402

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from envs.core.contamination import find_leaks
-from envs.core.validate import validate_task
+from envs.validate import validate_task
 from envs.domains.drug_interaction import build as di_build
 from envs.domains.drug_interaction import environment as di_env
 from envs.domains.drug_interaction.taskgen import split_of
@@ -132,7 +132,7 @@ def test_authored_answers_agree_with_the_tools(authored):
 
 
 def test_gym_episode_smoke(tasks):
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     env = HealthcareGymEnv(domain="drug_interaction", task_id="di-auth-01-warfarin-nsaid", max_turns=4)
     obs, info = env.reset(seed=0)

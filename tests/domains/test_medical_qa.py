@@ -12,7 +12,7 @@ import pytest
 
 from envs import registry
 from envs.calculators import CALCULATORS
-from envs.core.contamination import check_domain
+from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.medical_qa import build as mqa_build
 from envs.domains.medical_qa.data_model import MedicalQADB, QAQuestion
@@ -158,7 +158,7 @@ def test_counts_splits_and_schema(tasks):
 
 
 def test_no_held_out_leaks(tasks):
-    assert check_domain("medical_qa") == []
+    assert check_domain_contamination("medical_qa") == []
 
 
 def test_generated_answers_follow_from_the_data(tasks, kb):
@@ -264,7 +264,7 @@ def test_every_expected_action_runs(tasks, kb):
 
 
 def test_gold_replay_through_the_validator(tasks):
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     definitions = registry.get_environment("medical_qa").toolkit.definitions
     by_type = {}

@@ -12,7 +12,7 @@ from datetime import date
 import pytest
 
 from envs import registry
-from envs.core.contamination import check_domain
+from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.obstetrics import build as ob_build
 from envs.domains.obstetrics import ctg as CTG
@@ -196,11 +196,11 @@ def test_tasks_counts_splits_emergencies(tasks):
 
 
 def test_no_held_out_leaks(tasks):
-    assert check_domain("obstetrics") == []
+    assert check_domain_contamination("obstetrics") == []
 
 
 def test_gold_replay_with_full_safety(tasks):
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     definitions = registry.get_environment("obstetrics").toolkit.definitions
     sample = [t for t in tasks if t.description.source == "authored"]

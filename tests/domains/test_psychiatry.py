@@ -11,7 +11,7 @@ import pytest
 
 from envs import registry
 from envs.calculators import CALCULATORS
-from envs.core.contamination import check_domain
+from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.psychiatry import build as psy_build
 from envs.domains.psychiatry.instruments import score_mdq
@@ -173,11 +173,11 @@ def test_generated_answers_recomputed(tasks):
 
 
 def test_no_held_out_leaks(tasks):
-    assert check_domain("psychiatry") == []
+    assert check_domain_contamination("psychiatry") == []
 
 
 def test_gold_replay_through_the_validator(tasks):
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     definitions = registry.get_environment("psychiatry").toolkit.definitions
     sample = [t for t in tasks if t.description.source == "authored"]

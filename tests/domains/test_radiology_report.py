@@ -11,7 +11,7 @@ import pytest
 
 from envs import registry
 from envs.calculators import CALCULATORS
-from envs.core.contamination import check_domain
+from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.radiology_report import build as rad_build
 from envs.domains.radiology_report.tools import mean_diameter, normalise_category
@@ -150,11 +150,11 @@ def test_generated_answers_recomputed(tasks):
 
 
 def test_no_held_out_leaks(tasks):
-    assert check_domain("radiology_report") == []
+    assert check_domain_contamination("radiology_report") == []
 
 
 def test_gold_replay_reaches_answer_and_state(tasks):
-    from envs.core.validate import gold_replay, validate_task
+    from envs.validate import gold_replay, validate_task
 
     definitions = registry.get_environment("radiology_report").toolkit.definitions
     sample = [t for t in tasks if t.description.task_type == "report_workflow"]

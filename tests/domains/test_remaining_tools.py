@@ -5,7 +5,7 @@ from datetime import datetime
 import pytest
 
 from envs import registry
-from envs.core.env import HealthcareGymEnv
+from envs.env import HealthcareGymEnv
 
 
 def test_ehr_get_vital_trend_matches_the_charted_series():

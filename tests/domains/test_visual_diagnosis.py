@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from envs import registry
-from envs.core.contamination import check_domain
+from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.visual_diagnosis import build as vis_build
 from envs.domains.visual_diagnosis import png
@@ -187,11 +187,11 @@ def test_tasks_counts_splits_images(tasks):
 
 
 def test_no_held_out_leaks(tasks):
-    assert check_domain("visual_diagnosis") == []
+    assert check_domain_contamination("visual_diagnosis") == []
 
 
 def test_gold_replay(tasks):
-    from envs.core.validate import validate_task
+    from envs.validate import validate_task
 
     definitions = registry.get_environment("visual_diagnosis").toolkit.definitions
     sample = [t for t in tasks if t.description.source == "authored"]

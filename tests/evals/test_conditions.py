@@ -145,7 +145,7 @@ def test_logprob_condition_matches_an_independent_forward_pass(ward_policy_dir):
     task = ward_task("ward_choice")
     policy = LocalModelPolicy(ward_policy_dir)
     out = run(run_logprob(policy, LocalEnv(3), task, "ward", None, 0, ConditionSettings()))
-    from envs.core.env import render_ticket
+    from envs.env import render_ticket
 
     expected = independent_letter_logprobs(ward_policy_dir, render_ticket(task), sorted(task.options))
     got = out.extra["option_logprobs"]

@@ -90,7 +90,7 @@ def _answer_only(task: Task) -> Trajectory:
 
 def test_gold_replays_score_above_other_episodes_on_a_sample():
     """One task with NL assertions per domain (fixed seed), replayed in its real environment."""
-    from envs.core.validate import gold_replay
+    from envs.validate import gold_replay
 
     rows = []
     for domain in registry.list_domains():

@@ -24,7 +24,7 @@ def _call(name: str, arguments: dict) -> str:
 
 
 def test_gold_replays_of_the_drug_interaction_domain_score_cleanly():
-    from envs.core.env import HealthcareGymEnv
+    from envs.env import HealthcareGymEnv
 
     tasks = [t for t in _domain_tasks("drug_interaction") if t.has_gold_answer]
     sample = random.Random(7).sample(tasks, min(24, len(tasks)))

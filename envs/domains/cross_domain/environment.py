@@ -91,7 +91,7 @@ def _imported_toolkit():
     """The toolkit of an imported cross-domain task (`hcgym tasks import`, no pathway): think, submit_answer
     and the shared knowledge tools, which is what the reference's cross-domain task files call."""
     from envs.core.common_tools import BaseDomainTools
-    from envs.core.shared import shared_toolkits
+    from envs.shared import shared_toolkits
     from envs.core.tools import CompositeToolkit
 
     return CompositeToolkit(BaseDomainTools(None), *shared_toolkits())
@@ -139,7 +139,7 @@ def task_tool_definitions(task: Task) -> dict[str, Any]:
     """The tool definitions a pathway task's expected actions are checked against (`validate_task`):
     the control tools plus, for each required action, the tool of its own phase's domain. The
     environment's pre-reset toolkit has only the control tools, because the phase tools are built at
-    reset; use this with `envs.core.validate.validate_task(task, "cross_domain", definitions)`."""
+    reset; use this with `envs.validate.validate_task(task, "cross_domain", definitions)`."""
     from envs import registry
     from envs.domains.cross_domain.pathway import PathwayControlTools
 

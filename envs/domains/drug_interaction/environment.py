@@ -11,7 +11,7 @@ from pathlib import Path
 
 from envs.core.domain import BuiltDomain, DomainEnvironment
 from envs.core.paths import domain_build_dir
-from envs.core.shared import shared_toolkits
+from envs.shared import shared_toolkits
 from envs.core.tools import CompositeToolkit
 
 from .data_model import DrugInteractionDB

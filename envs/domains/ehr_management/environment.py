@@ -15,7 +15,7 @@ from pathlib import Path
 from envs.core.db import DataFileError
 from envs.core.domain import BuiltDomain, DomainEnvironment
 from envs.core.paths import domain_build_dir
-from envs.core.shared import shared_toolkits
+from envs.shared import shared_toolkits
 from envs.core.task import Task
 from envs.core.tools import CompositeToolkit
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from envs.core.domain import BuiltDomain, DomainEnvironment
-from envs.core.shared import shared_toolkits
+from envs.shared import shared_toolkits
 from envs.core.tools import CompositeToolkit
 
 from .data_model import RadiologyDB
