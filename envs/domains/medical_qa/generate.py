@@ -216,10 +216,18 @@ def hpo_diagnosis_tasks(kb: MedicalKnowledge, rng: random.Random, n: int, used: 
             if oname in names_seen or count > limit:
                 continue
             cov = _coverage(kb, other, chosen)
-            if 1 <= cov <= limit:
+            # a distractor's name must not also name a disease that covers more of the features (OMIM and
+            # Orphanet records share names): the option text is what the agent and the grader resolve
+            namesakes = kb.disease_by_name.get(oname, ())
+            if 1 <= cov <= limit and all(_coverage(kb, d, chosen) <= limit for d in namesakes):
                 scored.append((other, cov))
                 names_seen.add(oname)
         if len(scored) < 4:
+            continue
+        # The vignette must identify its disease: the domain's own ranking tool
+        # (search_diseases_by_phenotypes -> rank_diseases) has to put the gold in its top 3,
+        # otherwise the features read as another disease and the task is dropped (issue 14 item 1).
+        if did not in [r["disease_id"] for r in kb.rank_diseases(chosen, 3)]:
             continue
         scored.sort(key=lambda x: (-x[1], x[0]))
         top = scored[:12]
