@@ -179,6 +179,13 @@ def ctg_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict]]
     if gold == "Category III":
         actions.append(act("escalate_care", {"patient_id": pid, "level": "obstetric emergency team",
                                              "reason": "Category III tracing: expedite delivery"}, ["patient_id"]))
+        # ACOG Practice Bulletin 116 (2010): a Category III tracing needs intrauterine resuscitation
+        # while expedited delivery is arranged; the note records both, as the assertion asks.
+        actions.append(act("write_obstetric_note", {
+            "patient_id": pid, "assessment": "Category III tracing (NICHD): abnormal, predictive of fetal acidaemia.",
+            "plan": "Intrauterine resuscitation started: oxytocin switched off, left lateral position, IV fluid bolus, correct "
+                    "hypotension, oxygen if hypoxic. Expedited delivery arranged with the obstetric emergency team."},
+            ["patient_id"]))
         emergency = "fetal_compromise"
         assertions = ["The agent starts intrauterine resuscitation and arranges expedited delivery for the Category III tracing."]
     ticket = _intro(p) + " " + rng.choice([
@@ -344,6 +351,17 @@ def preeclampsia_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, li
                                                    "indication": "seizure prophylaxis for preeclampsia with severe features"},
                               ["patient_id", "drug"]))
         assertions = ["The agent starts magnesium sulfate seizure prophylaxis."]
+        # ACOG PB 222: with severe features, delivery after maternal stabilisation at >= 34 0/7 weeks;
+        # before 34 weeks, antenatal corticosteroids and expectant management only in a tertiary centre
+        # if mother and fetus are stable. The note states the plan for her gestational age.
+        weeks = days // 7
+        timing = (f"At {weeks} weeks (>= 34 0/7): plan delivery after maternal stabilisation." if weeks >= 34 else
+                  f"At {weeks} weeks (< 34 0/7): antenatal corticosteroids; plan delivery after maternal stabilisation, "
+                  "expectant management only in a tertiary centre while mother and fetus remain stable.")
+        actions.append(act("write_obstetric_note", {
+            "patient_id": pid, "assessment": f"{gold} (ACOG PB 222).",
+            "plan": ("Treat severe-range blood pressure urgently (IV labetalol, IV hydralazine or oral nifedipine). " if severe_range_bp else "")
+                    + "Magnesium sulfate seizure prophylaxis. " + timing}, ["patient_id"]))
         assertions.append("The agent treats severe-range blood pressure and plans delivery per gestational age." if severe_range_bp
                           else "The agent plans delivery per gestational age.")
     ticket = _intro(p) + " " + rng.choice([
@@ -367,7 +385,14 @@ def cord_prolapse_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, l
     actions = [act("get_cervical_exam", {"patient_id": pid}),
                act("escalate_care", {"patient_id": pid, "level": "emergency cesarean delivery",
                                      "reason": "umbilical cord prolapse with fetal bradycardia"}, ["patient_id", "level"]),
-               act("interpret_ctg", {"patient_id": pid}, ["patient_id"])]
+               act("interpret_ctg", {"patient_id": pid}, ["patient_id"]),
+               # RCOG Green-top 50: relieve cord compression (elevate the presenting part manually or fill
+               # the bladder) while preparing for category 1 delivery; the note records it.
+               act("write_obstetric_note", {
+                   "patient_id": pid, "assessment": "Umbilical cord prolapse with fetal bradycardia.",
+                   "plan": "Elevate the presenting part manually (or fill the bladder) to relieve cord compression, "
+                           "knee-chest position, minimal handling of the cord, while preparing for delivery: "
+                           "emergency (category 1) cesarean."}, ["patient_id"])]
     ticket = _intro(p) + " " + rng.choice([
         "The midwife has just examined her. Review the examination and the CTG and state the immediate delivery plan.",
         "Assess the examination findings and the tracing; what is the immediate management of delivery?"])
