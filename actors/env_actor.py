@@ -286,12 +286,29 @@ class _ActorBatcher:
                 self._in_flight -= 1
                 self._settle(batch, None, exc)
                 continue
-            asyncio.ensure_future(self._collect(ref, batch))
+            asyncio.ensure_future(self._collect(ref, batch, self.stream_after_s is not None))
 
-    async def _collect(self, ref: Any, batch: list[tuple[bytes, asyncio.Future]]) -> None:
+    def retire(self) -> None:
+        """Send every queued call now, whatever is in flight: a batcher being replaced (the pool's
+        mode changed, or a new event loop) must not strand calls, releases above all (a release
+        never sent keeps its slot busy in the actor). They are submitted before any call of the
+        batcher that replaces this one, so the actor still runs them first."""
+        queue, self._queue = self._queue, []
+        if not queue:
+            return
+        try:
+            ref = self.actor.batch.remote([payload for payload, _ in queue])
+        except Exception as exc:
+            self._settle(queue, None, exc)
+            return
+        if self.loop is _running_loop():  # else their episodes' loop has ended: nobody awaits them
+            self._in_flight += 1
+            asyncio.ensure_future(self._collect(ref, queue, False))
+
+    async def _collect(self, ref: Any, batch: list[tuple[bytes, asyncio.Future]], streamed: bool) -> None:
         settled = 0
         try:
-            if self.stream_after_s is None:
+            if not streamed:
                 self._settle(batch, await ref, None)
             else:
                 async for chunk_ref in ref:  # chunks in order, as the actor finishes them
@@ -513,13 +530,24 @@ class EnvPool:
         """The call batcher of actor `index` in the running event loop (None without batching).
         A pool used from a new event loop (another `asyncio.run`) gets new batchers."""
         if not self.batch_calls:
+            while self._batchers:  # batching was switched off: send what the batchers still hold
+                self._batchers.popitem()[1].retire()
             return None
         batcher = self._batchers.get(index)
         if (batcher is None or batcher.loop is not asyncio.get_running_loop()
                 or batcher.stream_after_s != self.stream_after_s):
+            if batcher is not None:
+                batcher.retire()
             batcher = self._batchers[index] = _ActorBatcher(self.actors[index], index, self.max_batch,
                                                             self.max_batches_in_flight, self.stream_after_s)
         return batcher
+
+
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None
 
 
 def _has_loop() -> bool:

@@ -223,3 +223,38 @@ def test_a_batch_lost_with_its_actor_fails_every_call_as_env_actor_lost(ray_clus
     assert all(isinstance(r, EnvActorLost) for r in results), results
     for r, s in zip(results, specs):  # each error names its own episode
         assert f"episode '{s.sample_id}#" in str(r) and "during step" in str(r)
+
+
+@pytest.mark.ray
+def test_switching_call_modes_between_passes_strands_no_release(ray_cluster, ward_policy_dir, monkeypatch):
+    """Releases are not awaited; when the pool's call mode changes their batcher is replaced, and
+    what it still holds is sent first: no slot stays busy in the actor ("all 2 slots are busy")."""
+    monkeypatch.setenv("HCGYM_EMBEDDINGS", "0")
+    tokenizer, limits, actions = ward_setup(ward_policy_dir)
+    loop, policy = AgentLoop(tokenizer, limits), GoldReplayPolicy(tokenizer, actions)
+    modes = [(True, 0.002), (True, None), (False, None), (True, 0.0), (True, None)]
+
+    async def go():
+        pool = EnvPool(1, 2, limits.max_turns, domain_modules=WARD, env_vars=NO_EMBEDDINGS, max_restarts=0)
+        await pool.ready()
+        passes = []
+        for number, (batch_calls, stream_after_s) in enumerate(modes):
+            pool.batch_calls, pool.stream_after_s = batch_calls, stream_after_s
+            specs = [EpisodeSpec.model_validate({**spec(t.id, i), "sample_id": f"{t.id}:p{number}:{i}"})
+                     for i, t in enumerate(_ward_tasks() * 2)]
+            ledger = EpisodeLedger()
+            for s in specs:
+                ledger.admit(s.sample_id)
+            passes.append(await asyncio.gather(*[run_episode(s, loop, pool, policy, ledger) for s in specs]))
+        pool.batch_calls = False  # sends what the last batcher holds
+        pool.batcher(0)
+        await asyncio.sleep(0.5)
+        pong = (await pool.ready())[0]
+        for a in pool.actors:
+            ray_cluster.kill(a)
+        return passes, pong
+
+    passes, pong = asyncio.run(go())
+    assert all(s.correct and s.metadata["attempts"] == 1 for samples in passes for s in samples)
+    assert [[s.input_ids for s in samples] for samples in passes[1:]] == [[s.input_ids for s in passes[0]]] * 4
+    assert pong["active"] == 0 and pong["episodes_started"] == 5 * 2 * len(_ward_tasks())
