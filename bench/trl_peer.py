@@ -336,7 +336,8 @@ class TreeMeter:
                 t = p.cpu_times()
                 key = (p.pid, p.create_time())
                 self.cpu_by_pid[key] = t.user + t.system
-                if key not in self.name_of:  # Ray workers carry their actor in the process title
+                if not self.name_of.get(key, "").startswith("ray::"):
+                    # Ray workers put their actor in the process title once it is assigned: re-read
                     cmd = p.cmdline()
                     self.name_of[key] = (cmd[0].split(" ")[0] if cmd and cmd[0].startswith("ray::")
                                          else p.name())
