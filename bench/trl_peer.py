@@ -336,10 +336,12 @@ class TreeMeter:
                 t = p.cpu_times()
                 key = (p.pid, p.create_time())
                 self.cpu_by_pid[key] = t.user + t.system
-                if not self.name_of.get(key, "").startswith("ray::"):
-                    # Ray workers put their actor in the process title once it is assigned: re-read
+                name = self.name_of.get(key, "")
+                if not name.startswith("ray::") or name == "ray::IDLE":
+                    # Ray workers put their actor in the process title once one is assigned (ray::IDLE
+                    # before): re-read until then; "ray::LearnerActor.train_step" counts as its actor.
                     cmd = p.cmdline()
-                    self.name_of[key] = (cmd[0].split(" ")[0] if cmd and cmd[0].startswith("ray::")
+                    self.name_of[key] = (cmd[0].split(" ")[0].split(".")[0] if cmd and cmd[0].startswith("ray::")
                                          else p.name())
             except psutil.Error:
                 continue  # exited between listing and reading: its last reading stays
