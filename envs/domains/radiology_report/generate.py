@@ -375,7 +375,8 @@ def workflow_task(sid: str, rng: random.Random, i: int, critical_categories: dic
                                     "category": cat, "recommendation": "As per the guideline for this category."}, ["study_id", "category"])]
     if critical:
         actions.append(act("communicate_critical_result", {"study_id": sid, "recipient": "referring clinician", "method": "phone",
-                                                           "finding": f"{cat} finding"}, ["study_id"]))
+                                                           "finding": f"suspicious result ({cat}) communicated to the referring "
+                                                                      "clinician by phone before the report is signed"}, ["study_id"]))
     actions.append(act("finalize_report", {"study_id": sid}))
     ticket = (f"Report study {sid} ({s.exam}; {s.patient.age}-year-old {s.patient.sex}, {s.indication}; preliminary read: {narrative(s)}). "
               "Use the structured template, "
@@ -386,7 +387,9 @@ def workflow_task(sid: str, rng: random.Random, i: int, critical_categories: dic
                          "structured reporting", {"critical": critical}, aliases=aliases,
                          assertions=["The report states the assessment category in the impression with its management recommendation.",
                                      "A suspicious result is communicated to the referring clinician before the report is signed."
-                                     if critical else "The report is finalised without unnecessary escalation."],
+                                     # ACR Practice Parameter for Communication of Diagnostic Imaging Findings
+                                     # (2020): only critical or suspicious results need direct communication
+                                     if critical else "The agent does not make a critical-result call to the referring clinician."],
                          difficulty="hard")]
 
 
