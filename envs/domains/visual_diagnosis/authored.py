@@ -71,6 +71,45 @@ def act(name, args, compare=None):
     return {"name": name, "arguments": args, "compare_args": list(args) if compare is None else compare}
 
 
+# The reasoning a complete gold submission gives with its answer (envs.validate.gold_replay submits
+# metadata.gold_reasoning): the interpretation and the management each task's assertions check,
+# following the guideline the task names (Fleischner 2017, BTS pleural disease 2023 / pneumothorax
+# 2010, ESC heart failure 2021, ATLS for tension pneumothorax).
+GOLD_REASONING = {
+    "vis_a_tension_ptx": "Right pneumothorax. Because the patient is hypotensive and hypoxic, this is a suspected tension "
+                         "pneumothorax: escalates immediately for needle decompression (ATLS 10th edition).",
+    "vis_a_pneumonia": "Right lower zone consolidation with air bronchograms. Relates the image to the fever and productive "
+                       "cough and suggests pneumonia.",
+    "vis_a_effusion_heart": "Right pleural effusion and cardiomegaly together in a breathless, orthopnoeic patient: suggests "
+                            "heart failure as a unifying explanation (ESC heart failure 2021); echocardiography.",
+    "vis_a_growing_nodule": "The solid nodule shows growth over 12 months of about 3.5 mm in mean diameter. Interval growth "
+                            "in a heavy smoker is suspicious for malignancy: recommends tissue sampling or PET/CT "
+                            "(Fleischner 2017, BTS 2015).",
+    "vis_a_multiple_solid": "Two solid nodules, the largest about 7 mm. Fleischner 2017 does not apply to a patient with known "
+                            "cancer: the nodules are assessed within the breast-cancer staging, metastasis being considered.",
+    "vis_a_cxr_nodule": "Left upper zone nodule under 30 mm. In a smoker, recommends CT chest for further characterisation.",
+    "vis_a_mass": "Right lung mass larger than 30 mm in a heavy smoker with haemoptysis and weight loss: recommends urgent CT "
+                  "staging and tissue diagnosis (suspected lung cancer pathway, NICE NG122).",
+    "vis_a_normal": "Systematic review: no abnormality, with a cardiothoracic ratio within normal limits; no lesion is called.",
+    "vis_a_cardiomegaly": "Cardiomegaly: CTR above 0.50 on a PA film. After a myocardial infarction with orthopnoea, recommends "
+                          "echocardiography (ESC heart failure 2021).",
+    "vis_a_aspiration": "Right lower zone consolidation after choking on food: raises aspiration pneumonia given the dysphagia "
+                        "after stroke.",
+    "vis_a_ggn": "A single pure ground-glass nodule of about 9 mm: Fleischner 2017 recommends CT at 6-12 months to confirm "
+                 "persistence, then every 2 years to 5 years.",
+    "vis_a_three_nodules": "Three nodules recorded with their sizes and types. In a colorectal cancer staging scan, metastases "
+                           "are the main concern; Fleischner 2017 excludes patients with known cancer.",
+    "vis_a_shrinking": "Compared with the prior, the nodule has shrunk by about 4 mm in mean diameter. Shrinkage after "
+                       "pneumonia favours a resolving inflammatory lesion.",
+    "vis_a_left_effusion": "Left pleural effusion with a meniscus. Given the breast cancer history, suggests diagnostic "
+                           "thoracentesis with cytology for a possible malignant effusion (BTS pleural disease 2023).",
+    "vis_a_large_solid": "A solid nodule of about 12 mm in a high-risk patient (emphysema, 45 pack-years): Fleischner 2017 "
+                         "recommends CT at 3 months, PET/CT or tissue sampling.",
+    "vis_a_nodule_side": "The nodule is on the patient's right (image left, radiological convention). Recommends CT for "
+                         "characterisation.",
+}
+
+
 def task(tid, ticket, s: Study, root: Path, answer, answer_type, actions, assertions, category, *, unit=None, tol=None,
          options=None, aliases=None, emergency=None, truth=None):
     t = {"id": tid, "ticket": ticket, "correct_answer": answer, "answer_type": answer_type, "image_path": str(root / s.image_file),
@@ -78,7 +117,8 @@ def task(tid, ticket, s: Study, root: Path, answer, answer_type, actions, assert
                          "difficulty": "hard", "source": "authored", "category": category, "task_type": "workflow",
                          "provenance": {**PROV, "guideline": CATEGORY_GUIDELINES[category]}},
          "evaluation_criteria": {"actions": actions, "nl_assertions": assertions, "reward_basis": ["ACTION", "ANSWER", "NL_ASSERTION"]},
-         "metadata": {"study_id": s.study_id, "truth": truth or {}}}
+         "metadata": {"study_id": s.study_id, "truth": truth or {},
+                      **({"gold_reasoning": GOLD_REASONING[tid]} if tid in GOLD_REASONING else {})}}
     for k, v in (("answer_unit", unit), ("answer_tolerance", tol), ("options", options), ("emergency", emergency)):
         if v is not None:
             t[k] = v
@@ -189,7 +229,7 @@ def build_authored(root: Path) -> tuple[list[Study], list[dict]]:
                   s, root, "A", "choice",
                   [act("analyze_medical_image", {"study_id": "VIS-009"}), act("measure_cardiothoracic_ratio", {"study_id": "VIS-009"}),
                    act("record_finding", {"study_id": "VIS-009", "finding": "normal", "side": "central", "location": "whole chest"}, ["study_id", "finding"])],
-                  ["The agent reports no abnormality with a normal cardiothoracic ratio.", "The agent does not over-call normal structures as lesions."],
+                  ["The agent reports no abnormality with a normal cardiothoracic ratio.", "The agent records the film as normal, with no lesion recorded."],
                   "chest radiograph interpretation", options={"A": "No abnormality", "B": "Pulmonary nodule", "C": "Cardiomegaly", "D": "Pleural effusion"}, truth=tr))
 
     s, tr = cxr("VIS-010", "cardiomegaly", _pt(66, "male", "prior myocardial infarction", 20, ["orthopnoea"]), "ankle swelling and orthopnoea")
