@@ -211,7 +211,9 @@ def workflow_tasks(db: EHRDB) -> list[Task]:
                         description={"purpose": "EHR order-management workflow", "difficulty": "hard", "source": "authored",
                                      "category": "workflow", "task_type": "order_workflow",
                                      "provenance": {"origin": "authored", "license": "project", "guideline": spec["guideline"]}},
-                        evaluation_criteria=crit))
+                        evaluation_criteria=crit,
+                        # what a complete gold submission states with its answer (envs.validate.gold_replay)
+                        metadata={"gold_reasoning": spec["gold_reasoning"]} if spec.get("gold_reasoning") else {}))
     return out
 
 
