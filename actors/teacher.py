@@ -33,20 +33,12 @@ import ray
 import torch
 from pydantic import BaseModel, ConfigDict
 
-from actors.types import RolloutSample, TeacherOutput
+from actors.types import RolloutSample, TeacherBatch, TeacherOutput
 from learner.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
 from learner.config_models import TeacherConfig, teacher_update_action
 from learner.model import IM_START, load_policy, pad_batch, token_stats
 
 GENERATION_PROMPT = f"{IM_START}assistant\n"
-
-
-class TeacherFetch(BaseModel):
-    """What `fetch` returns: the outputs in the requested order and the caller's wait."""
-
-    model_config = ConfigDict(extra="forbid")
-    outputs: list[TeacherOutput]
-    wait_s: float
 
 
 class TeacherContext(BaseModel):
@@ -214,7 +206,7 @@ class Teacher:
             self._cv.notify_all()
             return len(self._pending)
 
-    def fetch(self, sample_ids: list[str], timeout_s: float | None = None) -> TeacherFetch:
+    def fetch(self, sample_ids: list[str], timeout_s: float | None = None) -> TeacherBatch:
         """Results for `sample_ids` in that order, waiting for those still being computed.
 
         Fetched results are removed from the teacher (each is consumed once).
@@ -253,7 +245,7 @@ class Teacher:
             wait = time.perf_counter() - t0
             self._stats["fetch_wait_s"] += wait
             self._stats["fetches"] += 1
-        return TeacherFetch(outputs=outputs, wait_s=wait)
+        return TeacherBatch(outputs=outputs, wait_s=wait)
 
     def _take_batch(self) -> list[RolloutSample]:
         """Up to batch_size pending samples, the ones a caller is waiting for first (call under the lock)."""

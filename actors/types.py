@@ -8,6 +8,7 @@ exactly the tokens the generator sampled.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -106,3 +107,26 @@ class TeacherOutput(BaseModel):
             if value is not None and len(value) != self.input_length:
                 raise ValueError(f"teacher {name} has {len(value)} positions, expected input_length={self.input_length}")
         return self
+
+
+class TeacherBatch(BaseModel):
+    """The teacher's outputs for a training batch (what `Teacher.fetch` returns and what the
+    learner's `train_step` / `evaluate_loss` take), and how long the caller waited for them."""
+
+    model_config = ConfigDict(extra="forbid")
+    outputs: list[TeacherOutput]
+    wait_s: float = 0.0
+
+    def by_sample(self) -> dict[str, TeacherOutput]:
+        return {o.sample_id: o for o in self.outputs}
+
+
+@dataclass(frozen=True)
+class PendingTeacherBatch:
+    """A Ray ref to a `TeacherBatch` still being computed (`teacher.fetch.remote(...)`).
+
+    Ray resolves a ref passed as a top-level argument before the call starts; wrapped, it stays a
+    ref, so the learner can run its reference and old-policy forwards first and wait for the
+    teacher only when it needs the log-probs (the wait is reported as `teacher_wait_s`)."""
+
+    ref: Any

@@ -91,6 +91,7 @@ def run_mode(mode: str, args, model_dir: str) -> list[dict]:
 
     from actors.generator import HFGenerator, SamplingConfig
     from actors.teacher import TeacherActor
+    from actors.types import PendingTeacherBatch, TeacherBatch
     from learner.config_models import LearnerConfig, TeacherConfig, teacher_update_action
     from learner.learner_actor import LearnerActor
     from learner.model import ENDOFTEXT, IM_END, load_tokenizer
@@ -117,17 +118,17 @@ def run_mode(mode: str, args, model_dir: str) -> list[dict]:
                 teacher.submit.remote(group)  # scoring starts now, generation goes on
         t_ready = time.perf_counter()
         if mode == "async":
-            # The learner gets the fetch's ref (in a list, so Ray does not resolve it first) and only
+            # The learner gets the fetch's ref (wrapped, so Ray does not resolve it first) and only
             # blocks on it after its reference forward; the time it blocks is its teacher_wait_s.
             fetch_ref = teacher.fetch.remote([s.sample_id for s in batch], 600.0)
-            metrics = ray.get(learner.train_step.remote(batch, [fetch_ref], step))
+            metrics = ray.get(learner.train_step.remote(batch, PendingTeacherBatch(fetch_ref), step))
             wait = metrics["teacher_wait_s"]
             learner_s = time.perf_counter() - t_ready - wait
         else:
             outs = ray.get(teacher.score.remote(batch))
             wait = time.perf_counter() - t_ready
             t_learn = time.perf_counter()
-            metrics = ray.get(learner.train_step.remote(batch, outs, step))
+            metrics = ray.get(learner.train_step.remote(batch, TeacherBatch(outputs=outs), step))
             learner_s = time.perf_counter() - t_learn
         weights = learner.get_weights.remote()
         gen.update_weights(ray.get(weights), step)

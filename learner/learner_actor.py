@@ -22,7 +22,7 @@ from typing import Any
 import ray
 import torch
 
-from actors.types import RolloutSample, TeacherOutput
+from actors.types import PendingTeacherBatch, RolloutSample, TeacherBatch
 from learner.backends.worker import RankWorker, combine_rank_metrics
 from learner.checkpoint import read_json, write_json_atomic
 from learner.hf_checkpoint import DEFAULT_MAX_SHARD_SIZE, read_checkpoint_tensors, save_sharded_checkpoint
@@ -181,18 +181,17 @@ class Learner:
     def train_step(
         self,
         samples: list[RolloutSample],
-        teacher: list[TeacherOutput] | dict[str, TeacherOutput] | None = None,
+        teacher: TeacherBatch | PendingTeacherBatch | None = None,
         step: int | None = None,
     ) -> dict[str, float]:
         """One optimizer update (or `optim.updates_per_batch`) on a batch of whole GRPO groups.
 
         Args:
             samples: The batch.
-            teacher: Teacher outputs for the samples (list, dict by sample id, or `TeacherFetch`);
-                required when `loss.distill.enabled`. May also be `[ref]`, a one-element list holding
-                the Ray ref of `teacher.fetch.remote(...)`: the learner then runs its reference (and
-                pi_old) forwards first and blocks on the teacher only afterwards, reporting the time
-                as `teacher_wait_s`.
+            teacher: The teacher's outputs for the samples (`TeacherBatch`), required when
+                `loss.distill.enabled`; or `PendingTeacherBatch(teacher.fetch.remote(...))`: the
+                learner then runs its reference (and pi_old) forwards first and blocks on the teacher
+                only afterwards, reporting the time as `teacher_wait_s`.
             step: The driver's step number, echoed into the metrics (defaults to the learner's count).
 
         Returns:
@@ -211,7 +210,7 @@ class Learner:
         return metrics
 
     def evaluate_loss(
-        self, samples: list[RolloutSample], teacher: list[TeacherOutput] | dict[str, TeacherOutput] | None = None
+        self, samples: list[RolloutSample], teacher: TeacherBatch | None = None
     ) -> dict[str, float]:
         """The same metrics as `train_step` without updating (replaying stored trajectories)."""
         return combine_rank_metrics(self._all("evaluate", samples, teacher))

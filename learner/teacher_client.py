@@ -23,7 +23,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any, Callable
 
-from actors.types import RolloutSample, TeacherOutput
+from actors.types import PendingTeacherBatch, RolloutSample, TeacherOutput
 from learner.batching import Group
 from learner.config import RunConfig
 from learner.config_models import teacher_update_action
@@ -111,7 +111,7 @@ class TeacherClient:
                 continue
             fetch_ref = self.handle.fetch.remote(ids, timeout)
             try:
-                metrics = await self.learner.train_step.remote(samples, [fetch_ref], step)
+                metrics = await self.learner.train_step.remote(samples, PendingTeacherBatch(fetch_ref), step)
             except Exception as exc:
                 try:
                     await fetch_ref

@@ -40,7 +40,7 @@ import envs._runtime  # noqa: F401  (CPU-path environment defaults before torch/
 from actors.agent_loop import AgentLoop, RolloutLimits
 from actors.env_actor import EnvPool, register_domains
 from actors.generator import GeneratorClient
-from actors.types import TeacherOutput
+from actors.types import TeacherBatch, TeacherOutput
 from learner.batching import BatchScheduler, Group, is_correct, mixed_outcomes, score_sample, shape_reward
 from learner.config import RunConfig, dump_config, load_config
 from learner.metrics import MetricsSink, write_samples
@@ -301,15 +301,16 @@ def replay_loss(parquet_path: str | Path, model_dir: str | Path, cfg: RunConfig)
     samples, extras = read_samples(parquet_path)
     teacher = None
     if cfg.learner.loss.distill.enabled:
-        teacher = []
+        outputs = []
         for s in samples:
             extra = extras[s.sample_id]
             if extra["teacher_logprobs"] is None:
                 raise ValueError(f"{parquet_path}: sample {s.sample_id} has no stored teacher log-probs, "
                                  "but the config enables distillation")
-            teacher.append(TeacherOutput(sample_id=s.sample_id, teacher_version=int(extra["teacher_version"]),
+            outputs.append(TeacherOutput(sample_id=s.sample_id, teacher_version=int(extra["teacher_version"]),
                                          hint=extra["teacher_hint"] or "none", input_length=len(s.input_ids),
                                          logprobs=list(extra["teacher_logprobs"])))
+        teacher = TeacherBatch(outputs=outputs)
     learner = Learner(cfg.learner.model_dump(), str(model_dir), cfg.seed)
     try:
         return learner.evaluate_loss(samples, teacher)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from actors.types import RolloutSample, TeacherOutput
+from actors.types import PendingTeacherBatch, RolloutSample, TeacherBatch, TeacherOutput
 from learner.backends.base import LearnerBackend, make_backend
 from learner.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
 from learner.config_models import LearnerConfig
@@ -69,32 +69,18 @@ def combine_rank_metrics(results: Sequence[dict]) -> dict[str, float]:
     return metrics
 
 
-def index_teacher_outputs(
-    teacher: Sequence[TeacherOutput] | dict[str, TeacherOutput] | None,
-) -> dict[str, TeacherOutput]:
-    """Accept the teacher's outputs as a list or a dict keyed by sample id."""
-    if teacher is None:
-        return {}
-    if hasattr(teacher, "outputs"):  # actors.teacher.TeacherFetch
-        teacher = teacher.outputs
-    if isinstance(teacher, dict):
-        return dict(teacher)
-    return {t.sample_id: t for t in teacher}
-
-
-def resolve_teacher(teacher) -> tuple[object, float]:
-    """Teacher outputs given directly, or a Ray ref to them in a one-element list (resolved here, timed).
-
-    Passing `[teacher.fetch.remote(ids, timeout)]` lets the learner start its reference and
-    old-policy forwards before the teacher's last results exist: Ray only resolves top-level refs,
-    so the list keeps the ref unresolved until this call.
-    """
-    if isinstance(teacher, (list, tuple)) and len(teacher) == 1 and type(teacher[0]).__name__ == "ObjectRef":
+def resolve_teacher(teacher: TeacherBatch | PendingTeacherBatch | None) -> tuple[TeacherBatch | None, float]:
+    """The teacher's batch, waiting for a pending one here (timed): see `PendingTeacherBatch`."""
+    if isinstance(teacher, PendingTeacherBatch):
         import ray
 
         t0 = time.perf_counter()
-        value = ray.get(teacher[0])
+        value = ray.get(teacher.ref)
+        if not isinstance(value, TeacherBatch):
+            raise TypeError(f"the pending teacher batch resolved to {type(value).__name__}, not TeacherBatch")
         return value, time.perf_counter() - t0
+    if teacher is not None and not isinstance(teacher, TeacherBatch):
+        raise TypeError(f"teacher: expected a TeacherBatch, a PendingTeacherBatch or None, got {type(teacher).__name__}")
     return teacher, 0.0
 
 
@@ -159,7 +145,7 @@ class RankWorker:
         cfg = self.config.loss
         if not cfg.distill.enabled:
             return
-        by_id = index_teacher_outputs(teacher)
+        by_id = teacher.by_sample() if teacher is not None else {}
         outputs: list[TeacherOutput | None] = []
         for s in prep.samples:
             out = by_id.get(s.sample_id)

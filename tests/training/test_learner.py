@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from actors.teacher import Teacher
+from actors.types import TeacherBatch
 from learner.config_models import LearnerConfig, TeacherConfig
 from learner.learner_actor import Learner
 from learner.model import load_policy, pad_batch, per_token_logprobs
@@ -90,7 +91,7 @@ def _teacher_outputs(model_dir, samples, drift: float = 0.0, **cfg):
     if drift:
         gen = torch.Generator().manual_seed(7)
         t.hard_copy({k: v + drift * torch.randn(v.shape, generator=gen) for k, v in t.get_weights().items()})
-    return t.compute(samples)
+    return TeacherBatch(outputs=t.compute(samples))
 
 
 def test_ttopd_step_reports_truncation_and_pulls_toward_the_teacher(model_dir, batch):
@@ -146,7 +147,8 @@ def test_bad_inputs_fail_with_named_errors(model_dir, batch):
     with pytest.raises(ValueError, match=batch[0].sample_id):
         learner.train_step(batch, teacher=None)
     outs = _teacher_outputs(model_dir, batch)
-    wrong = [o.model_copy(update={"input_length": o.input_length + 1, "logprobs": o.logprobs + [0.0]}) for o in outs]
+    wrong = TeacherBatch(outputs=[o.model_copy(update={"input_length": o.input_length + 1, "logprobs": o.logprobs + [0.0]})
+                                  for o in outs.outputs])
     with pytest.raises(ValueError, match="positions"):
         learner.train_step(batch, wrong)
     with pytest.raises(ValueError, match="empty"):

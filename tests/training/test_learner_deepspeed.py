@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from actors.types import PendingTeacherBatch, TeacherBatch
 from learner.checkpoint import checkpoint_dir
 from learner.config_models import LearnerConfig, TeacherConfig
 from learner.learner_actor import Learner, LearnerActor
@@ -29,7 +30,7 @@ def _teacher_outputs(model_dir, batches):
     teacher = Teacher(TeacherConfig(), model_dir, start_worker=False)
     gen = torch.Generator().manual_seed(3)
     teacher.hard_copy({k: v + 0.03 * torch.randn(v.shape, generator=gen) for k, v in teacher.get_weights().items()})
-    return [teacher.compute(b) for b in batches]
+    return [TeacherBatch(outputs=teacher.compute(b)) for b in batches]
 
 
 def test_zero3_two_ranks_match_the_torch_backend_and_resume(ray_cluster, tmp_path):
@@ -82,19 +83,19 @@ def test_learner_and_teacher_actors_exchange_weights_through_the_object_store(ra
     teacher = TeacherActor.options(num_cpus=0).remote(TeacherConfig(ema_interval=1, hard_copy_interval=3), model_dir)
     try:
         ray.get(teacher.submit.remote(batch))
-        # The fetch's ref goes to the learner unresolved (inside a list); it blocks on it after its
+        # The fetch's ref goes to the learner unresolved (PendingTeacherBatch); it blocks on it after its
         # reference forward.
         fetch_ref = teacher.fetch.remote([s.sample_id for s in batch], 60.0)
-        metrics = ray.get(learner.train_step.remote(batch, [fetch_ref], 1))
+        metrics = ray.get(learner.train_step.remote(batch, PendingTeacherBatch(fetch_ref), 1))
         assert metrics["policy_version"] == 1.0 and metrics["distill_tokens"] > 0
         assert metrics["teacher_wait_s"] >= 0 and metrics["kl_teacher"] != 0
         got = ray.get(fetch_ref)
         weights_ref = learner.get_weights.remote()  # passed on as a ref: never through this process
         first = ray.get(teacher.update.remote(weights_ref, 1))
         assert first["action"] == "ema" and first["teacher_version"] == 1
-        ray.get(learner.train_step.remote(batch, got.outputs, 2))
+        ray.get(learner.train_step.remote(batch, got, 2))
         ray.get(teacher.update.remote(learner.get_weights.remote(), 2))
-        ray.get(learner.train_step.remote(batch, got.outputs, 3))
+        ray.get(learner.train_step.remote(batch, got, 3))
         copy = ray.get(teacher.update.remote(learner.get_weights.remote(), 3))
         assert copy["action"] == "hard_copy"
         student, taught = ray.get(learner.get_weights.remote()), ray.get(teacher.get_weights.remote())
@@ -102,7 +103,7 @@ def test_learner_and_teacher_actors_exchange_weights_through_the_object_store(ra
         # A teacher failure surfaces from train_step before any update: the step can be retried.
         missing = teacher.fetch.remote(["never-submitted"], 5.0)
         with pytest.raises(KeyError, match="never-submitted"):
-            ray.get(learner.train_step.remote(batch, [missing], 4))
+            ray.get(learner.train_step.remote(batch, PendingTeacherBatch(missing), 4))
         assert ray.get(learner.policy_version.remote()) == 3
         after = ray.get(learner.get_weights.remote())
         assert all(torch.equal(student[k], after[k]) for k in student)

@@ -16,7 +16,7 @@ import shutil
 import pytest
 import torch
 
-from actors.types import TeacherOutput
+from actors.types import TeacherBatch, TeacherOutput
 from learner.checkpoint import checkpoint_dir, latest_checkpoint, load_tensors, mark_latest, read_json
 from learner.metrics import read_metrics, read_samples
 from tests.training.test_train import final_weights as learner_weights
@@ -100,9 +100,10 @@ def test_ttopd_resume_with_staleness_continues_from_the_checkpoint_exactly(ray_c
         straight, _ = read_samples(tmp_path / "straight" / "trajectories" / f"step_{step:06d}.parquet")
         # The same groups with the same seeds: groups admitted before the checkpoint were re-admitted.
         assert [s.sample_id for s in resumed] == [s.sample_id for s in straight]
-        teacher = [TeacherOutput(sample_id=s.sample_id, teacher_version=int(extras[s.sample_id]["teacher_version"]),
-                                 hint=extras[s.sample_id]["teacher_hint"] or "none", input_length=len(s.input_ids),
-                                 logprobs=list(extras[s.sample_id]["teacher_logprobs"])) for s in resumed]
+        teacher = TeacherBatch(outputs=[
+            TeacherOutput(sample_id=s.sample_id, teacher_version=int(extras[s.sample_id]["teacher_version"]),
+                          hint=extras[s.sample_id]["teacher_hint"] or "none", input_length=len(s.input_ids),
+                          logprobs=list(extras[s.sample_id]["teacher_logprobs"])) for s in resumed])
         batches.append((step, resumed, teacher))
 
     cfg = cfg_of(tmp_path / "split")
