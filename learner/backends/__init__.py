@@ -5,6 +5,7 @@
 How to add one: learner/README.md.
 """
 
-from learner.backends.base import LearnerBackend, make_backend
+from learner.backends.base import LearnerBackend
+from learner.backends.factory import make_backend
 
 __all__ = ["LearnerBackend", "make_backend"]

@@ -124,20 +124,6 @@ class LearnerBackend(ABC):
         """Release process groups and memory."""
 
 
-def make_backend(config: LearnerConfig, model_dir: str, seed: int, rank: int = 0, world_size: int = 1,
-                 master_port: int | None = None) -> LearnerBackend:
-    """Instantiate the configured backend (imported lazily: the deepspeed one pulls in DeepSpeed)."""
-    if config.backend == "torch":
-        from learner.backends.torch_backend import TorchBackend
-
-        return TorchBackend(config, model_dir, seed, rank, world_size)
-    if config.backend == "deepspeed":
-        from learner.backends.deepspeed_backend import DeepSpeedBackend
-
-        return DeepSpeedBackend(config, model_dir, seed, rank, world_size, master_port=master_port)
-    raise ValueError(f"learner.backend={config.backend!r}: expected 'torch' or 'deepspeed'")
-
-
 def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu", *,
                    train_vision_tower: bool = False) -> torch.nn.Module:
     """The policy from a checkpoint folder or cached hub id (`learner.hf_checkpoint.load_model`),

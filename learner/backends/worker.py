@@ -21,7 +21,8 @@ from pathlib import Path
 import torch
 
 from actors.types import PendingTeacherBatch, RolloutSample, TeacherBatch, TeacherOutput
-from learner.backends.base import LearnerBackend, make_backend
+from learner.backends.base import LearnerBackend
+from learner.backends.factory import make_backend
 from learner.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
 from learner.config_models import LearnerConfig
 from learner.losses import (
