@@ -26,9 +26,6 @@ KNOWN_PACKAGE_CYCLES: set[frozenset[str]] = {
     # The teacher and generators load checkpoints with learner.hf_checkpoint / learner.model, and the
     # learner drives actors: the model-loading code belongs in a package both can import.
     frozenset({"actors", "learner"}),
-    # envs.core.reference_parsers reads registry packages (envs.data), which need envs.core.paths:
-    # the parsers belong in envs.data.
-    frozenset({"envs.core", "envs.data"}),
 }
 
 

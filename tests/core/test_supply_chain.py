@@ -160,7 +160,7 @@ def _package_with_vocabulary(path: Path, vocabulary: object) -> Archive:
 
 
 def _readers():
-    from envs.core.reference_parsers import load_drug_vocabulary
+    from envs.data.reference_parsers import load_drug_vocabulary
     from envs.domains.drug_interaction.ingest import read_vocabulary
     from kb_service.sources.drugs import load_vocabulary
 

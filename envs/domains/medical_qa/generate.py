@@ -21,7 +21,7 @@ from collections import defaultdict
 from typing import Any, Callable
 
 from envs.calculators import CALCULATORS
-from envs.core.reference_parsers import provenance
+from envs.data.reference_parsers import provenance
 from envs.domains.medical_qa.knowledge import MedicalKnowledge, norm
 
 LETTERS = "ABCDE"

@@ -16,7 +16,7 @@ import json
 from collections import Counter
 from pathlib import Path
 
-from envs.core import reference_parsers as R
+from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
