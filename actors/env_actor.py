@@ -21,13 +21,15 @@ exception never kills it) and does not reuse that episode's env.
 
 Batched calls. By default (`EnvPool(batch_calls=True)`) an episode's calls do not each cost an
 actor round trip: `RemoteEnv` hands them to the pool's `_ActorBatcher` for its actor, which sends
-every call queued for that actor in one `EnvActor.batch` call (calls queued in the same event-loop
-tick always travel together, so `asyncio.gather` over many episodes coalesces at no added latency;
-at most `max_batches_in_flight` batches per actor are outstanding, and calls arriving meanwhile wait
-for the next one). The actor runs the calls in order and answers each one separately: every call's
-arguments and result are pickled on their own, so an exception, a bad argument or an unpicklable
-result fails only that call's episode, never the batch (`EnvActor.batch`). A batch lost with its
-actor fails each of its calls with `EnvActorLost`, as single calls would.
+every call queued for that actor in one `EnvActor.batch_stream` call (calls queued in the same
+event-loop tick always travel together, so `asyncio.gather` over many episodes coalesces at no added
+latency; at most `max_batches_in_flight` batches per actor are outstanding, and calls arriving
+meanwhile wait for the next one). The actor runs the calls in order, streams the answers back in
+chunks as they finish (`stream_after_s`; None: the whole batch at once through `EnvActor.batch`)
+and answers each call separately: every call's arguments and result are pickled on their own, so
+an exception, a bad argument or an unpicklable result fails only that call's episode, never the
+batch. A batch lost with its actor fails each of its unanswered calls with `EnvActorLost`, as
+single calls would. Figures: docs/benchmarks.md, "Batched env actors".
 """
 
 from __future__ import annotations
