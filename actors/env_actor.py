@@ -319,9 +319,16 @@ class _ActorBatcher:
                     settled = start + len(answers)
         except Exception as exc:  # the actor died (or the call failed as a whole): the calls not yet
             self._settle(batch[settled:], None, exc)  # answered fail, each with the same error
-        finally:
+        except asyncio.CancelledError:
+            # The loop is shutting down (asyncio.run cancels what is left, e.g. the last releases):
+            # start no new batch from here, it would be a task the loop never runs. What is still
+            # queued is sent by `retire` when the pool is next used.
             self._in_flight -= 1
-            self._pump()
+            for _, future in batch[settled:]:
+                future.cancel()
+            raise
+        self._in_flight -= 1
+        self._pump()
 
     @staticmethod
     def _settle(batch: list[tuple[bytes, asyncio.Future]], answers: list[tuple[bool, bytes]] | None,
