@@ -5,7 +5,7 @@ The prompt is rendered once by the chat template. From then on the loop only app
     ids(turn t+1) = ids(turn t) + generated ids + tokenized observation wrapper
 
 where the wrapper is the text the chat template would render between a finished assistant turn
-and the next generation prompt (`learner.model.tool_turn_text` when the turn executed tool calls,
+and the next generation prompt (`modeling.model.tool_turn_text` when the turn executed tool calls,
 a plain user turn otherwise, matching the environment's own transcript). Nothing is re-rendered,
 so the learner trains on exactly the ids the generator sampled, and the loss mask is 1 exactly on
 those ids. When a turn is cut by the token limit (no `<|im_end|>` sampled), the loop appends
@@ -197,7 +197,7 @@ class AgentLoop:
     """
 
     def __init__(self, tokenizer, limits: RolloutLimits, prompt_style: PromptStyle = "env") -> None:
-        from learner.model import IM_END, IM_START
+        from modeling.model import IM_END, IM_START
 
         if prompt_style not in ("env", "compact"):
             raise ValueError(f"prompt_style must be 'env' or 'compact', got {prompt_style!r}")
@@ -220,7 +220,7 @@ class AgentLoop:
 
     def observation_text(self, observation: str, had_tool_calls: bool) -> str:
         """What the template renders after a finished assistant turn, up to the next generation prompt."""
-        from learner.model import tool_turn_text
+        from modeling.model import tool_turn_text
 
         cap = self.limits.max_observation_chars
         if cap is not None and len(observation) > cap:
@@ -370,7 +370,7 @@ class GoldReplayPolicy:
     """
 
     def __init__(self, tokenizer, actions: dict[str, list[str]]) -> None:
-        from learner.model import IM_END
+        from modeling.model import IM_END
 
         self.tokenizer = tokenizer
         self.actions = actions

@@ -183,12 +183,12 @@ class HFGenerator(Generator):
         super().__init__(model_dir, sampling, stop_token_ids, initial_version, options)
         import torch
 
-        from learner.hf_checkpoint import load_model
+        from modeling.hf_checkpoint import load_model
 
         self.options = HFOptions.model_validate(options or {})
         self.device = torch.device(self.options.device)
         dtype = getattr(torch, self.options.dtype)
-        # The one loading path (learner/hf_checkpoint.py): the checkpoint's own architecture class,
+        # The one loading path (modeling/hf_checkpoint.py): the checkpoint's own architecture class,
         # so published weight names (model.language_model.* for Qwen3.5) are this model's names.
         self.model = load_model(model_dir, dtype, self.device)
         # Multimodal configs (Qwen3.5) keep the token ids on their text config.
@@ -218,8 +218,8 @@ class HFGenerator(Generator):
         self._drop_prefixes()  # keys and values of the old weights
 
     def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
-        from learner.config_models import WeightSyncConfig
-        from learner.weight_sync import WeightSyncGroup
+        from modeling.config_models import WeightSyncConfig
+        from modeling.weight_sync import WeightSyncGroup
 
         device = "cuda" if self.device.type == "cuda" else "cpu"
         self._sync_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,

@@ -12,7 +12,7 @@ Weights reach vLLM two ways, both ending in vLLM's supported in-place update,
 * `update_weights(state_dict, version)`: a full (or partial) CPU state dict, what the learner
   publishes through the Ray object store.
 * `join_weight_sync(...)` + `receive_weights(version)`: the learner's rank 0 and the vLLM workers
-  form a `learner.weight_sync.WeightSyncGroup` (NCCL on GPU, gloo on CPU); the received buckets
+  form a `modeling.weight_sync.WeightSyncGroup` (NCCL on GPU, gloo on CPU); the received buckets
   are streamed straight into `reload_weights`, so the receiver never holds a second full copy.
 
 Why `reload_weights` and not `model.load_weights`: the CPU build prepacks every linear weight at
@@ -178,8 +178,8 @@ class WeightSyncExtension:
         """Join the learner's weight-sync group as receiver `rank_offset + tensor-parallel rank`."""
         from vllm.distributed.parallel_state import get_tensor_model_parallel_rank
 
-        from learner.config_models import WeightSyncConfig
-        from learner.weight_sync import WeightSyncGroup
+        from modeling.config_models import WeightSyncConfig
+        from modeling.weight_sync import WeightSyncGroup
 
         rank = rank_offset + get_tensor_model_parallel_rank()
         device = "cuda" if self.device.type == "cuda" else "cpu"

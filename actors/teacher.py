@@ -34,9 +34,9 @@ import torch
 from pydantic import BaseModel, ConfigDict
 
 from actors.types import RolloutSample, TeacherBatch, TeacherOutput
-from learner.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
-from learner.config_models import TeacherConfig, teacher_update_action
-from learner.model import IM_START, load_policy, pad_batch, token_stats
+from modeling.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
+from modeling.config_models import TeacherConfig, teacher_update_action
+from modeling.model import IM_START, load_policy, pad_batch, token_stats
 
 GENERATION_PROMPT = f"{IM_START}assistant\n"
 
@@ -369,8 +369,8 @@ class Teacher:
 
     def join_weight_sync(self, config: dict, rank: int, world_size: int, peer_names: list[str]) -> None:
         """Join the learner's collective weight-sync group as a receiver (GPU path)."""
-        from learner.config_models import WeightSyncConfig
-        from learner.weight_sync import WeightSyncGroup
+        from modeling.config_models import WeightSyncConfig
+        from modeling.weight_sync import WeightSyncGroup
 
         self._sync_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,
                                            device=self.config.device)

@@ -53,7 +53,7 @@ def worker(backend: str, policy: str, batches: int, seed: int) -> dict:
 
     from actors.agent_loop import AgentLoop, RolloutLimits, make_env
     from actors.generator import GenerationRequest, SamplingConfig, make_generator
-    from learner.model import ENDOFTEXT, IM_END, load_tokenizer
+    from modeling.model import ENDOFTEXT, IM_END, load_tokenizer
     from learner.tasks import load_task_refs
 
     tok = load_tokenizer(policy)

@@ -11,7 +11,7 @@ else `.venv-vllm`; on cluster nodes `~/hcgym-vllm/bin/python`) it says which ins
 
 The pieces are the production ones, as Ray actors on a local cluster with one GPU shared by
 fractions: `GeneratorService` with the `vllm` backend (actors/generator_vllm.py), `LearnerActor`
-with `backend: deepspeed` (ZeRO-3, 1 rank, bf16), and `learner.weight_sync` (NCCL).
+with `backend: deepspeed` (ZeRO-3, 1 rank, bf16), and `modeling.weight_sync` (NCCL).
 
 The model: Qwen3 in the 0.6B shape (hidden 1024, 28 layers, 16 heads, 8 KV heads, head_dim 128,
 intermediate 3072, vocabulary 151,936, tied embeddings), random init from the config (no hub),
@@ -46,7 +46,7 @@ def build_model(root: Path) -> tuple[str, int, int]:
     import torch
     from transformers import AutoModelForCausalLM, Qwen3Config
 
-    from learner.model import IM_END, load_tokenizer, train_tokenizer
+    from modeling.model import IM_END, load_tokenizer, train_tokenizer
 
     tok = load_tokenizer(train_tokenizer(["Healthcare AI GYM GPU smoke corpus."] * 10, 4096, root / "tok",
                                          max_stdlib_files=100))
@@ -96,7 +96,7 @@ def run(args, model_dir: str, params: int, stop_id: int, runtime_env: dict | Non
     import ray
 
     from actors.generator import generator_actor_class
-    from learner.config_models import LearnerConfig, WeightSyncConfig
+    from modeling.config_models import LearnerConfig, WeightSyncConfig
     from learner.learner_actor import LearnerActor
 
     from envs._runtime import init_ray  # a local cluster on 127.0.0.1 only

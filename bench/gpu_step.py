@@ -57,11 +57,11 @@ def build_model(root: Path) -> str:
     import torch
     from transformers import AutoModelForCausalLM, Qwen2Config
 
-    from learner.model import train_tokenizer
+    from modeling.model import train_tokenizer
 
     tok_dir = train_tokenizer(["Healthcare AI GYM GPU benchmark corpus."] * 10, 4096, root / "tok",
                               max_stdlib_files=100)
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     tok = load_tokenizer(tok_dir)
     config = Qwen2Config(vocab_size=151_936, pad_token_id=tok.pad_token_id, eos_token_id=tok.eos_token_id,
@@ -100,7 +100,7 @@ def synthetic_samples(batch: int, seq: int, vocab: int, seed: int = 0):
 def part_learner(args) -> dict:
     import torch
 
-    from learner.config_models import LearnerConfig
+    from modeling.config_models import LearnerConfig
     from learner.learner_actor import Learner
 
     params = json.loads((Path(args.model_dir) / "bench_params.json").read_text())["params"]

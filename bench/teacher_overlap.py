@@ -41,7 +41,7 @@ CORPUS = [
 
 
 def build_model(root: Path) -> str:
-    from learner.model import build_tiny_model, train_tokenizer
+    from modeling.model import build_tiny_model, train_tokenizer
 
     tok = train_tokenizer(CORPUS, 4096, root / "tok", max_stdlib_files=200)
     return str(build_tiny_model(root / "model", tok, seed=0))  # hidden 128, 2 layers, vocab 4096
@@ -51,7 +51,7 @@ def make_group(gen, tok, rng: random.Random, gid: int, group_size: int, new_toke
     """One GRPO group: G two-turn episodes sampled by the generator (tool result between turns)."""
     from actors.generator import GenerationRequest
     from actors.types import RolloutSample, TurnSpan
-    from learner.model import tool_turn_text
+    from modeling.model import tool_turn_text
 
     question = rng.choice(CORPUS[:4])
     prompt = tok.apply_chat_template([{"role": "user", "content": question}], tokenize=False,
@@ -92,9 +92,9 @@ def run_mode(mode: str, args, model_dir: str) -> list[dict]:
     from actors.generator import HFGenerator, SamplingConfig
     from actors.teacher import TeacherActor
     from actors.types import PendingTeacherBatch, TeacherBatch
-    from learner.config_models import LearnerConfig, TeacherConfig, teacher_update_action
+    from modeling.config_models import LearnerConfig, TeacherConfig, teacher_update_action
     from learner.learner_actor import LearnerActor
-    from learner.model import ENDOFTEXT, IM_END, load_tokenizer
+    from modeling.model import ENDOFTEXT, IM_END, load_tokenizer
 
     tok = load_tokenizer(model_dir)
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]

@@ -1,8 +1,8 @@
 """Side by side with TRL: TRL's GRPOTrainer (tools mode) and our trainer on the same work, interleaved.
 
 Both systems train the same tiny policy (the Qwen3 shape of ~1.34M parameters built from
-configs/tiny_cpu_grpo.yaml by `learner.model.build_tiny_model`, its BPE tokenizer trained here by
-`learner.model.train_tokenizer`, warm-started once by our SFT on gold replays so that it emits tool
+configs/tiny_cpu_grpo.yaml by `modeling.model.build_tiny_model`, its BPE tokenizer trained here by
+`modeling.model.train_tokenizer`, warm-started once by our SFT on gold replays so that it emits tool
 calls; nothing comes from a hub) on the same tasks (triage_emergency `tr_calc_*`, train split) with
 the same tools (the environment's own: TRL calls them as methods of an `environment_factory` class
 whose every method runs `env.step` on a real `HealthcareGymEnv` episode), the same reward (the env's
@@ -189,7 +189,7 @@ def trl_tokenizer(policy_dir: Path):
     (our template writes Hermes-style <tool_call> JSON, as Qwen3's does)."""
     from trl.chat_template_utils import qwen3_template
 
-    from learner.model import CHAT_TEMPLATE, load_tokenizer
+    from modeling.model import CHAT_TEMPLATE, load_tokenizer
 
     tok = load_tokenizer(policy_dir)
     start = CHAT_TEMPLATE.index("{%- if tools -%}")
@@ -203,7 +203,7 @@ def task_rows(tokenizer) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The train tasks as TRL rows (prompt messages, task id, seed) and the tool schemas; each row's
     prompt ids are checked against our agent loop's rendering."""
     from actors.agent_loop import AgentLoop, RolloutLimits, compact_system_prompt, make_env
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
     from learner.tasks import load_task_refs
 
     refs = load_task_refs([DOMAIN], "train", None, TASK_PATTERN)

@@ -154,7 +154,7 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _model_fetch(args: argparse.Namespace) -> int:
-    from learner.hf_checkpoint import fetch_model
+    from modeling.hf_checkpoint import fetch_model
 
     path = fetch_model(args.model_id, revision=args.revision, cache_dir=args.cache_dir)
     print(path)

@@ -9,7 +9,7 @@ default:
       rollout.group_size: Input should be a valid integer (got 'three')
 
 The learner-side sections (`learner`, `teacher`, `weight_sync`) are the models of
-`learner/config_models.py`; this module composes them with the rollout side and the driver.
+`modeling/config_models.py`; this module composes them with the rollout side and the driver.
 
 A config may start from another with `extends: other.yaml` (path relative to the file); mappings
 merge key by key, everything else is replaced. `--set key.path=value` overrides apply last.
@@ -35,7 +35,7 @@ from pydantic import BaseModel, Field, ValidationError, field_validator, model_v
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
-from learner.config_models import (OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig,
+from modeling.config_models import (OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig,
                                    WeightSyncConfig)
 
 
@@ -50,7 +50,7 @@ class TinyModelConfig(ConfigModel):
     vocab_size: int = Field(default=3072, ge=300)
     include_stdlib_corpus: bool = True
     max_stdlib_files: int = Field(default=150, ge=0)
-    # Config fields replacing learner.model.TINY_MODEL_DEFAULTS (hidden_size, num_hidden_layers, ...).
+    # Config fields replacing modeling.model.TINY_MODEL_DEFAULTS (hidden_size, num_hidden_layers, ...).
     overrides: dict[str, int | float | bool] = Field(default_factory=dict)
 
 
@@ -59,7 +59,7 @@ class ModelConfig(ConfigModel):
 
     `path` (kind: pretrained) is a local checkpoint folder or a hub id (`Qwen/Qwen3.5-9B`) resolved
     through the Hugging Face cache without downloading (`hcgym model fetch ID` fills the cache).
-    Checkpoint layouts read: learner/hf_checkpoint.py.
+    Checkpoint layouts read: modeling/hf_checkpoint.py.
     """
 
     kind: Literal["tiny", "pretrained"] = "tiny"
@@ -603,7 +603,7 @@ def _local_path_problems(cfg: RunConfig) -> list[str]:
     problems = []
     model = cfg.model
     if model.kind == "pretrained" and model.path:
-        from learner.hf_checkpoint import is_hub_id
+        from modeling.hf_checkpoint import is_hub_id
 
         local = Path(model.path).expanduser()
         if local.exists():

@@ -24,9 +24,9 @@ import torch
 
 from actors.types import PendingTeacherBatch, RolloutSample, TeacherBatch
 from learner.backends.worker import RankWorker, combine_rank_metrics
-from learner.checkpoint import read_json, write_json_atomic
-from learner.hf_checkpoint import DEFAULT_MAX_SHARD_SIZE, read_checkpoint_tensors, save_sharded_checkpoint
-from learner.config_models import LearnerConfig
+from modeling.checkpoint import read_json, write_json_atomic
+from modeling.hf_checkpoint import DEFAULT_MAX_SHARD_SIZE, read_checkpoint_tensors, save_sharded_checkpoint
+from modeling.config_models import LearnerConfig
 from learner.placement import (
     ActorDemand,
     NodeAddress,

@@ -83,7 +83,7 @@ from dataclasses import dataclass, field
 import torch
 
 from actors.types import RolloutSample
-from learner.config_models import DistillConfig, LossConfig
+from modeling.config_models import DistillConfig, LossConfig
 
 # ----------------------------------------------------------------------------------------------
 # Group-relative advantages (Eq. 1, A_i)

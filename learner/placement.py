@@ -38,7 +38,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 if TYPE_CHECKING:  # the run config imports actors; this module stays importable without them
     from learner.config import RunConfig
-    from learner.config_models import LearnerConfig
+    from modeling.config_models import LearnerConfig
 
 Strategy = Literal["PACK", "SPREAD", "STRICT_PACK", "STRICT_SPREAD"]
 

@@ -1,6 +1,6 @@
 """The driver's part of a run checkpoint (`driver.json`: step, data position, groups to re-admit,
 counters) and the save / restore of a whole checkpoint across the learner, the teacher and the driver.
-The layout is in learner/checkpoint.py."""
+The layout is in modeling/checkpoint.py."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from learner.batching import BatchScheduler
-from learner.checkpoint import (CheckpointError, checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints,
+from modeling.checkpoint import (CheckpointError, checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints,
                                 read_json, write_json_atomic)
 from learner.teacher_client import TeacherClient
 

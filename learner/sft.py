@@ -109,7 +109,7 @@ def hinted_example(sample: RolloutSample, tokenizer, hints, kind: str) -> SFTExa
     as out of distribution; on the tiny model that alone put KL(student || teacher) at 0.35-0.55
     nats/token at step 1 and the distillation term pulled the student toward broken outputs.
     """
-    from learner.model import IM_START
+    from modeling.model import IM_START
 
     text = hints.template.format(hint=hints.reinforcing if kind == "reinforcing" else hints.corrective)
     hint = list(tokenizer.encode(text, add_special_tokens=False))
@@ -127,7 +127,7 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
     """Next-token cross-entropy on the assistant tokens (loss mask 1) of `samples`.
 
     AdamW with linear warmup and cosine decay. The model is loaded through the one loading path
-    (`learner.hf_checkpoint`); a multimodal checkpoint's vision tower stays frozen unless
+    (`modeling.hf_checkpoint`); a multimodal checkpoint's vision tower stays frozen unless
     `train_vision_tower`. `output_dir` receives a Hugging Face checkpoint (sharded safetensors +
     index, config, tokenizer) that `from_pretrained`, vLLM and the learner load unchanged.
 
@@ -137,8 +137,8 @@ def run_sft(model_dir: str | Path, output_dir: str | Path, samples: list[Rollout
     import numpy as np
     import torch
 
-    from learner.hf_checkpoint import freeze_vision_tower, save_sharded_checkpoint
-    from learner.model import load_policy, pad_batch, per_token_logprobs
+    from modeling.hf_checkpoint import freeze_vision_tower, save_sharded_checkpoint
+    from modeling.model import load_policy, pad_batch, per_token_logprobs
 
     if not samples:
         raise ValueError("run_sft: no training samples (no gold replay was graded correct)")
@@ -212,7 +212,7 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
         run_dir: The run directory; everything is written under `run_dir/model/`.
     """
     from actors.env_actor import register_domains
-    from learner.model import build_tiny_model, load_tokenizer, train_tokenizer
+    from modeling.model import build_tiny_model, load_tokenizer, train_tokenizer
     from learner.tasks import load_task_refs
 
     register_domains(cfg.data.domain_modules)
@@ -229,7 +229,7 @@ def prepare_policy(cfg, run_dir: str | Path, *, log: Callable[[str], None] = pri
     root.mkdir(parents=True, exist_ok=True)
     info: dict[str, Any] = {}
     if cfg.model.kind == "pretrained":
-        from learner.hf_checkpoint import resolve_model_path
+        from modeling.hf_checkpoint import resolve_model_path
 
         try:  # a local folder, or a hub id already in the Hugging Face cache (never downloaded here)
             base = resolve_model_path(cfg.model.path, revision=cfg.model.revision)

@@ -26,7 +26,7 @@ from typing import Any, Callable
 from actors.types import PendingTeacherBatch, RolloutSample, TeacherOutput
 from learner.batching import Group
 from learner.config import RunConfig
-from learner.config_models import teacher_update_action
+from modeling.config_models import teacher_update_action
 
 STEP_ATTEMPTS = 5
 UPDATE_ATTEMPTS = 3

@@ -98,7 +98,7 @@ class Trainer:
 
     def _build(self) -> None:
         """Policy, tasks, actors and the collaborators of the loop."""
-        from learner.model import ENDOFTEXT, IM_END, load_tokenizer
+        from modeling.model import ENDOFTEXT, IM_END, load_tokenizer
         from learner.sft import prepare_policy
 
         cfg = self.cfg

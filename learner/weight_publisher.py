@@ -3,7 +3,7 @@ object store or the collective group, and to the teacher at its EMA / hard-copy 
 
 `object_store`: the learner returns a CPU state dict once (an `ObjectRef`); every generator gets the
 ref, and so does the teacher when it updates. `collective`: the learner's rank 0, the generators and
-the teacher form one private process group (learner/weight_sync.py) and the weights travel in
+the teacher form one private process group (modeling/weight_sync.py) and the weights travel in
 buckets; nothing passes through the object store. The teacher receives every broadcast and applies
 its schedule bucket by bucket (`Teacher.receive_update`; at steps without an update it drops the
 stream). A group broken by a restarted member is re-formed once and the sync retried; a teacher

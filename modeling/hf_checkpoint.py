@@ -160,7 +160,7 @@ def checkpoint_weight_map(model_dir: str | os.PathLike) -> dict[str, Path]:
     root = Path(model_dir)
     index = root / INDEX_FILE
     if index.is_file():
-        from learner.checkpoint import read_json  # names the file of a truncated / non-UTF-8 index
+        from modeling.checkpoint import read_json  # names the file of a truncated / non-UTF-8 index
 
         data = read_json(index)
         if not isinstance(data, dict) or not isinstance(data.get("weight_map"), dict):
@@ -198,7 +198,7 @@ def _open_safetensors(path: Path):
     """`safe_open(path)`; a corrupt or truncated file raises `CheckpointError` naming it."""
     from safetensors import safe_open
 
-    from learner.checkpoint import CheckpointError
+    from modeling.checkpoint import CheckpointError
 
     try:
         return safe_open(str(path), framework="pt", device="cpu")
@@ -252,7 +252,7 @@ class CheckpointReader:
         try:
             return handle.get_tensor(stored)
         except Exception as exc:  # a shard cut short after its header: safetensors names no file
-            from learner.checkpoint import CheckpointError
+            from modeling.checkpoint import CheckpointError
 
             raise CheckpointError(f"{shard}: cannot read tensor {stored!r} ({type(exc).__name__}: {exc})") from None
 
@@ -470,7 +470,7 @@ def save_sharded_checkpoint(
     """
     from safetensors.torch import save_file
 
-    from learner.checkpoint import replace_atomic
+    from modeling.checkpoint import replace_atomic
 
     source = resolve_model_path(source_dir)
     out = Path(out_dir)

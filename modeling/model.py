@@ -272,7 +272,7 @@ def build_tiny_model(
 def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32, *, tokenizer_dir=None):
     """Load a policy (the checkpoint's own architecture class) and its tokenizer.
 
-    Goes through `learner.hf_checkpoint.load_model`, the one loading path: sharded or single-file
+    Goes through `modeling.hf_checkpoint.load_model`, the one loading path: sharded or single-file
     safetensors, tied or untied embeddings, multimodal wrappers (Qwen3.5, Qwen2.5-VL), a local
     folder or a hub id already in the Hugging Face cache.
 
@@ -285,7 +285,7 @@ def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32
     Returns:
         `(model, tokenizer)`; the model is in eval mode.
     """
-    from learner.hf_checkpoint import load_model, resolve_model_path
+    from modeling.hf_checkpoint import load_model, resolve_model_path
 
     _quiet_transformers()
     path = resolve_model_path(model_dir)

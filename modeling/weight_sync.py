@@ -36,7 +36,7 @@ from datetime import timedelta
 import torch
 from pydantic import BaseModel, ConfigDict, Field
 
-from learner.config_models import WeightSyncConfig
+from modeling.config_models import WeightSyncConfig
 
 _DTYPES = {str(d): d for d in (torch.float32, torch.bfloat16, torch.float16, torch.float64, torch.int64, torch.int32,
                                torch.uint8, torch.int8, torch.bool)}

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 
-from learner.config_models import LearnerConfig
+from modeling.config_models import LearnerConfig
 
 DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
@@ -126,9 +126,9 @@ class LearnerBackend(ABC):
 
 def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu", *,
                    train_vision_tower: bool = False) -> torch.nn.Module:
-    """The policy from a checkpoint folder or cached hub id (`learner.hf_checkpoint.load_model`),
+    """The policy from a checkpoint folder or cached hub id (`modeling.hf_checkpoint.load_model`),
     with the vision tower of a multimodal checkpoint frozen unless `train_vision_tower`."""
-    from learner.hf_checkpoint import freeze_vision_tower, load_model
+    from modeling.hf_checkpoint import freeze_vision_tower, load_model
 
     model = load_model(model_dir, dtype, device)
     freeze_vision_tower(model, train_vision_tower=train_vision_tower)

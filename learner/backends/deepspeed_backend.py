@@ -15,7 +15,7 @@ Choices that come from measurements on our machines (docs/../stack_notes):
 
 The policy is built under `zero.Init` (partitioned from birth) as the checkpoint's own architecture
 class and its weights are loaded from the (sharded) safetensors checkpoint one module at a time
-(`learner.hf_checkpoint.load_weights_by_module`), so no rank ever holds the whole model. The same layer-by-
+(`modeling.hf_checkpoint.load_weights_by_module`), so no rank ever holds the whole model. The same layer-by-
 layer gathering serves `iter_full_parameters` (weight sync, checkpoints).
 
 Checkpoints are our own, not DeepSpeed's (whose loader unpickles with weights_only=False): each
@@ -34,8 +34,8 @@ from pathlib import Path
 import torch
 
 from learner.backends.base import DTYPES, LearnerBackend
-from learner.checkpoint import load_tensors, load_torch_state, save_tensors, save_torch_state
-from learner.config_models import LearnerConfig
+from modeling.checkpoint import load_tensors, load_torch_state, save_tensors, save_torch_state
+from modeling.config_models import LearnerConfig
 
 
 def _prepare_environment(config: LearnerConfig, rank: int, world_size: int, master_port: int | None) -> None:
@@ -85,7 +85,7 @@ def _load_weights_module_by_module(model: torch.nn.Module, model_dir: str, rank:
     parameters at a time: rank 0 reads and writes, every rank joins the gather (collective)."""
     import deepspeed
 
-    from learner.hf_checkpoint import load_weights_by_module
+    from modeling.hf_checkpoint import load_weights_by_module
 
     load_weights_by_module(model, model_dir,
                            gather=lambda params: deepspeed.zero.GatheredParameters(params, modifier_rank=0),
@@ -135,7 +135,7 @@ class DeepSpeedBackend(LearnerBackend):
             sys.modules["deepspeed.comm.torch"].build_shm_op = lambda: None
         from transformers.utils import logging as hf_logging
 
-        from learner.hf_checkpoint import build_empty_model, freeze_vision_tower, load_hf_config, resolve_model_path
+        from modeling.hf_checkpoint import build_empty_model, freeze_vision_tower, load_hf_config, resolve_model_path
 
         hf_logging.disable_progress_bar()
         torch.manual_seed(seed)

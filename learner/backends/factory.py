@@ -4,7 +4,7 @@ class and only this module depends on the backends (no import cycle)."""
 from __future__ import annotations
 
 from learner.backends.base import LearnerBackend
-from learner.config_models import LearnerConfig
+from modeling.config_models import LearnerConfig
 
 
 def make_backend(config: LearnerConfig, model_dir: str, seed: int, rank: int = 0, world_size: int = 1,

@@ -8,9 +8,9 @@ from pathlib import Path
 import torch
 
 from learner.backends.base import DTYPES, LearnerBackend, load_causal_lm
-from learner.checkpoint import load_torch_state, save_torch_state
-from learner.config_models import LearnerConfig
-from learner.hf_checkpoint import tied_parameter_aliases
+from modeling.checkpoint import load_torch_state, save_torch_state
+from modeling.config_models import LearnerConfig
+from modeling.hf_checkpoint import tied_parameter_aliases
 
 
 class TorchBackend(LearnerBackend):

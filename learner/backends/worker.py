@@ -23,8 +23,8 @@ import torch
 from actors.types import PendingTeacherBatch, RolloutSample, TeacherBatch, TeacherOutput
 from learner.backends.base import LearnerBackend
 from learner.backends.factory import make_backend
-from learner.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
-from learner.config_models import LearnerConfig
+from modeling.checkpoint import capture_rng_state, read_json, restore_rng_state, write_json_atomic
+from modeling.config_models import LearnerConfig
 from learner.losses import (
     BatchNorms,
     LossInputs,
@@ -34,7 +34,7 @@ from learner.losses import (
     group_advantages,
     turn_weights,
 )
-from learner.model import pad_batch, token_stats
+from modeling.model import pad_batch, token_stats
 
 
 @dataclass
@@ -103,7 +103,7 @@ class RankWorker:
         self.rank = rank
         self.world_size = world_size
         self.backend: LearnerBackend = make_backend(self.config, model_dir, seed, rank, world_size, master_port)
-        from learner.model import load_tokenizer
+        from modeling.model import load_tokenizer
 
         tokenizer = load_tokenizer(model_dir)
         self.pad_id = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
@@ -341,8 +341,8 @@ class RankWorker:
         """Rank 0 joins the private weight-sync group as its sender (blocks until every member joined)."""
         if self.rank != 0:
             return False
-        from learner.config_models import WeightSyncConfig
-        from learner.weight_sync import WeightSyncGroup
+        from modeling.config_models import WeightSyncConfig
+        from modeling.weight_sync import WeightSyncGroup
 
         device = "cuda" if self.config.device == "cuda" else "cpu"
         self._sync_group = WeightSyncGroup(0, world_size, WeightSyncConfig.model_validate(config), peer_names,
@@ -358,7 +358,7 @@ class RankWorker:
         group = getattr(self, "_sync_group", None)
         if group is None:
             raise RuntimeError("broadcast_weights before join_weight_sync")
-        from learner.weight_sync import manifest_from_tensors
+        from modeling.weight_sync import manifest_from_tensors
 
         manifest = manifest_from_tensors(self.backend.parameter_specs(), version,
                                          int(group.config.bucket_mb * 2**20))

@@ -99,7 +99,7 @@ def _train_to_answer(model_dir: Path) -> None:
 def endpoint_model_dir(tmp_path_factory) -> str:
     """A tiny head_dim-64 Qwen3 (vLLM's CPU attention rejects head_dim 16) with the project's ChatML
     template, trained to answer / call a tool (see the module docstring)."""
-    from learner.model import build_tiny_model, train_tokenizer
+    from modeling.model import build_tiny_model, train_tokenizer
 
     root = tmp_path_factory.mktemp("endpoint_model")
     corpus = [TOOLS_SYSTEM, ANSWER_TEXT, TOOL_CALL, LETTER_ONLY, json.dumps(LOOKUP_TOOL), *TRAIN_QUESTIONS] * 20

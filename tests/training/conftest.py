@@ -42,7 +42,7 @@ def ray_cluster():
 @pytest.fixture(scope="session")
 def ward_policy_dir() -> str:
     """A tiny ChatML policy whose tokenizer was trained on the ward domain's corpus (built once)."""
-    from learner.model import build_tiny_model, train_tokenizer
+    from modeling.model import build_tiny_model, train_tokenizer
     from learner.sft import task_corpus
 
     root = Path(tempfile.mkdtemp(prefix="t2_ward_policy_"))

@@ -29,7 +29,7 @@ CORPUS = [
 @functools.cache
 def tiny_model_dir(hidden: int = 64, layers: int = 2, vocab: int = 2048, seed: int = 0) -> str:
     """Build (once per process) a tiny Qwen3 model plus tokenizer; returns its directory."""
-    from learner.model import build_tiny_model, train_tokenizer
+    from modeling.model import build_tiny_model, train_tokenizer
 
     root = Path(tempfile.mkdtemp(prefix="t1_tiny_"))
     tok = train_tokenizer(CORPUS, vocab, root / "tok", max_stdlib_files=60)
@@ -77,7 +77,7 @@ def make_sample(
 
 def with_policy_logprobs(samples: list[RolloutSample], model_dir: str, temperature: float = 1.0) -> list[RolloutSample]:
     """Fill `sampling_logprobs` with the model's own log-probs (what an exact generator would report)."""
-    from learner.model import load_policy, pad_batch, per_token_logprobs
+    from modeling.model import load_policy, pad_batch, per_token_logprobs
 
     model, tok = load_policy(model_dir)
     ids, mask = pad_batch([s.input_ids for s in samples], tok.pad_token_id)

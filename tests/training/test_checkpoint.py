@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from learner.checkpoint import (
+from modeling.checkpoint import (
     capture_rng_state,
     checkpoint_dir,
     latest_checkpoint,
@@ -18,8 +18,8 @@ from learner.checkpoint import (
     restore_rng_state,
     save_torch_state,
 )
-from learner.config_models import LearnerConfig
-from learner.hf_checkpoint import read_checkpoint_tensors
+from modeling.config_models import LearnerConfig
+from modeling.hf_checkpoint import read_checkpoint_tensors
 from learner.learner_actor import Learner
 from tests.training.learner_fixtures import make_batch, tiny_model_dir
 

@@ -13,7 +13,7 @@ import random
 import pytest
 import torch
 
-from learner.checkpoint import (CheckpointError, capture_rng_state, checkpoint_dir, latest_checkpoint,
+from modeling.checkpoint import (CheckpointError, capture_rng_state, checkpoint_dir, latest_checkpoint,
                                 load_tensors, load_torch_state, mark_latest, read_json, restore_rng_state,
                                 save_tensors, save_torch_state, write_json_atomic)
 from learner.run_checkpoint import DRIVER_STATE, restore_run_checkpoint
@@ -222,7 +222,7 @@ def test_failed_atomic_writes_remove_their_temporary_file(tmp_path):
 
 
 def test_learner_checkpoint_failures_name_the_file(tmp_path):
-    from learner.config_models import LearnerConfig
+    from modeling.config_models import LearnerConfig
     from learner.learner_actor import Learner
     from tests.training.learner_fixtures import tiny_model_dir
 
@@ -248,7 +248,7 @@ def test_learner_checkpoint_failures_name_the_file(tmp_path):
     assert str(optimizer) in str(err.value)
     optimizer.write_bytes(good_optimizer)
 
-    # The policy weights (sharded safetensors + index, read by learner.hf_checkpoint).
+    # The policy weights (sharded safetensors + index, read by modeling.hf_checkpoint).
     policy = directory / "learner" / "policy"
     shard = sorted(policy.glob("*.safetensors"))[0]
     good_shard = shard.read_bytes()

@@ -212,7 +212,7 @@ def test_sections_built_in_code_refuse_non_finite_numbers():
     # The learner actor re-validates its section from a dict: NaN must not slip in that way either.
     from pydantic import ValidationError
 
-    from learner.config_models import LearnerConfig, TeacherConfig
+    from modeling.config_models import LearnerConfig, TeacherConfig
 
     with pytest.raises(ValidationError, match="loss.grpo.kl_beta"):
         LearnerConfig(loss={"grpo": {"kl_beta": float("inf")}})

@@ -17,7 +17,7 @@ WARD = {"ward": "tests.fixtures.ward_domain.environment"}
 @pytest.fixture(scope="module")
 def setup(ward_policy_dir):
     from envs import registry
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     tokenizer = load_tokenizer(ward_policy_dir)
     limits = RolloutLimits(max_turns=5)

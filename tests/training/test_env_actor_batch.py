@@ -120,7 +120,7 @@ def _ward_tasks():
 
 # -- through Ray ------------------------------------------------------------------------------------
 def ward_setup(ward_policy_dir):
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     tokenizer = load_tokenizer(ward_policy_dir)
     limits = RolloutLimits(max_turns=5)

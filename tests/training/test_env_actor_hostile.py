@@ -110,7 +110,7 @@ def test_hostile_actions_never_raise_inside_the_actor(ray_cluster):
 
 
 def test_failing_env_method_ends_only_its_episode_and_the_batch_completes(ray_cluster, ward_policy_dir):
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     tokenizer = load_tokenizer(ward_policy_dir)
     limits = RolloutLimits(max_turns=5)
@@ -166,7 +166,7 @@ def test_a_group_with_an_env_error_is_dropped_not_trained_on(ray_cluster, ward_p
     """Training side: a group in which an env error ended an episode is marked failed (the batching
     consumer drops and logs it) instead of training on its unscored reward 0 or stopping the run."""
     from learner.config import RunConfig
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
     from learner.rollouts import Rollouts
     from learner.tasks import TaskRef
 

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from actors.generator import GenerationRequest, HFGenerator, SamplingConfig
-from learner.model import ENDOFTEXT, IM_END, load_tokenizer, tool_turn_text
+from modeling.model import ENDOFTEXT, IM_END, load_tokenizer, tool_turn_text
 from tests.training.learner_fixtures import tiny_model_dir
 
 TICKETS = ["Check warfarin and aspirin.", "A 64-year-old man with chest pain.", "Creatinine clearance 45 mL/min.",

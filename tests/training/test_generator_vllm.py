@@ -35,7 +35,7 @@ PROMPTS = [[5, 17, 42, 99, 7], [3, 8, 13, 21, 34, 55, 89], [120, 7], [64, 65, 66
 @pytest.fixture(scope="module")
 def vllm_policy_dir(ward_policy_dir, tmp_path_factory) -> str:
     """The ward policy's tokenizer with a head_dim-64 Qwen3 (vLLM's CPU attention rejects head_dim 16)."""
-    from learner.model import build_tiny_model
+    from modeling.model import build_tiny_model
 
     tokenizer_dir = Path(ward_policy_dir).parent / "tok"
     out = build_tiny_model(tmp_path_factory.mktemp("vllm_policy") / "model", tokenizer_dir, seed=0, hidden_size=128,
@@ -74,8 +74,8 @@ def hf_model(model_dir: str, state_dict: dict[str, torch.Tensor] | None = None):
 
 
 def learner_logprobs(model, prompt: list[int], tokens: list[int], temperature: float) -> torch.Tensor:
-    """The learner's log-probs of `tokens` after `prompt` (`learner.model.per_token_logprobs`)."""
-    from learner.model import per_token_logprobs
+    """The learner's log-probs of `tokens` after `prompt` (`modeling.model.per_token_logprobs`)."""
+    from modeling.model import per_token_logprobs
 
     ids = torch.tensor([prompt + tokens])
     with torch.no_grad():
@@ -138,8 +138,8 @@ def test_vllm_logprobs_match_the_learner_and_hf_generator_with_seeds_and_version
 
 
 def test_vllm_weight_updates_object_store_subset_and_collective(ray_cluster, vllm_generator, vllm_policy_dir):
-    from learner.config_models import WeightSyncConfig
-    from learner.weight_sync import WeightSyncGroup, manifest_from_tensors
+    from modeling.config_models import WeightSyncConfig
+    from modeling.weight_sync import WeightSyncGroup, manifest_from_tensors
 
     base = hf_model(vllm_policy_dir).state_dict()
 

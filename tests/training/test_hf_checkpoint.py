@@ -1,5 +1,5 @@
 """Checkpoints as people have them: tiny twins of Qwen3, Qwen3.5 (with its vision tower) and a tied Llama,
-saved sharded, loaded through the one loading path (learner/hf_checkpoint.py) by every component.
+saved sharded, loaded through the one loading path (modeling/hf_checkpoint.py) by every component.
 
 Log-prob agreement is checked on the generator's own samples: the HF generator reports the log-prob
 of each token it draws; the learner's `logprob_abs_diff` (mean |learner - rollout| over the sampled
@@ -32,7 +32,7 @@ STEP_MOVES_LOGPROBS = 1e-3
 
 @pytest.fixture(scope="module")
 def twin_root(tmp_path_factory) -> Path:
-    from learner.model import train_tokenizer
+    from modeling.model import train_tokenizer
 
     root = tmp_path_factory.mktemp("twins")
     tok = train_tokenizer(CORPUS, 1024, root / "tok", max_stdlib_files=40)
@@ -68,7 +68,7 @@ def test_twins_have_the_real_layouts_and_are_sharded(twin_root):
 def test_load_model_equals_transformers_from_pretrained(twin_root, family):
     import transformers
 
-    from learner.hf_checkpoint import load_model, tied_parameter_aliases
+    from modeling.hf_checkpoint import load_model, tied_parameter_aliases
 
     d = twin_root / family
     ours = load_model(d)
@@ -87,7 +87,7 @@ def test_load_model_equals_transformers_from_pretrained(twin_root, family):
 def test_a_bf16_checkpoint_loads_in_fp32_like_transformers_does(twin_root, tmp_path):
     import transformers
 
-    from learner.hf_checkpoint import load_model
+    from modeling.hf_checkpoint import load_model
 
     d = build_twin("qwen3_5", tmp_path / "bf16", twin_root / "tok", dtype=torch.bfloat16)
     ours = load_model(d, torch.float32).state_dict()
@@ -102,7 +102,7 @@ def test_a_pre_4_52_multimodal_layout_loads_into_the_same_names(twin_root, tmp_p
 
     from safetensors.torch import save_file
 
-    from learner.hf_checkpoint import load_model, read_checkpoint_tensors
+    from modeling.hf_checkpoint import load_model, read_checkpoint_tensors
 
     src = twin_root / "qwen3_5"
     legacy = {}
@@ -125,7 +125,7 @@ def test_a_pre_4_52_multimodal_layout_loads_into_the_same_names(twin_root, tmp_p
 def test_missing_weights_and_bad_index_are_named(tmp_path, twin_root):
     import shutil
 
-    from learner.hf_checkpoint import checkpoint_weight_map
+    from modeling.hf_checkpoint import checkpoint_weight_map
 
     (tmp_path / "config.json").write_text("{}")
     (tmp_path / "pytorch_model.bin").write_bytes(b"")
@@ -136,7 +136,7 @@ def test_missing_weights_and_bad_index_are_named(tmp_path, twin_root):
     next(broken.glob("model-00002-of-*.safetensors")).unlink()
     with pytest.raises(FileNotFoundError, match="names shard model-00002-of-"):
         checkpoint_weight_map(broken)
-    from learner.hf_checkpoint import architecture_class, load_hf_config
+    from modeling.hf_checkpoint import architecture_class, load_hf_config
 
     config = load_hf_config(twin_root / "qwen3")
     config.architectures = ["Qwen3Model"]  # no LM head: no token log-probs
@@ -167,8 +167,8 @@ def _write_cache_snapshot(cache: Path, repo_id: str, revision: str, twin_dir: Pa
 
 def test_hub_id_resolves_from_the_cache_offline_and_its_absence_is_named(twin_root, tmp_path, monkeypatch):
     from learner.config import ModelConfig
-    from learner.hf_checkpoint import resolve_model_path
-    from learner.model import load_policy
+    from modeling.hf_checkpoint import resolve_model_path
+    from modeling.model import load_policy
 
     cache = tmp_path / "hub"
     rev = "0123456789abcdef0123456789abcdef01234567"
@@ -267,7 +267,7 @@ PROMPTS = ["Check the interaction between warfarin and aspirin", "Creatinine cle
 
 
 def _learner_cfg(backend: str, **extra):
-    from learner.config_models import LearnerConfig
+    from modeling.config_models import LearnerConfig
 
     return LearnerConfig(backend=backend, optim={"lr": 1e-2, "micro_batch_size": 2},
                          deepspeed={"world_size": 2 if backend == "deepspeed" else 1, "num_cpus_per_rank": 1},
@@ -278,8 +278,8 @@ def assert_components_agree(model_dir: Path, learner, family: str):
     """Generator, learner and teacher agree before and after one learner step."""
     from actors.generator import HFGenerator, SamplingConfig
     from actors.teacher import Teacher
-    from learner.config_models import TeacherConfig
-    from learner.model import IM_END, load_tokenizer
+    from modeling.config_models import TeacherConfig
+    from modeling.model import IM_END, load_tokenizer
 
     tokenizer = load_tokenizer(model_dir)
     generator = HFGenerator(str(model_dir), SamplingConfig(), [tokenizer.convert_tokens_to_ids(IM_END)])
@@ -315,7 +315,7 @@ def assert_components_agree(model_dir: Path, learner, family: str):
 def test_generator_torch_learner_and_teacher_agree_before_and_after_a_step(twin_root, family, tmp_path):
     import transformers
 
-    from learner.hf_checkpoint import checkpoint_metadata, load_model
+    from modeling.hf_checkpoint import checkpoint_metadata, load_model
     from learner.learner_actor import Learner
 
     model_dir = twin_root / family
@@ -351,7 +351,7 @@ def test_zero3_two_ranks_agree_with_generator_and_teacher(ray_cluster, twin_root
 
 def test_vision_tower_trains_only_when_configured(twin_root):
     from learner.backends.torch_backend import TorchBackend
-    from learner.hf_checkpoint import freeze_vision_tower, load_model
+    from modeling.hf_checkpoint import freeze_vision_tower, load_model
 
     model_dir = str(twin_root / "qwen3_5")
     frozen = TorchBackend(_learner_cfg("torch"), model_dir, seed=0)
@@ -387,8 +387,8 @@ def test_receivers_accept_a_subset_and_name_unknown_weights(twin_root):
 def test_save_sharded_checkpoint_checks_names_and_sft_output_loads(twin_root, tmp_path):
     import transformers
 
-    from learner.hf_checkpoint import load_model, parse_size, save_sharded_checkpoint
-    from learner.model import load_tokenizer
+    from modeling.hf_checkpoint import load_model, parse_size, save_sharded_checkpoint
+    from modeling.model import load_tokenizer
     from learner.sft import SFTExample, run_sft
 
     assert parse_size("5GB") == 5 * 10**9 and parse_size("2MiB") == 2 * 2**20 and parse_size(7) == 7

@@ -7,9 +7,9 @@ import torch
 
 from actors.teacher import Teacher
 from actors.types import TeacherBatch
-from learner.config_models import LearnerConfig, TeacherConfig
+from modeling.config_models import LearnerConfig, TeacherConfig
 from learner.learner_actor import Learner
-from learner.model import load_policy, pad_batch, per_token_logprobs
+from modeling.model import load_policy, pad_batch, per_token_logprobs
 from tests.training.learner_fixtures import make_batch, tiny_model_dir
 
 REQUIRED_KEYS = {"policy_loss", "distill_loss", "kl_ref", "kl_teacher", "entropy", "grad_norm", "logprob_diff",

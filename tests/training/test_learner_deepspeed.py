@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from actors.types import PendingTeacherBatch, TeacherBatch
-from learner.checkpoint import checkpoint_dir
-from learner.config_models import LearnerConfig, TeacherConfig
+from modeling.checkpoint import checkpoint_dir
+from modeling.config_models import LearnerConfig, TeacherConfig
 from learner.learner_actor import Learner, LearnerActor
 from tests.training.learner_fixtures import make_batch, tiny_model_dir
 

@@ -1,11 +1,11 @@
-"""learner/model.py: the local tokenizer, the chat format for token-in/token-out, the tiny model, log-probs."""
+"""modeling/model.py: the local tokenizer, the chat format for token-in/token-out, the tiny model, log-probs."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from learner.model import (
+from modeling.model import (
     TOOL_TOKENS,
     build_tiny_model,
     load_policy,

@@ -8,10 +8,10 @@ import pytest
 import torch
 
 from actors.teacher import Teacher
-from learner.config_models import LearnerConfig, TeacherConfig, WeightSyncConfig
+from modeling.config_models import LearnerConfig, TeacherConfig, WeightSyncConfig
 from learner.learner_actor import Learner, free_port
-from learner.model import load_policy
-from learner.weight_sync import (
+from modeling.model import load_policy
+from modeling.weight_sync import (
     TensorSpec,
     WeightSyncError,
     WeightSyncGroup,

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from actors.types import RolloutSample, TurnSpan
-from learner.config_models import DistillConfig, LossConfig
+from modeling.config_models import DistillConfig, LossConfig
 from learner.losses import (
     BatchNorms,
     LossInputs,

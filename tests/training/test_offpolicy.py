@@ -12,7 +12,7 @@ import math
 import pytest
 
 from learner.config import validate_config
-from learner.config_models import OFFPOLICY_TIS_CAP, LearnerConfig
+from modeling.config_models import OFFPOLICY_TIS_CAP, LearnerConfig
 from learner.learner_actor import Learner
 from learner.metrics import read_metrics, read_samples
 from tests.training.learner_fixtures import make_batch, tiny_model_dir

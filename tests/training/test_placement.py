@@ -26,7 +26,7 @@ import pytest
 import torch
 
 from learner.config import RunConfig
-from learner.config_models import LearnerConfig
+from modeling.config_models import LearnerConfig
 from learner.learner_actor import Learner, LearnerActor
 from learner.placement import (
     ActorDemand,
@@ -96,7 +96,7 @@ def _node_ip(node_id: str) -> str:
 def _logprobs_under(state: dict[str, torch.Tensor], model_dir: str, prompt: list[int],
                     tokens: list[int]) -> torch.Tensor:
     """Log-probs of `tokens` after `prompt` under a model holding `state` (what the generator must report)."""
-    from learner.model import load_policy, per_token_logprobs
+    from modeling.model import load_policy, per_token_logprobs
 
     model, _ = load_policy(model_dir)
     model.load_state_dict(state)

@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from actors.types import TeacherBatch, TeacherOutput
-from learner.checkpoint import checkpoint_dir, latest_checkpoint, load_tensors, mark_latest, read_json
+from modeling.checkpoint import checkpoint_dir, latest_checkpoint, load_tensors, mark_latest, read_json
 from learner.metrics import read_metrics, read_samples
 from tests.training.test_train import final_weights as learner_weights
 from tests.training.test_train import teacher_weights, ttopd_config

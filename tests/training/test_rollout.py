@@ -20,14 +20,14 @@ def run(coro):
 
 @pytest.fixture(scope="module")
 def tokenizer(ward_policy_dir):
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     return load_tokenizer(ward_policy_dir)
 
 
 @pytest.fixture(scope="module")
 def stop_ids(tokenizer):
-    from learner.model import ENDOFTEXT, IM_END
+    from modeling.model import ENDOFTEXT, IM_END
 
     return [tokenizer.convert_tokens_to_ids(IM_END), tokenizer.convert_tokens_to_ids(ENDOFTEXT)]
 
@@ -120,7 +120,7 @@ def test_loss_mask_spans_and_logprobs_line_up(tokenizer, hf):
 
 def test_sampling_logprobs_are_the_models_own(tokenizer, hf, ward_policy_dir):
     """With top_p = 1 the generator's log-probs must equal the learner's per-token log-probs."""
-    from learner.model import load_policy, per_token_logprobs
+    from modeling.model import load_policy, per_token_logprobs
 
     loop = AgentLoop(tokenizer, RolloutLimits(max_turns=2, max_new_tokens_per_turn=16))
     sample = run(loop.run(spec(seed=3), LocalEnv(2), hf_generate(hf)))

@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from actors.teacher import GENERATION_PROMPT, Teacher
-from learner.config_models import TeacherConfig, teacher_update_action
-from learner.model import load_policy, per_token_logprobs, token_stats
+from modeling.config_models import TeacherConfig, teacher_update_action
+from modeling.model import load_policy, per_token_logprobs, token_stats
 from tests.training.learner_fixtures import make_batch, make_sample, tiny_model_dir
 
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from learner.checkpoint import load_tensors
+from modeling.checkpoint import load_tensors
 from learner.config import validate_config
-from learner.hf_checkpoint import read_checkpoint_tensors
+from modeling.hf_checkpoint import read_checkpoint_tensors
 from learner.metrics import REQUIRED_KEYS, read_metrics, read_samples
 from tests.training.conftest import NO_EMBEDDINGS
 
@@ -43,7 +43,7 @@ def tiny_config(run_dir, policy_dir, **sections):
 
 
 def final_weights(run_dir):
-    from learner.checkpoint import latest_checkpoint
+    from modeling.checkpoint import latest_checkpoint
 
     return read_checkpoint_tensors(latest_checkpoint(run_dir) / "learner" / "policy")
 
@@ -84,7 +84,7 @@ def test_grpo_runs_streams_on_policy_and_resumes_exactly(ray_cluster, ward_polic
 
     # 2 steps + resume + 2 steps ends with identical weights. The first two steps of the straight
     # run are the "2 steps": its step-2 checkpoint is all that a run stopped there leaves behind.
-    from learner.checkpoint import mark_latest
+    from modeling.checkpoint import mark_latest
 
     split = tmp_path / "split"
     shutil.copytree(tmp_path / "straight", split, ignore=shutil.ignore_patterns("step_000004*"))
@@ -164,7 +164,7 @@ def ttopd_config(run_dir, policy_dir, **sections):
 
 
 def teacher_weights(run_dir):
-    from learner.checkpoint import latest_checkpoint
+    from modeling.checkpoint import latest_checkpoint
 
     return load_tensors(latest_checkpoint(run_dir) / "teacher" / "teacher.safetensors")
 

@@ -12,7 +12,7 @@ from actors.agent_loop import RolloutLimits
 
 @pytest.fixture(scope="module")
 def gold(ward_policy_dir):
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
     from learner.sft import gold_replay_samples
 
     previous = os.environ.get("HCGYM_EMBEDDINGS")
@@ -42,7 +42,7 @@ def test_gold_replays_are_correct_tito_episodes(gold):
 def test_hinted_examples_match_the_teachers_context(gold, ward_policy_dir):
     """The SFT hint turn is exactly the teacher's: same tokens, same place; hint tokens untrained."""
     from actors.teacher import Teacher
-    from learner.config_models import TeacherConfig
+    from modeling.config_models import TeacherConfig
     from learner.sft import hinted_example
 
     tokenizer, samples = gold
@@ -60,7 +60,7 @@ def test_hinted_examples_match_the_teachers_context(gold, ward_policy_dir):
 
 
 def test_sft_lowers_the_loss_on_gold_turns(gold, ward_policy_dir, tmp_path):
-    from learner.model import load_policy, pad_batch, per_token_logprobs
+    from modeling.model import load_policy, pad_batch, per_token_logprobs
     from learner.sft import run_sft
 
     tokenizer, samples = gold

@@ -52,7 +52,7 @@ _TEXT = {
 
 
 def _twin_config(family: str, tokenizer):
-    from learner.model import ENDOFTEXT, IM_END
+    from modeling.model import ENDOFTEXT, IM_END
 
     eos = [tokenizer.convert_tokens_to_ids(t) for t in (IM_END, ENDOFTEXT)]
     ids = {"vocab_size": len(tokenizer), "pad_token_id": tokenizer.pad_token_id, "eos_token_id": eos[0],
@@ -104,7 +104,7 @@ def build_twin(family: str, out_dir: str | os.PathLike, tokenizer_dir: str | os.
     Args:
         family: One of `TWIN_FAMILIES`.
         out_dir: Directory to write.
-        tokenizer_dir: A tokenizer directory (`learner.model.train_tokenizer` output or a model dir).
+        tokenizer_dir: A tokenizer directory (`modeling.model.train_tokenizer` output or a model dir).
         seed: Seed of the random initialisation (same seed, same weights).
         dtype: Storage dtype of the weights.
         max_shard_size: `save_pretrained`'s shard limit.
@@ -117,7 +117,7 @@ def build_twin(family: str, out_dir: str | os.PathLike, tokenizer_dir: str | os.
     """
     import transformers
 
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     tokenizer = load_tokenizer(tokenizer_dir)
     config, eos = _twin_config(family, tokenizer)

@@ -78,7 +78,7 @@ def gold_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F811
     )
     from envs import registry
     from learner.metrics import rollout_metrics, write_samples
-    from learner.model import load_tokenizer
+    from modeling.model import load_tokenizer
 
     run_dir = tmp_path_factory.mktemp("viewer") / "gold-run"
     tokenizer = load_tokenizer(ward_policy_dir)
