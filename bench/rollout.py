@@ -1,7 +1,7 @@
 """Rollout throughput with the scripted gold-replay policy: a plain in-process loop vs the Ray
 env-actor pool with 1 and 2 actors, each with one actor call per reset / step / release
-(unbatched), with the calls waiting on an actor batched into one call (batched) and batched with
-the answers streamed back as they finish (streamed, the `EnvPool` default), on the same episodes.
+(unbatched), with the calls waiting on an actor batched into one call (batched, the `EnvPool`
+default) and batched with the answers streamed back as they finish (streamed), on the same episodes.
 
 The policy is `GoldReplayPolicy` (no model), so the figures measure the rollout machinery itself:
 environment steps, tool execution, grading, TITO tokenization and, for Ray, the actor round trips.
@@ -91,8 +91,8 @@ async def pool_pass(pool, loop, policy, episode_specs):
 
 
 #: `ray_<actors>_<calls>`: unbatched = one actor call per reset / step / release; batched = the
-#: calls waiting on an actor in one call, answered at once; streamed = batched, answers streamed
-#: back in chunks as they finish (the `EnvPool` default).
+#: calls waiting on an actor in one call, answered at once (the `EnvPool` default); streamed =
+#: batched, answers streamed back in chunks as they finish (`--stream-after-ms`).
 MODES = ("plain", "ray_1_unbatched", "ray_1_batched", "ray_1_streamed",
          "ray_2_unbatched", "ray_2_batched", "ray_2_streamed")
 CALLS = {"unbatched": {"batch_calls": False}, "batched": {"batch_calls": True, "stream_after_s": None},
@@ -127,6 +127,8 @@ async def measure(loop, policy, episode_specs, args) -> dict[str, list]:
             pool = pools[int(actors)]
             for name, value in CALLS[calls].items():
                 setattr(pool, name, value)
+            if calls == "streamed":
+                pool.stream_after_s = args.stream_after_ms / 1000
             runs[mode].append(await pool_pass(pool, loop, policy, episode_specs))
     stats = {actors: await pool.ready() for actors, pool in pools.items()}
     return runs, stats
@@ -145,6 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--searches", type=int, default=0,
                         help="medical_qa only: ICD-10 searches each episode makes in its first turn besides the "
                              "gold calls (a knowledge-search-heavy workload: env work dominates)")
+    parser.add_argument("--stream-after-ms", type=float, default=2.0,
+                        help="streamed mode: the actor sends a chunk of answers per this much work (EnvPool.stream_after_s)")
     parser.add_argument("--json", default=None, help="also write the figures here")
     args = parser.parse_args(argv)
     if args.searches and args.domain != "medical_qa":
@@ -180,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     plain = runs["plain"][0][0]
     wall = {mode: statistics.median(r[1] for r in runs[mode]) for mode in MODES}
     results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
-               "prompt": args.prompt, "searches": args.searches, "repeats": args.repeats, "load_average": os.getloadavg(),
+               "prompt": args.prompt, "searches": args.searches, "stream_after_ms": args.stream_after_ms, "repeats": args.repeats, "load_average": os.getloadavg(),
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
                "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
                "plain": {"wall_s": wall["plain"], "episodes_per_s": args.episodes / wall["plain"],

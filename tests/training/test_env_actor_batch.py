@@ -205,14 +205,17 @@ def test_an_unsendable_action_fails_only_its_episode(ray_cluster, ward_policy_di
 
 
 @pytest.mark.ray
-def test_a_batch_lost_with_its_actor_fails_every_call_as_env_actor_lost(ray_cluster, ward_policy_dir, monkeypatch):
+@pytest.mark.parametrize("stream_after_s", [None, 0.0], ids=["whole", "streamed"])
+def test_a_batch_lost_with_its_actor_fails_every_call_as_env_actor_lost(ray_cluster, ward_policy_dir, monkeypatch,
+                                                                        stream_after_s):
     """Every episode whose call was in a batch when the actor died gets EnvActorLost (so run_episode
     re-runs it); killing the actor with `no_restart=True` makes the loss permanent."""
     monkeypatch.setenv("HCGYM_EMBEDDINGS", "0")
     specs = ward_specs(3)
 
     async def go():
-        pool = EnvPool(1, 3, 5, domain_modules=WARD, env_vars=NO_EMBEDDINGS, max_restarts=0)
+        pool = EnvPool(1, 3, 5, domain_modules=WARD, env_vars=NO_EMBEDDINGS, max_restarts=0,
+                       stream_after_s=stream_after_s)
         await pool.ready()
         envs = [await pool.lease(s) for s in specs]
         await asyncio.gather(*[e.reset(s) for e, s in zip(envs, specs)])
