@@ -32,7 +32,7 @@ import envs  # noqa: E402,F401  (CPU runtime defaults)
 
 
 def build_tokenizer(domain: str, pattern: str | None) -> object:
-    from learner.model import load_tokenizer, train_tokenizer
+    from modeling.model import load_tokenizer, train_tokenizer
     from learner.sft import task_corpus
 
     out = Path(tempfile.mkdtemp(prefix="bench_rollout_tok_"))
