@@ -423,7 +423,7 @@ class EnvPool:
             time has passed since the last (`EnvActor.batch_stream`), so slow calls do not hold back
             the episodes already answered; None (the default) returns each batch's answers at once
             (`EnvActor.batch`). Measured (docs/benchmarks.md, "Batched env actors"): answers at once
-            were faster in 7 of 9 same-run comparisons, streaming (2 ms) only with 2 actors on
+            were faster in 8 of 10 same-run comparisons, streaming (2 ms) only with 2 actors on
             heavy steps; a Ray streaming generator costs ~0.35 ms a chunk.
     """
 
