@@ -369,10 +369,18 @@ def workflow_task(sid: str, rng: random.Random, i: int, critical_categories: dic
     key = f"{tpl[0]} {tpl[1]}" if tpl[1] != "chest" else ("LDCT chest" if tpl[0] == "LDCT" else "CT chest")
     critical = cat in critical_categories[key]
     core = cat.split()[-1] if not kind == "ct" else cat
+    # the management the applicable ACR system or Fleischner 2017 attaches to the category (the
+    # calculator's interpretation), written into the gold report's recommendation
+    if kind in ("thyroid", "breast"):
+        management = res.interpretation
+    elif kind == "ldct":
+        management = CALCULATORS["calculate_lung_rads"](**tasks[0]["metadata"]["arguments"]).interpretation
+    else:
+        management = f"Fleischner 2017: {cat}."
     actions = [act("get_study", {"study_id": sid}), act("get_report_template", {"modality": tpl[0], "region": tpl[1]}),
                act(calc, {"study_id": sid}, ["study_id"]),
-               act("draft_report", {"study_id": sid, "findings": "Findings as analysed.", "impression": f"Assessment: {core}.",
-                                    "category": cat, "recommendation": "As per the guideline for this category."}, ["study_id", "category"])]
+               act("draft_report", {"study_id": sid, "findings": narrative(s), "impression": f"Assessment category: {core}. Management: {management}",
+                                    "category": cat, "recommendation": management}, ["study_id", "category"])]
     if critical:
         actions.append(act("communicate_critical_result", {"study_id": sid, "recipient": "referring clinician", "method": "phone",
                                                            "finding": f"suspicious result ({cat}) communicated to the referring "
