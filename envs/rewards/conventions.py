@@ -56,7 +56,8 @@ class ToolConventions:
     place_order: Family = _fam("place_order create_order enter_order")
     interaction_check: Family = _fam("", "check_interaction check_all_interactions check_drug_interactions interaction")
     #: Interaction checks that cover every drug of the patient whatever their arguments.
-    interaction_check_all: Family = _fam("check_all_interactions check_drug_interactions check_patient_interactions")
+    interaction_check_all: Family = _fam("check_all_interactions check_drug_interactions check_patient_interactions "
+                                         "check_psych_med_interactions")
     escalation: Family = _fam(
         "escalate_care activate_code activate_stemi_alert call_rapid_response transfer_to_specialist "
         "activate_stroke_alert activate_sepsis_protocol activate_cath_lab call_911 call_emergency_services "

@@ -47,7 +47,9 @@ _NEGATION_CUE = re.compile(
     r"\b(?:no|not|never|without|avoid\w*|don't|do not|does not|did not|no need|rather than|instead of|"
     r"rule out|ruled out|no longer|stop|stopped|discontinue|discontinued|hold|withhold|contraindicated|allergic|"
     r"allergy|allergies|unless|nor|refrain|decline|declined|defer|cannot|can't|shouldn't|should not|must not|"
-    r"won't|will not)\b"
+    r"won't|will not|"
+    # a deferral: "a 14-day washout is required before sertraline can start" (the drug waits)
+    r"(?:washout|wait|waiting|interval|gap)\b[^.;:]{0,60}\bbefore)\b"
 )
 # A prescribing verb: when a negation does not govern it, the drug after it is recommended.
 _ACTION_VERB = re.compile(
@@ -148,8 +150,12 @@ def _avoided_after(state: SafetyState, after: str) -> bool:
     return False
 
 
-_STOP_DRUG = re.compile(r"\b(?:stop|stopping|discontinue|discontinuing|cease|hold|holding|withhold|withholding|d/c)\s+"
+_STOP_DRUG = re.compile(r"\b(?:stops?|stopping|discontinues?|discontinuing|ceases?|holds?|holding|withholds?|"
+                        r"withholding|d/c)\s+"
                         r"(?:the\s+|his\s+|her\s+|their\s+)?([a-z][a-z0-9\-]+(?: [a-z][a-z0-9\-]+)?)")
+# Drugs coordinated with the first one a stop verb names: "stops lithium and ibuprofen",
+# "hold warfarin, aspirin or clopidogrel" (a new verb, "and start heparin", ends the list).
+_AND_NEXT_DRUG = re.compile(r"\s*(?:,\s*(?:and\s+|or\s+)?|\s+and\s+|\s+or\s+)(?:the\s+)?([a-z][a-z0-9\-]+)")
 _DRUG_STOPPED = re.compile(r"([a-z][a-z0-9\-]+)\s+(?:is|was|has been|will be|should be|to be)\s+"
                            r"(?:stopped|discontinued|held|withheld|ceased)\b")
 _SWITCH_FROM = re.compile(r"\bfrom\s+([a-z][a-z0-9\-]+(?: [a-z][a-z0-9\-]+)?)\s+to\s+([a-z][a-z0-9\-]+)")
@@ -174,6 +180,12 @@ def stopped_in_answer(state: SafetyState) -> set[str]:
             drug = known(m.group(1))
             if drug:
                 out.add(drug)
+            if regex is _STOP_DRUG and drug:
+                end = m.end() if m.group(1).split()[0] == m.group(1) or known(m.group(1).split()[0]) is None \
+                    else m.start(1) + len(m.group(1).split()[0])
+                while (nxt := _AND_NEXT_DRUG.match(text, end)) and known(nxt.group(1)):
+                    out.add(known(nxt.group(1)))
+                    end = nxt.end()
     for regex in (_SWITCH_FROM, _REPLACE):
         for m in regex.finditer(text):
             old, new = known(m.group(1)), known(m.group(2))
