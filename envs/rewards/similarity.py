@@ -69,10 +69,19 @@ _cache: dict[str, object] = {}
 _CACHE_MAX = 20_000
 
 
+_DISABLED = "disabled (HCGYM_EMBEDDINGS=0)"
+
+
+def _disabled() -> bool:
+    """The switch is read at every call, not once: a model loaded earlier in the process (another
+    test, another run) must not grade an episode whose settings turned embeddings off."""
+    return os.environ.get("HCGYM_EMBEDDINGS", "1").strip().lower() in ("0", "false", "no", "off")
+
+
 def _load() -> Embedder | None:
     global _status
-    if os.environ.get("HCGYM_EMBEDDINGS", "1").strip().lower() in ("0", "false", "no", "off"):
-        _status = "disabled (HCGYM_EMBEDDINGS=0)"
+    if _disabled():
+        _status = _DISABLED
         return None
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
@@ -108,16 +117,19 @@ def _load() -> Embedder | None:
 def get_embedder() -> Embedder | None:
     """The process-wide embedder, loaded on first call; None when unavailable."""
     global _embedder, _status
-    if _embedder is None and _status == "not loaded":
+    if _disabled():
+        return None
+    if _embedder is None and _status in ("not loaded", _DISABLED):
         with _lock:
-            if _embedder is None and _status == "not loaded":
+            if _embedder is None and _status in ("not loaded", _DISABLED):
                 _embedder = _load()
     return _embedder
 
 
 def embedding_status() -> str:
-    """'loaded <path>', 'not loaded', 'not installed ...', 'disabled ...' or 'failed ...'."""
-    return _status
+    """'loaded <path>', 'not loaded', 'not installed ...', 'disabled ...' or 'failed ...' (as the
+    switch stands now: 'disabled' while HCGYM_EMBEDDINGS=0, whatever was loaded before)."""
+    return _DISABLED if _disabled() else _status
 
 
 def embedding_failed() -> bool:

@@ -204,7 +204,10 @@ def test_ctrl_c_keeps_finished_episodes_and_the_rerun_completes(tmp_path):
                "gym-test:triage_emergency", "--condition", "agent", "--output", str(out), "--seeds", "40",
                "--no-ray", "--concurrency", "1", "--no-report"]
     env = dict(os.environ, HCGYM_EMBEDDINGS="0")
-    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Ctrl-C's default disposition, as a shell gives it: a child inherits an ignored SIGINT, and
+    # something earlier in a long test session may leave this process ignoring it (seen in a full run).
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not (out / RESULTS_FILE).exists() and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.2)

@@ -84,3 +84,17 @@ def test_disabled_embeddings_are_not_an_error(monkeypatch):
     similarity.set_embedder(None)
     breakdown = score_episode(episode(FREE, answer="Pneumothorax from pleural injury"), FREE)
     assert breakdown.grader_errors == [] and breakdown.details["embeddings"].startswith("disabled")
+
+
+def test_the_switch_is_honoured_after_the_model_is_loaded(real_embedder, monkeypatch):
+    """A model loaded earlier in the process must not grade an episode run with HCGYM_EMBEDDINGS=0
+    (the plain loop and a fresh env actor must give the same record)."""
+    embedder, status = real_embedder
+    similarity.set_embedder(embedder, status)
+    monkeypatch.delenv("HCGYM_EMBEDDINGS", raising=False)
+    assert similarity.get_embedder() is embedder and similarity.embedding_status() == status
+    monkeypatch.setenv("HCGYM_EMBEDDINGS", "0")
+    assert similarity.get_embedder() is None
+    assert similarity.embedding_status() == "disabled (HCGYM_EMBEDDINGS=0)"
+    monkeypatch.delenv("HCGYM_EMBEDDINGS")
+    assert similarity.get_embedder() is embedder
