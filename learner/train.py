@@ -342,8 +342,13 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from learner.run_folder import run_undoing_failed_start
+
     args = build_arg_parser().parse_args(argv)
-    summary = train(config_from_args(args), resume=args.resume)
+    cfg = config_from_args(args)
+    summary = run_undoing_failed_start(
+        Path(cfg.output_dir), lambda: train(cfg, resume=args.resume),
+        lambda text: print(f"python -m learner.train: {text}", file=sys.stderr))
     print(json.dumps({k: summary[k] for k in ("steps", "wall_s", "run_dir")}))
     return 0
 

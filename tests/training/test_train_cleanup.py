@@ -8,7 +8,7 @@ import json
 import yaml
 
 from envs.cli import main
-from learner.cli import RunFolderSnapshot, undo_failed_start
+from learner.run_folder import RunFolderSnapshot, undo_failed_start
 
 WARD = {"ward": "tests.fixtures.ward_domain.environment"}
 
@@ -95,3 +95,18 @@ def test_a_run_that_recorded_a_step_is_left_as_it_is(tmp_path):
     message = undo_failed_start(before)
     assert message == f"the run failed after recording 1 step(s); {run_dir} is left as it is"
     assert (run_dir / "checkpoints").is_dir()
+
+
+def test_the_cluster_entry_point_cleans_up_too(tmp_path, monkeypatch, capsys):
+    """`python -m learner.train` (what cluster jobs run) undoes a failed start the same way."""
+    import pytest
+
+    from learner.train import main as module_main
+
+    _isolated_hub_cache(monkeypatch, tmp_path)
+    run_dir = tmp_path / "runs" / "job"
+    with pytest.raises(Exception, match="not in the Hugging Face cache"):
+        module_main(["--config", _config(tmp_path, run_dir)])
+    err = capsys.readouterr().err
+    assert f"python -m learner.train: the run failed before its first step; removed config.yaml, model/ and the folder {run_dir}" in err
+    assert not run_dir.exists()
