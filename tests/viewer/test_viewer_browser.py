@@ -197,7 +197,8 @@ def test_evaluation_page_shows_the_reports_numbers_and_the_comparison(served, br
     assert f"{difference['estimate']:.3f} [{difference['low']:.3f}, {difference['high']:.3f}]" in row
     # each number links to its episodes
     before = renders(browser)
-    browser.find_element(By.CSS_SELECTOR, f'[data-eval="{source_id(served, eval_dirs[0])}"] tr[data-benchmark="ward"] a').click()
+    browser.find_element(By.CSS_SELECTOR,
+                         f'[data-eval="{source_id(served, eval_dirs[0])}"] tr[data-benchmark="ward"] td[data-value] a').click()
     wait_render(browser, before)
     rows = pq.read_table(eval_dirs[0] / "results.parquet", columns=["benchmark"]).num_rows
     assert browser.find_element(By.ID, "episode-count").text.startswith(f"{rows} of {rows}")

@@ -336,7 +336,10 @@ async function evalsPage(root, params) {
       const ci = (m) => `${fixed(m.estimate)} [${fixed(m.low)}, ${fixed(m.high)}]`;
       table.append(el("tr", { "data-benchmark": b.benchmark },
         el("td", {}, el("a", { href: `#/episodes?source=${source.id}&benchmark=${encodeURIComponent(b.benchmark)}` }, b.title)),
-        el("td", {}, b.primary), el("td", { class: "num", "data-value": primary.estimate }, ci(primary)), el("td", { class: "num" }, primary.n),
+        el("td", {}, b.primary),
+        el("td", { class: "num", "data-value": primary.estimate },
+          el("a", { href: `#/episodes?source=${source.id}&benchmark=${encodeURIComponent(b.benchmark)}`, title: "the episodes behind this number" }, ci(primary))),
+        el("td", { class: "num" }, primary.n),
         el("td", {}, b.metrics.filter((m) => m !== primary).map((m) => `${m.metric} ${ci(m)}`).join("; "))));
     }
     panel.append(table);
@@ -353,7 +356,9 @@ async function evalsPage(root, params) {
     const table = el("table", {}, el("tr", {}, ["benchmark", "metric", "items", "A", "B", "B − A [95% CI]", "McNemar p"].map((h) => el("th", {}, h))));
     for (const e of cmp.benchmarks) {
       const d = e.difference;
-      table.append(el("tr", { "data-benchmark": e.benchmark }, el("td", {}, e.benchmark), el("td", {}, e.metric), el("td", { class: "num" }, e.items),
+      table.append(el("tr", { "data-benchmark": e.benchmark },
+        el("td", {}, el("a", { href: `#/episodes?source=${a}&benchmark=${encodeURIComponent(e.benchmark)}` }, e.benchmark)),
+        el("td", {}, e.metric), el("td", { class: "num" }, e.items),
         el("td", { class: "num" }, fixed(e.a)), el("td", { class: "num" }, fixed(e.b)),
         el("td", { class: "num" }, `${fixed(d.estimate)} [${fixed(d.low)}, ${fixed(d.high)}]`), el("td", { class: "num" }, e.mcnemar ? fmt(e.mcnemar.p_value, 4) : "–")));
     }
