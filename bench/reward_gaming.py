@@ -75,14 +75,14 @@ def submit(answer: str, syntax: str = "hermes") -> str:
     return call_text("submit_answer", {"answer": answer}, syntax)
 
 
-def placeholder(name: str, schema: dict[str, Any], task) -> Any:
-    """A value a policy that read only the ticket could pass: the patient id, the ticket's opening words."""
+def ticket_only_argument(name: str, schema: dict[str, Any], task) -> Any:
+    """The value a gaming policy that read only the ticket would pass (the strategy under test): the patient id, the ticket's opening words."""
     if "enum" in schema and schema["enum"]:
         return schema["enum"][0]
     kind = schema.get("type")
     if kind is None and schema.get("anyOf"):
         kinds = [s for s in schema["anyOf"] if s.get("type") != "null"]
-        return placeholder(name, kinds[0], task) if kinds else None
+        return ticket_only_argument(name, kinds[0], task) if kinds else None
     if kind == "integer":
         return 1
     if kind == "number":
@@ -104,7 +104,7 @@ def every_read_call(definitions: dict, task) -> list[tuple[str, dict[str, Any]]]
         if str(definition.tool_type).lower() not in ("read", "tooltype.read"):
             continue
         params = definition.parameters
-        args = {key: placeholder(key, params["properties"].get(key, {}), task) for key in params.get("required", [])}
+        args = {key: ticket_only_argument(key, params["properties"].get(key, {}), task) for key in params.get("required", [])}
         calls.append((name, args))
     return calls
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import threading
+from abc import ABC, abstractmethod
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,7 +179,7 @@ def per_turn_kl(sample: dict[str, Any]) -> list[float | None]:
 
 
 @dataclass
-class _Source:
+class _Source(ABC):
     """What both kinds of folder share: an id, a path, and a table of episodes built once."""
 
     id: str
@@ -186,8 +187,9 @@ class _Source:
     _facets: dict[str, list[Any]] = field(default_factory=dict, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
+    @abstractmethod
     def index(self) -> pa.Table:
-        raise NotImplementedError
+        """The episode table of this folder (built once)."""
 
     def episodes(self, query: EpisodeQuery) -> dict[str, Any]:
         """One page of the episode table under `query`, with the match count and the filter values."""

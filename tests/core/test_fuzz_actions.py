@@ -214,17 +214,22 @@ def check_step(env: HealthcareGymEnv, act: str) -> bool:
 @pytest.mark.parametrize("domain", DOMAINS)
 def test_fuzzed_actions_never_raise_and_end_scored(domain_envs, domain):
     env, _, gold = domain_envs[domain]
+    steps_checked: list[int] = []
 
     @FUZZ_SETTINGS
     @given(data=st.data())
     def episode(data):
         # the toolkit of the episode's task (cross_domain builds one per pathway)
         _, info = env.reset(seed=data.draw(st.integers(0, 10_000), label="seed"))
+        steps = 0
         for act in data.draw(st.lists(action(info["tools"], gold), min_size=1, max_size=MAX_TURNS), label="actions"):
+            steps += 1  # check_step asserts the step's contract (no raise, str observation, scored end)
             if check_step(env, act):
                 break
+        steps_checked.append(steps)
 
     episode()
+    assert steps_checked and min(steps_checked) >= 1, f"{domain}: no fuzzed step was checked"
 
 
 def test_fuzz_strategies_cover_every_format_and_terminal_steps(domain_envs):
