@@ -95,7 +95,10 @@ class EnvActor:
     def ping(self) -> dict[str, Any]:
         return {"actor_index": self.actor_index, "pid": os.getpid(), "incarnation": self.incarnation,
                 "active": len(self._active), "episodes_started": self.episodes_started,
-                "env_errors": self.env_errors, "batches": self.batches, "batched_calls": self.batched_calls}
+                "env_errors": self.env_errors, "batches": self.batches, "batched_calls": self.batched_calls,
+                # the actor process's CPU time (all threads): what a benchmark divides by to see
+                # whether a pool's actors were busy or waiting on the driver
+                "cpu_s": time.process_time()}
 
     def _env_for(self, domain: str, split: str | None):
         idle = self._idle.setdefault((domain, split), [])

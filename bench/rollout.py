@@ -54,11 +54,16 @@ SEARCH_QUERIES = (
 )
 
 
-def with_searches(actions: list[str], searches: int, index: int) -> list[str]:
+#: The costly queries only (`--queries vague`): every search scans many candidate codes, so an
+#: episode's env work is large against the driver's tokenization of its small observations.
+VAGUE_QUERIES = SEARCH_QUERIES[:4]
+
+
+def with_searches(actions: list[str], searches: int, index: int, queries: tuple[str, ...] = SEARCH_QUERIES) -> list[str]:
     """The gold actions with `searches` ICD-10 searches (one result each, so the observation stays
     small and the cost is the search itself) made in the first turn before its gold calls."""
     calls = ["<tool_call>" + json.dumps({"name": "search_icd10", "arguments": {
-        "query": SEARCH_QUERIES[(index + i) % len(SEARCH_QUERIES)], "limit": 1}}) + "</tool_call>"
+        "query": queries[(index + i) % len(queries)], "limit": 1}}) + "</tool_call>"
         for i in range(searches)]
     return ["\n".join(calls + actions[:1])] + actions[1:]
 
@@ -85,9 +90,12 @@ async def pool_pass(pool, loop, policy, episode_specs):
     ledger = EpisodeLedger()
     for spec in episode_specs:
         ledger.admit(spec.sample_id)
-    started = time.perf_counter()
+    actors_before = [p["cpu_s"] for p in await pool.ready()]
+    cpu_started, started = time.process_time(), time.perf_counter()
     samples = await asyncio.gather(*[run_episode(s, loop, pool, policy, ledger) for s in episode_specs])
-    return samples, time.perf_counter() - started, ledger.balance()
+    wall, driver_cpu = time.perf_counter() - started, time.process_time() - cpu_started
+    actors_cpu = [p["cpu_s"] - b for p, b in zip(await pool.ready(), actors_before)]
+    return samples, wall, ledger.balance(), {"driver": driver_cpu, "actors": actors_cpu}
 
 
 #: `ray_<actors>_<calls>`: unbatched = one actor call per reset / step / release; batched = the
@@ -119,9 +127,10 @@ async def measure(loop, policy, episode_specs, args) -> dict[str, list]:
     for round_index in range(args.repeats):
         for mode in MODES[round_index % len(MODES):] + MODES[:round_index % len(MODES)]:
             if mode == "plain":
-                started = time.perf_counter()
+                cpu_started, started = time.process_time(), time.perf_counter()
                 samples = await plain_loop(loop, policy, episode_specs, args.max_turns)
-                runs[mode].append((samples, time.perf_counter() - started, None))
+                runs[mode].append((samples, time.perf_counter() - started, None,
+                                   {"driver": time.process_time() - cpu_started, "actors": []}))
                 continue
             _, actors, calls = mode.split("_")
             pool = pools[int(actors)]
@@ -144,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--prompt", choices=["env", "compact"], default="env",
                         help="system prompt style of the agent loop (the tiny configs use compact)")
     parser.add_argument("--repeats", type=int, default=5, help="timed passes per mode; the median is reported")
+    parser.add_argument("--queries", choices=["mixed", "vague"], default="mixed",
+                        help="--searches' queries: all clinical phrases (mixed) or only the costly vague ones")
     parser.add_argument("--searches", type=int, default=0,
                         help="medical_qa only: ICD-10 searches each episode makes in its first turn besides the "
                              "gold calls (a knowledge-search-heavy workload: env work dominates)")
@@ -169,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     limits = RolloutLimits(max_turns=args.max_turns)
     tasks = {t.id: t for t in registry.get_tasks(args.domain, "train")}
     policy = GoldReplayPolicy(tokenizer, {r.task_id: with_searches(gold_turn_actions(tasks[r.task_id], args.max_turns),
-                                                                   args.searches, index)
+                                                                   args.searches, index,
+                                                                   VAGUE_QUERIES if args.queries == "vague" else SEARCH_QUERIES)
                                           for index, r in enumerate(refs)})
     loop = AgentLoop(tokenizer, limits, args.prompt)
     episode_specs = specs(refs, args.episodes)
@@ -183,12 +195,17 @@ def main(argv: list[str] | None = None) -> int:
         ray.shutdown()
     plain = runs["plain"][0][0]
     wall = {mode: statistics.median(r[1] for r in runs[mode]) for mode in MODES}
+    # CPU-seconds a pass (medians): the driver process (agent loop, tokenization, Ray client) and
+    # each env actor; with the wall time they say whether a pool's actors were busy or waiting.
+    cpu = {mode: {"driver": statistics.median(r[3]["driver"] for r in runs[mode]),
+                  "actors": [statistics.median(r[3]["actors"][i] for r in runs[mode])
+                             for i in range(len(runs[mode][0][3]["actors"]))]} for mode in MODES}
     results = {"domain": args.domain, "pattern": pattern, "episodes": args.episodes, "cpus": os.cpu_count(),
-               "prompt": args.prompt, "searches": args.searches, "stream_after_ms": args.stream_after_ms, "repeats": args.repeats, "load_average": os.getloadavg(),
+               "prompt": args.prompt, "searches": args.searches, "queries": args.queries, "stream_after_ms": args.stream_after_ms, "repeats": args.repeats, "load_average": os.getloadavg(),
                "turns_mean": statistics.mean(len(s.turns) for s in plain),
                "tokens_mean": statistics.mean(len(s.input_ids) for s in plain),
                "plain": {"wall_s": wall["plain"], "episodes_per_s": args.episodes / wall["plain"],
-                         "passes_s": [r[1] for r in runs["plain"]]}}
+                         "passes_s": [r[1] for r in runs["plain"]], "cpu_s": cpu["plain"]}}
     for mode in MODES[1:]:
         same = all(a.input_ids == b.input_ids and a.reward == b.reward and a.episode == b.episode
                    for run in runs[mode] for a, b in zip(run[0], plain))
@@ -196,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
             "wall_s": wall[mode], "episodes_per_s": args.episodes / wall[mode], "passes_s": [r[1] for r in runs[mode]],
             "vs_plain": wall["plain"] / wall[mode],
             "overhead_ms_per_episode": 1000 * (wall[mode] - wall["plain"]) / args.episodes,
-            "same_trajectories_as_plain_loop": same, "ledger": runs[mode][0][2],
+            "same_trajectories_as_plain_loop": same, "ledger": runs[mode][0][2], "cpu_s": cpu[mode],
         }
     results["vs_unbatched"] = {f"{c}, {a} actor(s)": wall[f"ray_{a}_unbatched"] / wall[f"ray_{a}_{c}"]
                                for a in (1, 2) for c in ("batched", "streamed")}
@@ -204,14 +221,16 @@ def main(argv: list[str] | None = None) -> int:
     results["calls_per_batch"] = {a: sum(p["batched_calls"] for p in ps) / max(1, sum(p["batches"] for p in ps))
                                   for a, ps in pings.items()}
     print(f"rollout benchmark: {args.episodes} gold-replay episodes of {args.domain} ({pattern}, {args.prompt} prompt), "
-          f"{args.searches} extra searches, {results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs, "
+          f"{args.searches} extra searches ({args.queries} queries), {results['turns_mean']:.2f} turns, {results['tokens_mean']:.0f} tokens each, {os.cpu_count()} CPUs, "
           f"medians of {args.repeats} interleaved passes, load average {results['load_average'][0]:.1f}")
-    print(f"  plain loop                   {wall['plain']:7.3f} s  {results['plain']['episodes_per_s']:7.1f} episodes/s")
+    print(f"  plain loop                   {wall['plain']:7.3f} s  {results['plain']['episodes_per_s']:7.1f} episodes/s  "
+          f"CPU-s driver {cpu['plain']['driver']:.2f}")
     for mode in MODES[1:]:
         r = results[mode]
         print(f"  Ray, {mode[4]} actor(s), {mode[6:]:9s} {r['wall_s']:7.3f} s  {r['episodes_per_s']:7.1f} episodes/s  "
               f"{r['vs_plain']:.2f}x plain  overhead {r['overhead_ms_per_episode']:+.1f} ms/episode  "
-              f"identical={r['same_trajectories_as_plain_loop']}")
+              f"identical={r['same_trajectories_as_plain_loop']}  CPU-s driver {cpu[mode]['driver']:.2f}, actors "
+              + " + ".join(f"{c:.2f}" for c in cpu[mode]["actors"]))
     print("  vs unbatched: " + ", ".join(f"{k} {v:.2f}x" for k, v in results["vs_unbatched"].items())
           + "; 2 / 1 actors: " + ", ".join(f"{c} {v:.2f}x" for c, v in results["two_vs_one_actor"].items())
           + "; calls per batch: " + ", ".join(f"{a} actor(s) {v:.1f}" for a, v in results["calls_per_batch"].items()))
