@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from typing import Any, Callable, SupportsFloat
 
@@ -41,6 +42,17 @@ CALL_FORMAT_HELP = (
     "To call a tool, write <tool_call>{\"name\": \"<tool>\", \"arguments\": {...}}</tool_call> "
     "(one block per call; several calls run in order). When you are done, call submit_answer."
 )
+# The observation of a turn that ended the episode as a text answer (`text_turn_ends_episode`).
+TEXT_ANSWER_OBSERVATION = "Your message had no tool call, so it was taken as your final answer."
+#: `info["end_reason"]` / `Trajectory.metadata["end_reason"]` of an episode ended that way.
+TEXT_ANSWER_END_REASON = "text_answer"
+_THINK_BLOCK = re.compile(r"<think>.*?</think>", re.DOTALL)
+
+
+def text_answer(message: str) -> str:
+    """The final answer of a text turn: the message without its `<think>` blocks (reasoning is not
+    the answer, as chat templates drop it from the assistant's content), stripped."""
+    return _THINK_BLOCK.sub("", message).strip()
 
 
 def render_ticket(task: Task) -> str:
@@ -91,6 +103,12 @@ class HealthcareGymEnv(gym.Env[str, str]):
         reward_weights: Optional weights for the 5D reward (`envs.rewards.RewardWeights` fields).
         step_time_budget_s: Seconds an action's tool calls may take before the rest are refused
             (`STEP_TIME_BUDGET_S`); None for no budget.
+        text_turn_ends_episode: End the episode at a turn whose action holds no tool call and no
+            parse error: its text (without `<think>` blocks) is the submitted answer, graded as one,
+            and `info["end_reason"]` / the record's `metadata["end_reason"]` is "text_answer". The
+            usual chat-agent convention (OpenAI-style tool loops, TRL's tools mode end at the first
+            reply without a tool call). Off by default: the env answers such a turn with a reminder
+            of the call format and the episode goes on to `submit_answer` or `max_turns`.
 
     Attributes:
         clock: The monotonic clock the step budget reads (`time.perf_counter`); tests inject one.
@@ -101,7 +119,8 @@ class HealthcareGymEnv(gym.Env[str, str]):
     def __init__(self, domain: str = "drug_interaction", task_id: str | None = None, split: str | None = None,
                  max_turns: int = 10, render_mode: str | None = None,
                  reward_weights: dict[str, float] | None = None,
-                 step_time_budget_s: float | None = STEP_TIME_BUDGET_S) -> None:
+                 step_time_budget_s: float | None = STEP_TIME_BUDGET_S,
+                 text_turn_ends_episode: bool = False) -> None:
         from envs import registry
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -113,6 +132,9 @@ class HealthcareGymEnv(gym.Env[str, str]):
                 or not math.isfinite(step_time_budget_s) or step_time_budget_s < 0):
             raise ValueError(f"step_time_budget_s must be a finite number of seconds >= 0 or None, "
                              f"got {step_time_budget_s!r}")
+        if not isinstance(text_turn_ends_episode, bool):
+            raise ValueError(f"text_turn_ends_episode must be true or false, got {text_turn_ends_episode!r}")
+        self.text_turn_ends_episode = text_turn_ends_episode
         self.step_time_budget_s = None if step_time_budget_s is None else float(step_time_budget_s)
         self.clock: Callable[[], float] = time.perf_counter
         self.domain_name = domain
@@ -230,8 +252,16 @@ class HealthcareGymEnv(gym.Env[str, str]):
                               f"took longer than the step time budget of {self.step_time_budget_s:g} s")
             parts.append(json.dumps({"error": budget_refusal}))
             parsed.errors.append(budget_refusal)
-        if not parsed.calls and not parsed.errors:
+        # A turn with neither a call nor a parse error is plain text: the final answer when
+        # `text_turn_ends_episode`, else a reminder of the call format. A malformed call (a parse
+        # error) never ends the episode: the agent meant to call a tool and sees why it failed.
+        text_turn = not parsed.calls and not parsed.errors
+        if text_turn and self.text_turn_ends_episode:
+            submitted = text_answer(parsed.message)
+            parts.append(TEXT_ANSWER_OBSERVATION)
+        elif text_turn:
             parts.append("No tool call found in your message. " + CALL_FORMAT_HELP)
+        ended_by_text = text_turn and self.text_turn_ends_episode
         observation = "\n".join(parts)[:MAX_OBSERVATION_CHARS]
         turn = TurnRecord(index=turn_index, action=raw, message=parsed.message, action_format=parsed.format,
                           tool_calls=records, parse_errors=parsed.errors, observation=observation,
@@ -241,7 +271,7 @@ class HealthcareGymEnv(gym.Env[str, str]):
         for rec in records:
             self._record.messages.append({"role": "tool", "name": rec.name,
                                           "content": rec.result if rec.ok else json.dumps({"error": rec.error})})
-        if not records:
+        if not records and not ended_by_text:  # the episode is over: no one answers a text answer
             self._record.messages.append({"role": "user", "content": observation})
 
         terminated = submitted is not None
@@ -253,6 +283,9 @@ class HealthcareGymEnv(gym.Env[str, str]):
                                 "tool_errors": [r.error_kind for r in records if r.error_kind]}
         if over_budget:
             info["calls_over_budget"] = len(over_budget)
+        if ended_by_text:
+            info["end_reason"] = TEXT_ANSWER_END_REASON
+            self._record.metadata["end_reason"] = TEXT_ANSWER_END_REASON
         if terminated or truncated:
             self._record.submitted_answer = submitted
             self._record.terminated, self._record.truncated = terminated, truncated

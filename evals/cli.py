@@ -163,6 +163,7 @@ def evaluate(args: argparse.Namespace) -> int:
         max_response_tokens=args.max_response_tokens or rollout.get("max_response_tokens", 4096),
         prompt_style=notes.get("prompt_style", "env"),
         max_observation_chars=rollout.get("max_observation_chars"),
+        text_turn_ends_episode=bool(rollout.get("text_turn_ends_episode", False)),
     )
     env_vars = {k: os.environ[k] for k in ("HCGYM_EMBEDDINGS", "HCGYM_DATA_DIR") if k in os.environ}
     env_vars.update(rollout.get("env_vars") or {})

@@ -10,7 +10,8 @@ handle (`actors.agent_loop.EnvHandle`: in-process `LocalEnv` or a Ray `RemoteEnv
 * `agent`: the multi-turn runner: the env's system prompt (or the run's compact prompt), its tools,
   its action parser, a turn budget and a response-token budget, as in training.
 
-End reasons (evals.types.END_REASONS): "answer" (submitted), "turn_limit", "token_limit",
+End reasons (evals.types.END_REASONS): "answer" (submitted), "text_answer" (a turn without a tool
+call taken as the answer, `text_turn_ends_episode`), "turn_limit", "token_limit",
 "parse_failure" (no readable answer), "endpoint_error", "context_overflow".
 """
 
@@ -39,6 +40,13 @@ class ConditionSettings:
     # Agent condition: tool results longer than this are cut as in training (a run's
     # rollout.max_observation_chars); None keeps them whole.
     max_observation_chars: int | None = None
+    # Agent condition: a turn without a tool call ends the episode as the final answer (end reason
+    # "text_answer"), as in a run trained with rollout.text_turn_ends_episode.
+    text_turn_ends_episode: bool = False
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """The env arguments these settings imply (env actors and in-process envs alike)."""
+        return {"text_turn_ends_episode": True} if self.text_turn_ends_episode else {}
 
 
 @dataclass
@@ -250,7 +258,10 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
             outcome.error_kinds["no_tool_call"] = outcome.error_kinds.get("no_tool_call", 0) + 1
         if terminated or truncated:
             final = step_info.get("final") or {"reward": reward}
-            outcome.end_reason = "answer" if terminated else ("parse_failure" if last_unparsed else "turn_limit")
+            if step_info.get("end_reason") == "text_answer":  # the env took a text turn as the answer
+                outcome.end_reason = "text_answer"
+            else:
+                outcome.end_reason = "answer" if terminated else ("parse_failure" if last_unparsed else "turn_limit")
             break
         cap = settings.max_observation_chars
         if cap is not None and len(observation) > cap:  # the agent loop's cut, marker included

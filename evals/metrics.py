@@ -160,7 +160,7 @@ def _correct(row: dict[str, Any]) -> float | None:
     """1/0; an episode that ended without an answer is wrong, an answered one without a gold to
     grade against (correct is None) is left out rather than counted wrong."""
     if row.get("correct") is None:
-        return None if row.get("end_reason") == "answer" else 0.0
+        return None if row.get("end_reason") in ("answer", "text_answer") else 0.0
     return 1.0 if row["correct"] else 0.0
 
 

@@ -183,7 +183,8 @@ class _EnvSource:
             from actors.env_actor import EnvPool
 
             self.pool = EnvPool(options.num_env_actors, options.slots_per_env_actor, options.settings.max_turns,
-                                domain_modules=options.domain_modules, env_vars=options.env_vars)
+                                env_kwargs=options.settings.env_kwargs(), domain_modules=options.domain_modules,
+                                env_vars=options.env_vars)
 
     async def run(self, runner: Callable, item: EvalItem, seed: int):
         """Run `runner(env)`; with Ray, re-run from its start when the env actor is lost."""
@@ -192,7 +193,8 @@ class _EnvSource:
 
         if not self.options.use_ray:
             # One LocalEnv per episode in flight, reused afterwards (it caches its envs per domain).
-            env = self._idle.pop() if self._idle else LocalEnv(self.options.settings.max_turns)
+            env = self._idle.pop() if self._idle else LocalEnv(self.options.settings.max_turns,
+                                                                  self.options.settings.env_kwargs())
             try:
                 return await runner(env)
             finally:

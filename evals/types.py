@@ -14,8 +14,8 @@ from pydantic import BaseModel, ConfigDict, Field
 Condition = Literal["text", "logprob", "agent"]
 CONDITIONS: tuple[str, ...] = ("text", "logprob", "agent")
 
-EndReason = Literal["answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error", "context_overflow"]
-END_REASONS: tuple[str, ...] = ("answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error",
+EndReason = Literal["answer", "text_answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error", "context_overflow"]
+END_REASONS: tuple[str, ...] = ("answer", "text_answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error",
                                 "context_overflow")
 
 # The columns that identify one episode; a results folder never holds two rows with the same key.

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, StrictBool, ValidationError, field_validator, model_validator
 
 from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
@@ -136,6 +136,36 @@ class RolloutConfig(RolloutLimits):
     # replays), e.g. {"HCGYM_EMBEDDINGS": "0"} to grade free text by token overlap instead of loading
     # a sentence-embedding model into every env process.
     env_vars: dict[str, str] = Field(default_factory=dict)
+    # End an episode at a turn without a tool call (and without a parse error): its text is the
+    # submitted answer, end_reason "text_answer" (envs.env.HealthcareGymEnv text_turn_ends_episode).
+    # The chat-agent convention TRL's tools mode follows; off: the env reminds the agent of the call
+    # format and the episode goes on to submit_answer or max_turns.
+    text_turn_ends_episode: StrictBool = False
+    # Env-pool batching (actors.env_actor.EnvPool): send the calls of all episodes waiting on an env
+    # actor in one actor call (False: one actor call per reset / step / finish); with
+    # env_stream_after_s, stream a batch's answers back in chunks, one per that much actor time
+    # (null, the default: the whole batch's answers at once; docs/benchmarks.md "Batched env actors").
+    env_batch_calls: StrictBool = True
+    env_stream_after_s: float | None = Field(default=None, ge=0)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """The `HealthcareGymEnv` arguments this section sets (the env actors and the driver's
+        in-process episodes get the same)."""
+        return {"text_turn_ends_episode": True} if self.text_turn_ends_episode else {}
+
+    def env_pool_options(self) -> dict[str, Any]:
+        """`EnvPool` keyword arguments of this section (actor counts, restarts, batching, env args)."""
+        return {"num_actors": self.num_env_actors, "slots_per_actor": self.slots_per_env_actor,
+                "max_turns": self.max_turns, "max_restarts": self.env_actor_max_restarts,
+                "env_vars": self.env_vars, "env_kwargs": self.env_kwargs(), "batch_calls": self.env_batch_calls,
+                "stream_after_s": self.env_stream_after_s}
+
+    @field_validator("env_stream_after_s")
+    @classmethod
+    def _stream_needs_batches(cls, value: float | None, info) -> float | None:
+        if value is not None and info.data.get("env_batch_calls") is False:
+            raise ValueError("env_stream_after_s streams the answers of batched calls; it needs env_batch_calls: true")
+        return value
 
     @field_validator("group_size")
     @classmethod

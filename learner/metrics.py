@@ -209,8 +209,9 @@ def episode_index_fields(sample: RolloutSample) -> dict[str, Any]:
     kinds = {call.error_kind for turn in record.turns for call in turn.tool_calls if call.error_kind}
     if any(turn.parse_errors for turn in record.turns):
         kinds.add("parse_error")
-    end = truncation or ("answer" if record.submitted_answer is not None else "turn_limit" if record.truncated
-                         else "ended")
+    # "text_answer": a turn without a tool call ended the episode (rollout.text_turn_ends_episode)
+    end = truncation or record.metadata.get("end_reason") or (
+        "answer" if record.submitted_answer is not None else "turn_limit" if record.truncated else "ended")
     return {"end_reason": end, "safety_max_severity": max(severities, default=0), "error_kinds": sorted(kinds)}
 
 

@@ -128,8 +128,7 @@ class Trainer:
         self.generators = start_generators(cfg, str(self.policy_dir), stop_ids)
         self.learner = start_learner(cfg, str(self.policy_dir))
         r = cfg.rollout
-        self.pool = EnvPool(num_actors=r.num_env_actors, slots_per_actor=r.slots_per_env_actor, max_turns=r.max_turns,
-                            max_restarts=r.env_actor_max_restarts, domain_modules=d.domain_modules, env_vars=r.env_vars,
+        self.pool = EnvPool(**r.env_pool_options(), domain_modules=d.domain_modules,
                             kb_service=cfg.kb.name if self.kb_client is not None else None)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
                                           cfg.weight_sync.timeout_s,
