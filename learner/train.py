@@ -170,7 +170,10 @@ class Trainer:
         t_batch = time.perf_counter()
         samples = [s for g in groups for s in g.samples]
         if not samples:
-            raise RuntimeError(f"step {self.step + 1}: no trainable groups (all rollouts failed); see the log")
+            raise RuntimeError(
+                f"step {self.step + 1}: no trainable groups among {batch_info['groups_inspected']:.0f} inspected "
+                f"({batch_info['groups_failed']:.0f} failed, {batch_info['groups_stale_dropped']:.0f} stale, "
+                f"the rest filtered by dynamic sampling with none recent enough to top up); see the log")
         teacher_out: dict[str, TeacherOutput] | None = None
         if self.teacher_client is not None:
             learner_metrics, teacher_out = await self.teacher_client.train_step(groups, samples, self.step + 1)

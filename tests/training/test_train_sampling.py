@@ -147,3 +147,41 @@ def test_task_sampler_is_deterministic_and_resumable():
     assert [d.next().task_id for _ in range(4)] == first[3:]
     assert [TaskSampler(refs, seed=2).next().task_id for _ in range(5)] != first[:5]
     assert episode_seed(0, "", 3, 1) == episode_seed(0, "", 3, 1) != episode_seed(0, "", 3, 2)
+
+
+@pytest.mark.parametrize("staleness", [0, 1])
+def test_a_fast_generator_with_filtered_groups_never_goes_stale(staleness):
+    """Half the groups are filtered and every group finishes at once (a generator much faster than the
+    learner, as vLLM is on the demo): the scheduler must still hand the learner full batches of groups
+    within the staleness bound. Filtered groups used to free their admission slot on completion, so the
+    producer ran ahead of the FIFO consumer and 6-18 of 36 groups a step were dropped as stale."""
+    # 6 groups inspected a step at most, half of them filtered: 3 accepted + 1 filtered top-up a step,
+    # so accepted groups are produced faster than they are consumed (the demo: 36 inspected for 24)
+    t = BatchScheduler(validate_config({"trainer": {"batch_size": 4, "max_staleness": staleness,
+                                                    "dynamic_sampling": {"enabled": True, "max_admissions_factor": 1.5}},
+                                        "data": {"domains": ["ward"]}}).trainer,
+                       TaskSampler([TaskRef("ward", f"t{i}", "train") for i in range(7)], seed=0),
+                       log=lambda line: None)
+
+    async def produce(seq: int, task: TaskRef, version: int) -> Group:
+        await asyncio.sleep(0)
+        return group(seq, outcomes=(True, False) if seq % 2 else (True, True), admit_version=version)
+
+    async def run() -> list[tuple[list[Group], dict]]:
+        admission = asyncio.ensure_future(t.admission_loop(produce))
+        steps = []
+        for step in range(1, 9):
+            batch, info = await t.collect_batch()
+            await asyncio.sleep(0.01)  # the learner's step: the producer runs meanwhile
+            steps.append((batch, info))
+            await t.consumed(batch, step)
+        await t.stop()
+        await admission
+        return steps
+
+    steps = asyncio.run(run())
+    for step, (batch, info) in enumerate(steps, start=1):
+        assert info["groups_stale_dropped"] == 0, f"step {step}: {info}"
+        assert len(batch) == 4 and sum(g.accepted for g in batch) == 3, f"step {step}: {info}"
+        assert all(step - 1 - g.admit_version <= staleness for g in batch), [g.admit_version for g in batch]
+    assert t.unresolved <= t.capacity
