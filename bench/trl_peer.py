@@ -89,9 +89,10 @@ SYSTEMS = {
     "grpo_kv": "ours, GRPO (staleness 1), HF generator reusing the KV cache across turns",
     "grpo_vllm": "ours, GRPO (staleness 1), vLLM CPU build generator (.venv-vllm)",
     "trl_vllm": "TRL GRPOTrainer, vLLM CPU build colocated (use_vllm, .venv-vllm)",
+    "trl_mc": "TRL GRPOTrainer, a malformed call answered with the env's parse error (bench patch)",
 }
 #: Arms that are TRL (the rest are ours).
-TRL_SYSTEMS = ("trl", "trl_vllm")
+TRL_SYSTEMS = ("trl", "trl_vllm", "trl_mc")
 VLLM_PYTHON = ROOT / ".venv-vllm" / "bin" / "python"
 #: vLLM CPU build settings shared by both vLLM arms (actors/generator_vllm.py VLLMOptions defaults):
 #: a 1 GiB KV cache, the OMP threads bound to core 0 (vLLM's "auto" reserves a core for its frontend,
@@ -165,7 +166,7 @@ def make_tool_method(schema: dict[str, Any]):
     return method
 
 
-def make_env_class(tool_schemas: list[dict[str, Any]]):
+def make_env_class(tool_schemas: list[dict[str, Any]], with_raw_action: bool = False):
     """An `environment_factory` class for TRL: one real HealthcareGymEnv episode per instance."""
     from actors.agent_loop import make_env
 
@@ -192,6 +193,22 @@ def make_env_class(tool_schemas: list[dict[str, Any]]):
                 obs = obs[:MAX_OBSERVATION_CHARS] + f" ...[{len(obs) - MAX_OBSERVATION_CHARS} more characters]"
             return obs
 
+        def raw_action(self, action: str) -> str:
+            """Run one assistant turn's raw text as the environment's action (only `trl_mc`: a turn
+            TRL's parser rejects, e.g. broken JSON in a tool-call block).
+
+            Args:
+                action: The assistant's text.
+            """
+            if self.done:
+                return "Episode already finished."
+            obs, reward, terminated, truncated, _info = self.env.step(action)
+            if terminated or truncated:
+                self.done, self.reward = True, float(reward)
+            if len(obs) > MAX_OBSERVATION_CHARS:
+                obs = obs[:MAX_OBSERVATION_CHARS] + f" ...[{len(obs) - MAX_OBSERVATION_CHARS} more characters]"
+            return obs
+
         def _final_reward(self, last: dict[str, Any] | None) -> float:
             """The episode's reward once TRL has ended it. A final completion without a tool call
             is the answer, sent to the env as text (graded as our arms grade their text turns);
@@ -211,6 +228,8 @@ def make_env_class(tool_schemas: list[dict[str, Any]]):
     for schema in tool_schemas:
         method = make_tool_method(schema)
         setattr(GymToolEnv, method.__name__, method)
+    if not with_raw_action:  # a public method is a tool for TRL: only `trl_mc` offers this one
+        del GymToolEnv.raw_action
     return GymToolEnv
 
 
@@ -252,6 +271,34 @@ def task_rows(tokenizer) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     return rows, schemas
 
 
+def _patch_trl_malformed_calls_continue() -> None:
+    """`trl_mc`: make TRL treat a turn as ours does. TRL ends a rollout at a completion whose tool
+    call does not parse (`parse_response` falls back to plain text), where our env answers with the
+    parse error and the episode goes on (a malformed call never ends it, `text_turn_ends_episode` or
+    not). Patched: a completion without a parsed call that our own action parser reads as a call
+    attempt (a call or a parse error) becomes one call of `raw_action` with the raw text, which runs
+    it through `env.step`: the same observation, the same turn. A real plain-text turn still ends the
+    rollout, as in both systems."""
+    import trl.trainer.grpo_trainer as grpo_trainer
+
+    from envs.core.actions import parse_action
+
+    original = grpo_trainer.parse_response
+
+    def parse_response(tokenizer, ids, *args, **kwargs):
+        parsed = original(tokenizer, ids, *args, **kwargs)
+        if parsed.get("tool_calls"):
+            return parsed
+        text = tokenizer.decode(ids, skip_special_tokens=True)
+        ours = parse_action(text)
+        if ours.calls or ours.errors:  # not plain text for our env
+            return {"role": "assistant", "content": "", "tool_calls": [
+                {"type": "function", "function": {"name": "raw_action", "arguments": {"action": text}}}]}
+        return parsed
+
+    grpo_trainer.parse_response = parse_response
+
+
 def env_reward(completions, environments, **_kwargs) -> list[float]:
     """TRL reward function: each rollout's env scores it (`GymToolEnv._final_reward`; private: TRL makes every public method a tool)."""
     out = []
@@ -281,7 +328,8 @@ def _patch_trl_vllm_weight_sync() -> None:
     VLLMGeneration.sync_weights = sync_weights
 
 
-def run_trl(policy_dir: Path, out: Path, steps: int, seed: int, use_vllm: bool = False) -> None:
+def run_trl(policy_dir: Path, out: Path, steps: int, seed: int, use_vllm: bool = False,
+            malformed_calls_continue: bool = False) -> None:
     """One TRL GRPOTrainer run; a line per optimizer step in out/steps.jsonl. With `use_vllm`, TRL's
     colocated vLLM generates (run in .venv-vllm's interpreter, see `trl_vllm_command`)."""
     import torch
@@ -292,6 +340,8 @@ def run_trl(policy_dir: Path, out: Path, steps: int, seed: int, use_vllm: bool =
     torch.set_num_threads(1)
     if use_vllm:
         _patch_trl_vllm_weight_sync()
+    if malformed_calls_continue:
+        _patch_trl_malformed_calls_continue()
     tokenizer = trl_tokenizer(policy_dir)
     rows, schemas = task_rows(tokenizer)
     model = AutoModelForCausalLM.from_pretrained(str(policy_dir), dtype=torch.float32)
@@ -333,7 +383,7 @@ def run_trl(policy_dir: Path, out: Path, steps: int, seed: int, use_vllm: bool =
             "vllm_gpu_memory_utilization": 0.1, "vllm_enable_sleep_mode": False} if use_vllm else {}),
     )
     trainer = Trainer(model=model, reward_funcs=[env_reward], args=args, train_dataset=Dataset.from_list(rows),
-                      processing_class=tokenizer, environment_factory=make_env_class(schemas),
+                      processing_class=tokenizer, environment_factory=make_env_class(schemas, malformed_calls_continue),
                       callbacks=[StepLog()])
     trainer.train()
     steps_file.close()
@@ -541,7 +591,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", help="write every run's figures here (rewritten after each run)")
     ap.add_argument("--report", help="only print the report of a --json file written earlier")
-    ap.add_argument("--role", choices=["driver", "trl", "trl_vllm", "prepare"], default="driver", help=argparse.SUPPRESS)
+    ap.add_argument("--role", choices=["driver", *TRL_SYSTEMS, "prepare"], default="driver", help=argparse.SUPPRESS)
     ap.add_argument("--policy", help=argparse.SUPPRESS)
     ap.add_argument("--out", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -550,7 +600,8 @@ def main() -> None:
     if args.role in TRL_SYSTEMS:
         if args.role == "trl_vllm":
             _add_main_venv_packages()
-        run_trl(Path(args.policy), Path(args.out), args.steps, args.seed, use_vllm=args.role == "trl_vllm")
+        run_trl(Path(args.policy), Path(args.out), args.steps, args.seed, use_vllm=args.role == "trl_vllm",
+                malformed_calls_continue=args.role == "trl_mc")
         return
     if args.report:
         rows = json.loads(Path(args.report).read_text())
