@@ -22,7 +22,10 @@ Equal work, made explicit:
   differs: ours also ends at `submit_answer`, TRL only at the next turn without a call or at the turn
   limit (`max_tool_calling_iterations` = 2), so TRL may generate one more turn after a submission; and
   a malformed call (a parse error) ends a TRL rollout (its parser finds no call) but not ours (the env
-  shows the error and the episode goes on). Generated tokens per completion are printed for each
+  shows the error and the episode goes on); the `trl_mc` arm removes that difference (a malformed
+  call reaches the env as ours does, `_patch_trl_malformed_calls_continue`), and is the arm to compare
+  against when the policy writes many broken calls (the warm-started tiny one does: none of its
+  turns is plain text). Generated tokens per completion are printed for each
   system, so whether the work is equal is visible; completions/s counts episodes, tokens/s the
   generated tokens each system really sampled.
 
