@@ -22,7 +22,7 @@ from envs.rewards.assertions import RuleGrader, grade_assertions
 from envs.rewards.view import EpisodeView
 
 DOMAINS = ["clinical_diagnosis", "drug_interaction", "medical_qa", "obstetrics", "psychiatry", "radiology_report",
-           "triage_emergency", "visual_diagnosis", "ehr_management"]
+           "triage_emergency", "visual_diagnosis", "ehr_management", "cross_domain"]
 SAMPLE = 4  # tasks per domain, spread evenly over the domain's tasks with assertions
 
 

@@ -84,6 +84,7 @@ def _set(data, keys, value):
         (["cases", 1, "guideline"], "", "guideline"),
         (["cases", 1, "split"], "validation", "split"),
         (["cases", 1, "vitals", 0, "avpu"], "asleep", "vitals.0.avpu"),
+        (["cases", 1, "phases", 1, "gold_reasoning"], "", "phases.1.gold_reasoning"),
     ],
 )
 def test_a_malformed_case_names_file_case_and_field(tmp_path, keys, value, field):
@@ -102,6 +103,26 @@ def test_a_missing_field_is_named(tmp_path):
     with pytest.raises(DataFileError, match=r"postop\.yaml: case #1 'postop_pulmonary_embolism': field "
                                             r"records\.ehr_management\.admission\.admit_time: Field required"):
         authoring.load_cases(folder)
+
+
+def test_a_phase_without_its_gold_statement_is_refused(tmp_path):
+    """Every phase states what the reference clinician concludes (the gold submission's reasoning), so an
+    assertion about what the agent says or plans can be met by the gold."""
+    folder = _copy_cases(tmp_path)
+    _edit(folder, "stroke", lambda data: data["cases"][2]["phases"][2].pop("gold_reasoning"))
+    with pytest.raises(DataFileError, match=r"stroke\.yaml: case #3 'stroke_code_anticoagulated': field "
+                                            r"phases\.2\.gold_reasoning: Field required"):
+        authoring.load_cases(folder)
+
+
+def test_the_gold_reasoning_is_every_phase_statement_in_order():
+    from envs.domains.cross_domain import environment as cross
+
+    pathways = cross.load_pathways.__wrapped__(cross.PATHWAY_FILE)
+    for _, case in authoring.load_cases():
+        task = cross.pathway_task(pathways[case.id])
+        reasoning = task.metadata["gold_reasoning"]
+        assert reasoning.split("\n") == [p.gold_reasoning.strip() for p in case.phases], case.id
 
 
 def test_yaml_syntax_errors_and_repeated_keys_name_the_line(tmp_path):

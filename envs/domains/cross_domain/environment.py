@@ -51,6 +51,10 @@ def pathway_task(pathway: Pathway) -> Task:
             actions.append(ExpectedAction(name="complete_phase", arguments={"summary": f"{phase.name} complete"},
                                           compare_args=[], info=f"declare the end of phase {phase.name!r}"))
     assertions = [s for phase in pathway.phases for s in phase.nl_assertions]
+    # the reference rationale submitted with the gold answer (envs.validate.gold_replay): each phase's
+    # statement, in phase order, so the gold meets the assertions about what the clinician says or plans
+    reasoning = "\n".join(p.gold_reasoning.strip() for p in pathway.phases
+                          if p.gold_reasoning.strip())
     phases = " -> ".join(f"{p.name} ({p.domain})" for p in pathway.phases)
     ticket = (f"{pathway.presentation}\n\nThis is a multi-phase clinical pathway: {phases}. Work through each "
               f"phase with its tools; the next phase starts when the current one is complete (call "
@@ -63,7 +67,7 @@ def pathway_task(pathway: Pathway) -> Task:
                      "provenance": {"guideline": pathway.guideline} if pathway.guideline else {}},
         evaluation_criteria={"actions": [a.model_dump() for a in actions], "nl_assertions": assertions,
                              "reward_basis": ["ACTION", "NL_ASSERTION", "ANSWER"]},
-        metadata={"pathway_id": pathway.id},
+        metadata={"pathway_id": pathway.id, **({"gold_reasoning": reasoning} if reasoning else {})},
     )
 
 

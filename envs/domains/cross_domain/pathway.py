@@ -29,6 +29,9 @@ class PathwayPhase(BaseModel):
     goal: str
     required_actions: list[ExpectedAction] = Field(default_factory=list)
     nl_assertions: list[str] = Field(default_factory=list)
+    # The reference clinician's statement for the phase (what its assertions check); the phases'
+    # statements joined are the gold submission's reasoning (Task.metadata["gold_reasoning"]).
+    gold_reasoning: str = ""
     # "required_actions": the phase ends as soon as every required action has been performed;
     # "agent_declares": the agent ends it with complete_phase (it may leave actions undone).
     transition: Literal["required_actions", "agent_declares"] = "required_actions"

@@ -161,7 +161,7 @@ def phase(p: Phase) -> dict[str, Any]:
     return {
         "name": p.name, "domain": p.domain, "goal": p.goal,
         "required_actions": [a.model_dump() for a in p.required_actions],
-        "nl_assertions": list(p.nl_assertions), "transition": p.transition,
+        "nl_assertions": list(p.nl_assertions), "gold_reasoning": p.gold_reasoning, "transition": p.transition,
         "time_pressure": p.max_calls is not None, "max_calls": p.max_calls,
     }
 

@@ -217,6 +217,11 @@ class Phase(StrictModel):
     goal: str
     required_actions: list[Action] = Field(min_length=1)
     nl_assertions: list[str] = Field(min_length=1)
+    # What the reference clinician states in this phase: the findings and decisions each of the phase's
+    # NL assertions checks, in the guideline's words. The phases' statements are the gold submission's
+    # reasoning (the task's `metadata.gold_reasoning`, which `envs.validate.gold_replay` submits), so
+    # an assertion about what the agent says or plans ("plans aPTT monitoring") can be met by the gold.
+    gold_reasoning: str = Field(min_length=20)
     # "required_actions": the phase ends when every required action is done; "agent_declares": the
     # agent ends it with complete_phase.
     transition: Literal["required_actions", "agent_declares"] = "required_actions"
