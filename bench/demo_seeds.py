@@ -7,6 +7,7 @@ validation), their paired difference, and whether the mean gain exceeds the seed
 (the standard deviation across seeds of the warm start's held-out reward, and of the gain).
 
     python bench/demo_seeds.py [--config configs/tiny_cpu_ttopd.yaml] [--seeds 0 1 2] [--out runs/demo_seeds]
+        [--set KEY.PATH=VALUE ...]
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="runs/demo_seeds")
     ap.add_argument("--metric", default="val_reward_component/total",
                     help="the held-out reward compared (default: the 5D total)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="a config override passed to every run (repeatable), e.g. generator.backend=vllm")
     ap.add_argument("--summarise-only", action="store_true", help="read existing run directories, train nothing")
     ap.add_argument("--json", help="also write the summary here")
     args = ap.parse_args(argv)
@@ -54,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         cmd = [sys.executable, "-m", "learner.train", "--config", args.config, "--seed", str(seed),
                "--output-dir", str(run_dir)]
+        for item in args.overrides:
+            cmd += ["--set", item]
         print(f"[demo_seeds] seed {seed}: {' '.join(cmd)}", flush=True)
         subprocess.run(cmd, cwd=ROOT, check=True)
         walls[seed] = time.perf_counter() - t0
