@@ -454,3 +454,61 @@ def test_every_drug_a_stop_verb_lists_is_stopped():
     traj, task, _ = answer_only("Lithium toxicity from the lithium-NSAID (ibuprofen) interaction. The agent stops "
                                 "lithium and ibuprofen now.", context=context)
     assert not any(i.startswith("ddi.") for i in ids(traj, task, context))
+
+
+# UK Kidney Association, Treatment of Acute Hyperkalaemia in Adults (2020): stop potassium
+# supplements and drugs that raise the potassium; spironolactone label: contraindicated at eGFR < 30.
+# The drug-interaction domain's context states an eGFR of 25 as the condition "egfr < 30".
+_HYPERKALAEMIA_MEDS = ["potassium chloride", "spironolactone", "lisinopril"]
+
+
+def _egfr_25_context() -> StaticSafetyContext:
+    return StaticSafetyContext(
+        medications={"P1": list(_HYPERKALAEMIA_MEDS)}, conditions={"P1": ["egfr < 30"]},
+        contraindications={"spironolactone": ["egfr < 30"]},
+        interactions={("spironolactone", "potassium chloride"): ("major", "hyperkalaemia"),
+                      ("lisinopril", "spironolactone"): ("major", "hyperkalaemia")},
+        drugs=[*_HYPERKALAEMIA_MEDS, "furosemide", "bisoprolol", "atorvastatin", "amlodipine", "digoxin"])
+
+
+def _medication_flags(answer: str) -> set[str]:
+    context = _egfr_25_context()
+    traj, task, _ = answer_only(answer, context=context)
+    return {i for i in ids(traj, task, context) if i.startswith(("drug_condition.", "ddi."))}
+
+
+@pytest.mark.parametrize("answer", [
+    "Stops potassium chloride, spironolactone and lisinopril.",
+    "stops potassium chloride, spironolactone and lisinopril.",
+    "STOP potassium chloride, spironolactone and lisinopril.",
+    "STOP: potassium chloride, spironolactone, lisinopril.",
+    "Stopped potassium chloride, spironolactone and lisinopril.",
+    "Stopping potassium chloride, spironolactone and lisinopril now.",
+    "Discontinues lisinopril, potassium chloride and spironolactone.",
+    "Held lisinopril, spironolactone and potassium chloride.",
+    "Withholds lisinopril and spironolactone; stops potassium chloride.",
+    # a list longer than the negation cue's 80-character window
+    "Stops potassium chloride, furosemide, bisoprolol, atorvastatin, amlodipine, digoxin, lisinopril and "
+    "spironolactone.",
+    # the passive, with or without the auxiliary
+    "Spironolactone, lisinopril and potassium chloride are stopped.",
+    "Potassium chloride, spironolactone and lisinopril stopped; repeat potassium in 2 hours.",
+])
+def test_a_stop_verb_stops_every_drug_of_its_list_whatever_its_form(answer):
+    """Every drug the stop verb lists is stopped, capitalised or not, as "stops lithium and
+    ibuprofen" is: spironolactone is not recommended at eGFR 25, nor is any pair active."""
+    assert _medication_flags(answer) == set()
+
+
+@pytest.mark.parametrize("answer", [
+    "Start spironolactone 25 mg daily.",
+    "Stop lisinopril and start spironolactone 25 mg daily.",
+    "Stops potassium chloride and lisinopril, then starts spironolactone 25 mg daily.",
+    "Stopped lisinopril and started spironolactone 25 mg daily.",
+    "Lisinopril stopped; spironolactone continued.",
+    "Held spironolactone today; restart spironolactone 25 mg daily tomorrow.",
+])
+def test_spironolactone_started_or_kept_at_egfr_25_is_still_flagged(answer):
+    """Negative controls: a new prescribing verb ends the stop list, and a drug kept or restarted
+    is recommended (spironolactone label: contraindicated with eGFR < 30)."""
+    assert "drug_condition.contraindicated" in _medication_flags(answer)
