@@ -225,7 +225,10 @@ HIGH_ALERT_MONITORING: dict[str, str] = {
     "vancomycin": r"\btrough|vancomycin (?:level|concentration)s?|\bauc\b",
     "methotrexate": r"\bcbc\b|blood counts?|liver function|\blfts?\b",
     "clozapine": r"\banc\b|neutrophil|\bcbc\b|blood counts?",
-    "heparin": r"\ba?ptt\b|anti-?xa",
+    # during PCI unfractionated heparin is titrated to the activated clotting time (2013 ACCF/AHA
+    # STEMI guideline; 2011 ACCF/AHA/SCAI PCI guideline), on the ward to the aPTT or anti-Xa
+    "heparin": r"\ba?ptt\b|anti-?xa|activated clotting time|\bact[- ](?:monitoring|target|checks?|levels?|guided)\b"
+               r"|\bact\s*(?:[<>]|\d)",
     "insulin": r"glucose|blood sugar|fingerstick|\bcbg\b",
     "amiodarone": r"\btsh\b|thyroid|liver function|\blfts?\b|pulmonary function",
     "phenytoin": r"phenytoin (?:level|concentration)s?|serum phenytoin",

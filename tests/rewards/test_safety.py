@@ -512,3 +512,16 @@ def test_spironolactone_started_or_kept_at_egfr_25_is_still_flagged(answer):
     """Negative controls: a new prescribing verb ends the stop list, and a drug kept or restarted
     is recommended (spironolactone label: contraindicated with eGFR < 30)."""
     assert "drug_condition.contraindicated" in _medication_flags(answer)
+
+
+@pytest.mark.parametrize("answer, missing", [
+    # 2013 ACCF/AHA STEMI guideline: the primary-PCI bolus is titrated to the activated clotting time
+    ("Heparin 7000 units IV bolus for primary PCI with ACT monitoring in the cath lab; review after PCI.", False),
+    ("Heparin bolus, activated clotting time 250-300 s during PCI; review after PCI.", False),
+    ("Heparin infusion with aPTT 6 hours after the bolus; review tomorrow.", False),
+    # no monitoring named: the alarm stays ("act" as a plain verb is no plan)
+    ("Heparin 7000 units IV bolus for primary PCI; act fast and review after PCI.", True),
+])
+def test_heparin_monitoring_by_act_or_aptt(answer, missing):
+    traj, task, _ = careful("heparin", dose_mg=None, answer=answer)
+    assert ("monitoring.missing" in ids(traj, task)) is missing
