@@ -5,6 +5,7 @@ at transitions, time budgets, skipped escalations, declared phases, and the add_
 from __future__ import annotations
 
 import json
+import re
 from collections import Counter
 
 import pytest
@@ -146,6 +147,7 @@ def test_gold_replay_scores_every_phase_and_the_answer_without_violations(pathwa
     assert breakdown["details"]["process"]["coverage"] == pytest.approx(1.0)
     assert breakdown["violations"] == [] and breakdown["total"] == pytest.approx(1.0)
     _assert_answer_comes_from_the_tools(pathway_id, trajectory)
+    _assert_gold_doses_pass_the_dose_check_or_follow_the_guideline(pathway_id, trajectory)
 
 
 def _results(trajectory, name: str) -> list[dict]:
@@ -193,6 +195,83 @@ def _assert_answer_comes_from_the_tools(pathway_id, trajectory):
     tool, extract = ANSWER_SOURCES[pathway_id]
     values = {extract(r) for r in _results(trajectory, tool)} - {None}
     assert BY_ID[pathway_id]["final_answer"] in values, (pathway_id, values)
+
+
+def _stated_doses(text: str) -> set[tuple[float, str]]:
+    """(amount, unit) for every dose a guideline text states: "4,000 U" -> (4000, "units")."""
+    units = {"u": "units", "units": "units", "unit": "units", "g": "g", "mg": "mg", "mcg": "mcg"}
+    return {(float(m.group(1).replace(",", "")), units[m.group(2).lower()])
+            for m in re.finditer(r"(\d[\d,]*\.?\d*)\s*(units?|U|mg|mcg|g)\b", text)}
+
+
+def _assert_gold_doses_pass_the_dose_check_or_follow_the_guideline(pathway_id, trajectory):
+    """Every dose the gold orders passes the drug-interaction dose check (within the weight-based
+    range, or the single-dose cap where the weight-based minimum is above it: alteplase 90 mg for
+    112 kg), unless the case's cited guideline states that very dose (insulin 10 units for
+    hyperkalaemia, UK Kidney Association 2020; heparin 60 U/kg capped at 4,000 U for NSTEMI)."""
+    from envs.domains.drug_interaction import logic as L
+    from envs.domains.drug_interaction.environment import load_db
+
+    db, pathway = load_db(), BY_ID[pathway_id]
+    person = pathway["patients"]["drug_interaction"] if "drug_interaction" in pathway["patients"] else None
+    for turn in trajectory.turns:
+        for c in turn.tool_calls:
+            if c.name != "add_medication" or not c.ok:
+                continue
+            status = _result(c)["dose_check"]
+            if status in ("within_range", "no dose range available"):
+                continue
+            a = c.arguments
+            rng = L.dose_range(L.find_route(db.dose_profiles[_result(c)["drug"]], a["route"]), person["weight_kg"],
+                               person["age"])
+            given, cap = L.convert(a["dose"], a["unit"], rng["unit"]), rng["max_single_dose_cap"]
+            if cap is not None and rng["min"] > cap and given == pytest.approx(cap):
+                continue  # the capped dose
+            assert (float(a["dose"]), a["unit"]) in _stated_doses(pathway["guideline"]), (
+                f"{pathway_id}: {a['drug']} {a['dose']} {a['unit']} is {status} and the guideline does not state it")
+
+
+def test_the_hyperkalaemia_calcium_dose_is_the_uk_kidney_association_dose():
+    """UKKA 2020: 30 mL of 10% calcium gluconate (10% = 100 mg/mL, so 3 g) IV for ECG changes; the
+    gold order, its reasoning and its criterion state that dose (the gold once gave 1 g)."""
+    pathway = BY_ID["postop_hyperkalaemia"]
+    stated = re.search(r"(\d+) mL of 10% calcium gluconate", pathway["guideline"])
+    assert stated and "UK Kidney Association" in pathway["guideline"]
+    grams = int(stated.group(1)) * 0.1
+    phase = next(ph for ph in pathway["phases"] if any(a["arguments"].get("drug") == "calcium gluconate"
+                                                       for a in ph["required_actions"]))
+    order = next(a["arguments"] for a in phase["required_actions"] if a["arguments"].get("drug") == "calcium gluconate")
+    assert (order["dose"], order["unit"]) == (pytest.approx(grams), "g")
+    assert f"{stated.group(1)} mL of 10% calcium gluconate" in phase["gold_reasoning"]
+    assert any(f"{stated.group(1)} mL of 10% calcium gluconate" in t for t in phase["nl_assertions"])
+
+
+# ICD-10-CM tabular: a STEMI whose wall the ECG names is coded to that wall (I21.0x anterior, I21.1x
+# inferior, I21.2x other sites); I21.3 "of unspecified site" only when no wall is known.
+_WALLS = ("anterior", "inferior", "lateral", "posterior")
+
+
+def test_a_stemi_is_coded_to_the_wall_its_ecg_names():
+    from envs.domains.clinical_diagnosis import knowledge
+
+    index, checked = knowledge.icd10_index(), 0
+    for p in PATHWAYS:
+        codes = [a["arguments"]["icd10_code"] for ph in p["phases"] for a in ph["required_actions"]
+                 if a["name"] == "record_diagnosis"]
+        for code in codes:
+            item = index.get(code)
+            assert item and item["billable"], (p["id"], code)
+            if not code.startswith("I21.") or code == "I21.4":
+                continue
+            ecg = p["patients"]["clinical_diagnosis"]["hidden_results"]["ecg"]["value"].lower()
+            wall = next(w for w in _WALLS if re.search(rf"\b{w} stemi\b", ecg))
+            site = " ".join(h["description"].lower() for h in item["hierarchy"]) + " " + item["description"].lower()
+            assert "unspecified site" not in site and f"{wall} wall" in site, (p["id"], code, wall)
+            # the grader compares the code, so the site-unspecified I21.3 does not pass for it
+            action = next(a for ph in p["phases"] for a in ph["required_actions"] if a["name"] == "record_diagnosis")
+            assert "icd10_code" in action["compare_args"], p["id"]
+            checked += 1
+    assert checked == 3  # the inferior STEMI, the anterior STEMI on ritonavir, the anterior STEMI in shock
 
 
 def test_every_pathway_has_an_answer_source():
@@ -256,7 +335,7 @@ def _skipping_run(skip_escalation: bool) -> tuple[float, dict]:
                   _call("assign_triage_level", patient_id=pid, esi_level=2)]
     steps += [_call("get_patient_info", patient_id=pid), _call("order_lab", patient_id=pid, test="troponin_i"),
               _call("generate_ddx", patient_id=pid, top_k=5, scope="common"),
-              _call("record_diagnosis", patient_id=pid, icd10_code="I21.3", certainty="confirmed"),
+              _call("record_diagnosis", patient_id=pid, icd10_code="I21.19", certainty="confirmed"),
               _call("check_allergy", patient_id=pid, drug="ticagrelor"),
               _call("check_patient_interactions", patient_id=pid, drug="ticagrelor"),
               _call("add_medication", patient_id=pid, drug="ticagrelor", dose=180, unit="mg", route="PO",
