@@ -18,14 +18,30 @@ the agent established with its tools):
            "6 to 12 months")
   keyword = clip((recall - 0.2) / (0.7 - 0.2))
   semantic = calibrated max cosine between the criterion and the evidence units (if available)
+             holding every number of the criterion (an embedding does not tell "ESI level 5"
+             from "ESI level 3")
   score = max(keyword, semantic)
-Polarity must match: a criterion without a negation cue is matched only against sentences
-without one ("recommends ibuprofen" is not met by "avoid ibuprofen"). A negative criterion
-("does not recommend NSAIDs such as ibuprofen") scores 1 - presence of its positive part in what
-the agent itself said or did (its sentences and answer without negation, and its acting calls:
-write tools, prescribing, orders, escalation...), not in read calls or their results (checking an
-interaction with sildenafil is not prescribing it); naming half of its keywords counts as full
-presence. `RuleGrader(use_observations=False)` leaves tool results out (the grader before issue 14).
+Polarity must match: a criterion without a negation cue is matched only against what the evidence
+states without negation ("recommends ibuprofen" is not met by "avoid ibuprofen"). A negation scopes
+over its clause (`text.unnegated`): a cue that takes an object ("no", "avoid", "without", "rather
+than", ...) negates that object up to the end of its clause, so "Assessment category: no routine
+follow-up" still states the category; any other cue ("not", "must not", "contraindicated"), or an
+object cue with nothing after it ("ibuprofen should be avoided"), negates its whole sentence,
+subject included ("ibuprofen: not recommended", "ibuprofen is not appropriate").
+A negative criterion ("does not recommend NSAIDs such as ibuprofen") scores 1 - presence of its
+positive part (the forbidden act) in what the agent itself said or did (its sentences and answer
+without negation, and its acting calls: write tools, prescribing, orders, escalation...), not in
+read calls or their results (checking an interaction with sildenafil is not prescribing it);
+naming half of its keywords counts as full presence. Only the agent's units that name the act's
+object count (a keyword of the phrase after the act verbs, up to its first adjunct: "ibuprofen" in
+"prescribe or endorse ibuprofen for this patient", "dual antiplatelet therapy" in "interrupt dual
+antiplatelet therapy to make room for the antibiotic"; either alternative of "NSAIDs such as
+ibuprofen"), so a sentence recommending the alternative (paracetamol, azithromycin), which an
+embedding reads as close to the forbidden drug, or prescribing another drug cannot break it; a
+unit doing the contrary act on the object does not count either ("continue dual antiplatelet
+therapy" against "interrupt dual antiplatelet therapy"), while a stop-type act is done by a stop verb that is itself a negation cue
+("hold DAPT"), unless that verb is negated ("do not stop DAPT").
+`RuleGrader(use_observations=False)` leaves tool results out (the grader before issue 14).
 
 Rubric (HealthBench style): required elements and required tools earn their points times their
 score; forbidden elements (and any item with negative points) subtract |points| times their
@@ -50,7 +66,7 @@ from typing import Any, Protocol
 from envs.core.task import RubricItem
 from envs.rewards.equivalence import canonical
 from envs.rewards.similarity import calibrate, grading_tokens, similarity_matrix
-from envs.rewards.text import clip01, has_negation, sentences, short
+from envs.rewards.text import STOPWORDS, clip01, has_negation, negated, sentences, short, tokens, unnegated
 from envs.rewards.view import EpisodeView
 
 MET_THRESHOLD = 0.5
@@ -110,28 +126,50 @@ class RuleGrader:
         said = _evidence_sentences(view)
         observed = _observation_sentences(view) if self.use_observations else []
         evidence = list(dict.fromkeys(said + observed))[:_MAX_EVIDENCE]
-        acted = _acting_sentences(view)
         all_tokens = set(_keyword_tokens(evidence))
-        plain = [s for s in evidence if not has_negation(s)]
+        # what each unit states without negation: a negation scopes over its clause, so "Assessment
+        # category: no routine follow-up" still states the category, while "avoid ibuprofen" and
+        # "ibuprofen is not appropriate" state nothing about ibuprofen (text.unnegated)
+        plain_of = {s: unnegated(s) for s in evidence}
+        plain = [p for p in plain_of.values() if p]
         plain_tokens = set(_keyword_tokens(plain))
+        # the part left of a partly negated unit is a unit of its own for the embedding
+        units = list(dict.fromkeys(evidence + plain))
+        plain_set = set(plain)
+        plain_idx = [i for i, u in enumerate(units) if u in plain_set]
         # what a negative criterion forbids is present only in what the agent itself wrote or did
         # (an interaction check naming sildenafil, or a result listing it, is not prescribing it)
-        own_plain = [s for s in list(dict.fromkeys(_said_only(view) + acted)) if not has_negation(s)]
-        own_tokens = set(_keyword_tokens(own_plain))
+        own = list(dict.fromkeys(_said_only(view) + _acting_sentences(view)))
+        own_plain = list(dict.fromkeys(p for p in map(unnegated, own) if p))
         positives = [(_NEGATIVE.sub("", c, count=1), bool(_NEGATIVE.match(c))) for c in criteria]
-        sims = similarity_matrix([p for p, _ in positives], evidence) if evidence else None
-        own_sims = similarity_matrix([p for p, _ in positives], own_plain) if own_plain else None
-        plain_idx = [i for i, s in enumerate(evidence) if not has_negation(s)]
+        # a stop-type forbidden act ("interrupt dual antiplatelet therapy") is also done by a
+        # sentence whose stop verb is itself a negation cue ("Hold DAPT", "stop ticagrelor")
+        stopping = [s for s in own if _stop_verb_used(s)] if any(
+            neg and _STOP_VERBS.search(p.lower()) for p, neg in positives) else []
+        own_units = list(dict.fromkeys(own_plain + stopping))
+        sims = similarity_matrix([p for p, _ in positives], units) if units else None
+        token_sets: dict[int, set[str]] = {}
+
+        def unit_tokens(j: int) -> set[str]:
+            if j not in token_sets:
+                token_sets[j] = set(_keyword_tokens([units[j]]))
+            return token_sets[j]
+
+        own_sims = similarity_matrix([p for p, _ in positives], own_units) if own_units else None
         results = []
         for i, (positive, is_negative) in enumerate(positives):
             words = [w for w in _keyword_tokens([positive]) if w not in _FILLER] or _keyword_tokens([positive])
             semantic = None
             if is_negative:
-                recall = sum(w in own_tokens for w in words) / len(words) if words else 0.0
+                pool = _forbidden_act_units(positive, own_plain, stopping)
+                pool_tokens = set(_keyword_tokens(pool))
+                recall = sum(w in pool_tokens for w in words) / len(words) if words else 0.0
                 # a negative criterion is broken by naming half of what it forbids ("NSAIDs such as ibuprofen")
                 keyword = clip01(recall / 0.5)
                 if own_sims is not None:
-                    semantic = calibrate(float(own_sims[i].max()))
+                    chosen = set(pool)
+                    idx = [j for j, u in enumerate(own_units) if u in chosen]
+                    semantic = calibrate(float(own_sims[i, idx].max())) if idx else 0.0
                 elif sims is not None:
                     semantic = 0.0
             else:
@@ -145,13 +183,102 @@ class RuleGrader:
                 recall = max(_weighted_recall(words, pool), _weighted_recall(main, pool) if main else 0.0)
                 keyword = clip01((recall - KEYWORD_FLOOR) / (KEYWORD_FULL - KEYWORD_FLOOR))
                 if sims is not None:
-                    row = sims[i, plain_idx] if plain_only else sims[i]
-                    semantic = calibrate(float(row.max())) if len(row) else 0.0
+                    idx = plain_idx if plain_only else range(len(evidence))
+                    # an embedding does not tell "ESI level 5" from "ESI level 3": a unit lacking a
+                    # number of the criterion is no semantic evidence for it (as NUMBER_WEIGHT for keywords)
+                    numbers = {w for w in (main or words) if any(ch.isdigit() for ch in w)}
+                    if numbers:
+                        idx = [j for j in idx if numbers <= unit_tokens(j)]
+                    semantic = calibrate(float(sims[i, list(idx)].max())) if len(idx) else 0.0
             present = max(keyword, semantic or 0.0)
             score = 1.0 - present if is_negative else present
             reason = f"keyword recall {recall:.2f}" + (f", semantic {semantic:.2f}" if semantic is not None else "")
             results.append(CriterionResult(criteria[i], round(score, 4), "rule", reason))
         return results
+
+
+#: Verbs of a negative criterion's forbidden act, not its object: "prescribe or endorse ibuprofen"
+#: is about ibuprofen, and a sentence that does not name ibuprofen cannot be prescribing it.
+_ACT_WORDS = frozenset(grading_tokens(
+    "prescribe prescribes prescribed prescribing endorse endorses endorsed endorsing give gives given giving "
+    "administer administers administered start starts started starting initiate initiates initiated begin begins "
+    "continue continues continued maintain maintains keep keeps interrupt interrupts interrupted interrupting "
+    "stop stops stopped stopping discontinue discontinues discontinued hold holds withhold withholds suspend "
+    "suspends suspended pause pauses paused cease ceases omit omits omitted order orders ordered perform "
+    "performs performed use uses used using combine combines combined suggest suggests suggested advise "
+    "advises advised offer offers offered make makes made take takes add adds added switch switches switched "
+    "repeat repeats repeated apply applies applied activate activates activated together concomitantly alongside"
+))
+#: Where the object of the forbidden act ends: a preposition or conjunction opening an adjunct
+#: ("to make room for the antibiotic", "before arrival", "because the patient has ...").
+_OBJECT_END = frozenset(tokens(" ".join(STOPWORDS - {"a", "an", "the", "or", "and", "other", "any", "all", "such"})
+                               + " before after during because since until despite unless while whilst beyond"))
+_ALTERNATIVES = re.compile(r",|\bor\b|\band\b|\bsuch as\b|\blike\b|\bincluding\b|\be\.g\.")
+
+
+def _act_objects(positive: str) -> list[set[str]]:
+    """The object of a negative criterion's forbidden act, as its alternatives' keyword sets: the
+    content words after the act verbs up to the first adjunct ("interrupt dual antiplatelet therapy
+    to make room for the antibiotic" -> [{dual, antiplatelet, therapy}]; "give piperacillin-
+    tazobactam or another penicillin after ..." -> [{piperacillin, tazobactam}, {penicillin}];
+    "NSAIDs such as ibuprofen" -> [{nsaid}, {ibuprofen}]). [] when the act names no object
+    ("does not discharge the patient")."""
+    phrase = re.split(r"[:;.()\[\]]", positive, maxsplit=1)[0].lower()
+    objects: list[set[str]] = []
+    for part in _ALTERNATIVES.split(phrase):
+        words: list[str] = []
+        ended = False
+        for raw in tokens(part):
+            stemmed = grading_tokens(raw)
+            is_act = not stemmed or stemmed[0] in _ACT_WORDS or stemmed[0] in _FILLER
+            if not words and (is_act or raw in STOPWORDS or raw == "another"):
+                continue  # the verbs and determiners before the object
+            if raw in _OBJECT_END or (words and stemmed and stemmed[0] in _ACT_WORDS):
+                ended = True
+                break
+            if stemmed:
+                words.append(raw)
+        keys = set(_keyword_tokens([" ".join(words)])) - _FILLER
+        if keys:
+            objects.append(keys)
+        if ended and objects:
+            break
+    return objects
+
+
+_STOP_VERBS = re.compile(r"\b(?:interrupt\w*|stop(?:s|ped|ping)?|discontinu\w*|hold(?:s|ing)?|held|withh\w*|suspend\w*|"
+                         r"paus\w*|ceas\w*|omit\w*)\b")
+_CONTINUE_VERBS = re.compile(r"\b(?:continu\w*|maintain\w*|keep(?:s|ing)?|kept|carr(?:y|ies|ied) on|remains? on)\b")
+
+
+def _stop_verb_used(sentence: str) -> bool:
+    """The sentence stops something: a stop verb not itself negated ("hold DAPT", not "do not hold DAPT")."""
+    low = sentence.lower()
+    return any(not negated(low, m.start()) for m in _STOP_VERBS.finditer(low))
+
+
+def _forbidden_act_units(positive: str, own_plain: list[str], stopping: list[str]) -> list[str]:
+    """The agent's own units that can break the negative criterion whose forbidden act is `positive`:
+    those naming its object (a keyword of one of its alternatives, `_act_objects`: "ibuprofen" in
+    "prescribe or endorse ibuprofen"), so the gold's sentences about the alternative it
+    recommends (paracetamol, azithromycin), which an embedding reads as close to the forbidden drug,
+    do not count; and not those doing the contrary act ("continue dual antiplatelet therapy" is not
+    "interrupt dual antiplatelet therapy", nor the reverse), which an embedding cannot tell apart."""
+    low = positive.lower()
+    stop_act, continue_act = bool(_STOP_VERBS.search(low)), bool(_CONTINUE_VERBS.search(low))
+    objects = _act_objects(positive)
+    out = []
+    for unit in dict.fromkeys(own_plain + (stopping if stop_act else [])):
+        # naming the object at all: "Per the ACR/Fleischner recommendation" names "Fleischner 2017
+        # guideline"; the act's adjuncts are not its object ("to make room for the antibiotic")
+        if objects and not any(alternative & set(_keyword_tokens([unit])) for alternative in objects):
+            continue
+        u = unit.lower()
+        does_stop, does_continue = bool(_STOP_VERBS.search(u)), bool(_CONTINUE_VERBS.search(u))
+        if (stop_act and does_continue and not does_stop) or (continue_act and does_stop and not does_continue):
+            continue
+        out.append(unit)
+    return out
 
 
 def _keyword_tokens(texts: list[str]) -> list[str]:

@@ -150,3 +150,60 @@ def clip01(value: float) -> float:
 def short(text: str, limit: int = 160) -> str:
     text = " ".join(str(text).split())
     return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+# -- negation scope --------------------------------------------------------------------------------
+# Cues that take an object ("no routine follow-up", "avoid ibuprofen", "rather than ibuprofen"):
+# followed by that object, they negate it and what follows up to the end of their clause, not the
+# sentence's other clauses ("Assessment category: no routine follow-up" still states the category).
+# Every other cue, or one of these with no object after it ("ibuprofen should be avoided", "avoid
+# with warfarin"), negates its whole sentence: "not" ("ibuprofen is not appropriate", "ibuprofen:
+# not recommended"), "must not", "contraindicated", "allergic" negate the subject before them.
+_OBJECT_CUES = frozenset(
+    "no without avoid avoiding stop discontinue hold withhold decline declined defer denies denied "
+    "discontinued stopped".split()
+) | {"rather than", "instead of", "rule out", "ruled out", "rules out", "negative for"}
+_HARD_SPLIT = re.compile(r"(?<=[.!?;])\s+|\n+")
+_CLAUSE_END = re.compile(r"[.!?;:,()\[\]\n]|\b(?:but|however|although|whereas|except)\b")
+_DETERMINERS = frozenset("a an the any further more other all such".split())
+
+
+def _object_follows(low: str, start: int, end: int) -> bool:
+    words = [w for w in tokens(low[start:end]) if w not in _DETERMINERS]
+    return bool(words) and words[0] not in STOPWORDS
+
+
+def unnegated(text: str) -> str:
+    """What `text` states without negation: each sentence without a cue as it is, a sentence whose
+    cues all take an object ("no", "avoid", "without", "rather than", ...) with each negated object
+    cut out up to the end of its clause, and nothing of a sentence with any other cue ("not",
+    "contraindicated", "must not"), which negates its subject too. "" when nothing is left.
+
+    "Category: no routine follow-up." -> "Category:"; "Give paracetamol rather than ibuprofen." ->
+    "Give paracetamol"; "Avoid ibuprofen." -> ""; "Ibuprofen: not recommended." -> "".
+    """
+    if not has_negation(text):
+        return text
+    kept: list[str] = []
+    for sentence in _HARD_SPLIT.split(text):
+        low = sentence.lower()
+        if len(low) != len(sentence):  # a character whose lower case is longer: positions would drift
+            sentence = low
+        cuts: list[tuple[int, int]] = []
+        for cue in _NEGATION.finditer(low):
+            stop = _CLAUSE_END.search(low, cue.end())
+            end = stop.start() if stop else len(low)
+            if cue.group(0) not in _OBJECT_CUES or not _object_follows(low, cue.end(), end):
+                cuts = [(0, len(low))]
+                break
+            cuts.append((cue.start(), end))
+        rest, at = [], 0
+        for start, end in cuts:
+            if start > at:
+                rest.append(sentence[at:start])
+            at = max(at, end)
+        rest.append(sentence[at:])
+        remnant = " ".join(" ".join(rest).split())
+        if tokens(remnant):
+            kept.append(remnant)
+    return " ".join(kept)
