@@ -274,6 +274,26 @@ def test_a_stemi_is_coded_to_the_wall_its_ecg_names():
     assert checked == 3  # the inferior STEMI, the anterior STEMI on ritonavir, the anterior STEMI in shock
 
 
+def test_the_febrile_neonate_gets_a_lumbar_puncture():
+    """AAP 2021 (well-appearing febrile infants 8 to 21 days): the septic screen includes a lumbar
+    puncture for CSF analysis and culture; both are orderable tests of the clinical-diagnosis
+    catalogue ("lumbar puncture" resolves to the CSF analysis) whose results the case holds."""
+    from envs.domains.clinical_diagnosis import knowledge
+
+    catalog, pathway = knowledge.lab_catalog(), BY_ID["paediatric_fever_neonate"]
+    assert catalog.resolve("lumbar puncture") == "csf_analysis" and catalog.resolve("CSF culture") == "csf_culture"
+    screen = next(ph for ph in pathway["phases"] if ph["name"] == "septic screen")
+    ordered = {a["arguments"]["test"] for a in screen["required_actions"] if a["name"] == "order_lab"}
+    assert {"blood_culture", "urine_culture", "csf_analysis", "csf_culture"} <= ordered
+    held = pathway["patients"]["clinical_diagnosis"]["hidden_results"]
+    assert {"csf_analysis", "csf_culture"} <= set(held) and "lumbar puncture" in pathway["guideline"]
+    task = next(t for t in cross.get_tasks() if t.id == "pathway_paediatric_fever_neonate")
+    trajectory, _ = gold_replay(task, "cross_domain")
+    resulted = {r["test"]: r for r in _results(trajectory, "order_lab")}
+    assert resulted["csf_analysis"]["status"] == "resulted"
+    assert resulted["csf_analysis"]["result"]["flag"] == "normal"  # no pleocytosis, no organisms on Gram stain
+
+
 def test_every_pathway_has_an_answer_source():
     assert set(ANSWER_SOURCES) == set(BY_ID)
 
