@@ -641,14 +641,18 @@ def report(rows: list[dict[str, Any]], systems: list[str], args) -> None:
     rounds = len({r["round"] for r in rows})
     print(f"\nmedians over {rounds} interleaved rounds of {rows[0]['steps']} measured steps "
           f"(+{args.warmup} warm-up), {PROMPTS_PER_STEP} prompts x {GROUP_SIZE} completions a step")
+    # ratios against stock TRL, else the first TRL arm of the run (e.g. `--systems trl_mc,grpo,ttopd`)
+    base_name = next((s for s in ("trl", *TRL_SYSTEMS) if s in med), None)
+    base = med.get(base_name) if base_name else None
+    if base_name:
+        print(f"ratios in brackets against {SYSTEMS[base_name]}")
     print("| system | s/step | completions/s | generated tok/s | trained tok/s | CPU-s/step | completions per CPU-s "
           "| generated tok per CPU-s | gen tokens per completion | turns (ours) / tool calls (TRL) per episode |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    base = med.get("trl")
     for s in systems:
         m = med[s]
         def ratio(k: str, m=m, s=s) -> str:
-            return f" ({m[k] / base[k]:.2f}x)" if base and s != "trl" else ""
+            return f" ({m[k] / base[k]:.2f}x)" if base and s != base_name else ""
         print(f"| {SYSTEMS[s]} | {m['s_per_step']:.2f} | {m['completions_per_s']:.2f}{ratio('completions_per_s')} "
               f"| {m['generated_tok_per_s']:.0f}{ratio('generated_tok_per_s')} | {m['trained_tok_per_s']:.0f}"
               f"{ratio('trained_tok_per_s')} | {m['cpu_s_per_step']:.2f} | {m['completions_per_cpu_s']:.2f}"
