@@ -205,10 +205,11 @@ def _stated_doses(text: str) -> set[tuple[float, str]]:
 
 
 def _assert_gold_doses_pass_the_dose_check_or_follow_the_guideline(pathway_id, trajectory):
-    """Every dose the gold orders passes the drug-interaction dose check (within the weight-based
-    range, or the single-dose cap where the weight-based minimum is above it: alteplase 90 mg for
-    112 kg), unless the case's cited guideline states that very dose (insulin 10 units for
-    hyperkalaemia, UK Kidney Association 2020; heparin 60 U/kg capped at 4,000 U for NSTEMI)."""
+    """Every dose the gold orders passes the drug-interaction dose check (within_range: within the
+    weight-based range, or the single-dose cap where the weight-based minimum is above it, alteplase
+    90 mg for 112 kg, which the check now reports within_range with at_cap), unless the case's cited
+    guideline states that very dose (insulin 10 units for hyperkalaemia, UK Kidney Association 2020;
+    heparin 60 U/kg capped at 4,000 U for NSTEMI). A capped dose no longer needs an exemption here."""
     from envs.domains.drug_interaction import logic as L
     from envs.domains.drug_interaction.environment import load_db
 
@@ -218,15 +219,17 @@ def _assert_gold_doses_pass_the_dose_check_or_follow_the_guideline(pathway_id, t
         for c in turn.tool_calls:
             if c.name != "add_medication" or not c.ok:
                 continue
-            status = _result(c)["dose_check"]
-            if status in ("within_range", "no dose range available"):
+            status, a = _result(c)["dose_check"], c.arguments
+            if status == "no dose range available":
                 continue
-            a = c.arguments
-            rng = L.dose_range(L.find_route(db.dose_profiles[_result(c)["drug"]], a["route"]), person["weight_kg"],
-                               person["age"])
-            given, cap = L.convert(a["dose"], a["unit"], rng["unit"]), rng["max_single_dose_cap"]
-            if cap is not None and rng["min"] > cap and given == pytest.approx(cap):
-                continue  # the capped dose
+            check = L.dose_check(L.find_route(db.dose_profiles[_result(c)["drug"]], a["route"]), a["dose"], a["unit"],
+                                 person["weight_kg"], person["age"])
+            assert check["status"] == status, (pathway_id, a, check)
+            cap = check["max_single_dose_cap"]
+            if cap is not None and check["min"] > cap and check["dose_given"] == pytest.approx(cap):
+                assert status == "within_range" and check["at_cap"], (pathway_id, a, check)  # the capped dose
+            if status == "within_range":
+                continue
             assert (float(a["dose"]), a["unit"]) in _stated_doses(pathway["guideline"]), (
                 f"{pathway_id}: {a['drug']} {a['dose']} {a['unit']} is {status} and the guideline does not state it")
 

@@ -252,6 +252,70 @@ def test_paediatric_cap_uses_patient_age(env, raw_drugdose):
     assert adult["max_single_dose_cap"] == im["max_single_dose_mg"]
 
 
+
+def test_a_capped_weight_based_dose_is_within_range(env, raw_drugdose):
+    """AHA/ASA 2019 acute ischaemic stroke: alteplase 0.9 mg/kg, maximum 90 mg. At 112 kg the
+    weight-based dose (100.8 mg) is above the cap, so 90 mg is the guideline dose: within_range with
+    at_cap (the old check called it below_range). Under the cap stays below_range, over it stays
+    flagged, and at a weight whose range is below the cap nothing changes."""
+    iv = next(r for r in raw_drugdose["alteplase"]["routes"] if r["route"] == "IV")
+    assert (iv["dose_min"], iv["dose_max"], iv["max_single_dose_mg"]) == (0.9, 0.9, 90)  # drugdose 0.1.2 states the cap
+    capped = call(env, "check_dose", drug="alteplase", dose=90, unit="mg", route="IV", weight_kg=112)
+    assert capped["status"] == "within_range" and capped["at_cap"] is True
+    assert capped["min"] == pytest.approx(100.8) and capped["max_single_dose_cap"] == 90
+    assert "100.8 mg" in capped["cap_note"] and "cap of 90 mg" in capped["cap_note"]
+    in_grams = call(env, "check_dose", drug="alteplase", dose=0.09, unit="g", route="IV", weight_kg=112)
+    assert in_grams["status"] == "within_range" and in_grams["at_cap"] is True
+    under = call(env, "check_dose", drug="alteplase", dose=80, unit="mg", route="IV", weight_kg=112)
+    assert under["status"] == "below_range" and under["at_cap"] is False and under["cap_note"] is None
+    over = call(env, "check_dose", drug="alteplase", dose=100, unit="mg", route="IV", weight_kg=112)
+    assert over["status"] == "exceeds_max_single_dose" and over["at_cap"] is False
+    assert call(env, "check_dose", drug="alteplase", dose=90.5, unit="mg", route="IV", weight_kg=112)["status"] == \
+        "exceeds_max_single_dose"
+    # 70 kg: 63 mg, below the cap; the cap plays no part
+    light = call(env, "check_dose", drug="alteplase", dose=63, unit="mg", route="IV", weight_kg=70)
+    assert light["status"] == "within_range" and light["at_cap"] is False
+    assert call(env, "check_dose", drug="alteplase", dose=60, unit="mg", route="IV", weight_kg=70)["status"] == "below_range"
+    assert call(env, "check_dose", drug="alteplase", dose=90, unit="mg", route="IV", weight_kg=70)["status"] == "above_range"
+    # 100 kg: the weight-based dose equals the cap, an ordinary within_range
+    exact = call(env, "check_dose", drug="alteplase", dose=90, unit="mg", route="IV", weight_kg=100)
+    assert exact["status"] == "within_range" and exact["at_cap"] is False
+
+
+@pytest.mark.parametrize("drug,source_name,dose,unit,weight", [
+    ("piperacillin and tazobactam", "piperacillin_tazobactam", 4.5, "g", 80),  # 100-112.5 mg/kg = 8-9 g, cap 4.5 g (Zosyn label 4.5 g)
+    ("tranexamic acid", "tranexamic_acid", 1, "g", 80),  # 15 mg/kg = 1.2 g, cap 1 g (CRASH-2 loading dose)
+    ("glucose", "dextrose", 25, "g", 70),  # 0.5-1 g/kg = 35-70 g, cap 25 g (50 mL of 50% dextrose)
+])
+def test_other_capped_doses_are_within_range_and_less_is_below(env, raw_drugdose, drug, source_name, dose, unit,
+                                                                weight):
+    iv = next(r for r in raw_drugdose[source_name]["routes"] if r["route"] == "IV")
+    to_mg = {"mg": 1, "g": 1000}  # drugdose states caps in mg, ranges in the route's unit (g/kg for dextrose)
+    minimum_mg = iv["dose_min"] * weight * to_mg[iv["dose_unit"].split("/")[0]]
+    assert minimum_mg > iv["max_single_dose_mg"] == dose * to_mg[unit]  # the weight-based range lies above the cap
+    capped = call(env, "check_dose", drug=drug, dose=dose, unit=unit, route="IV", weight_kg=weight)
+    assert capped["status"] == "within_range" and capped["at_cap"] is True
+    under = call(env, "check_dose", drug=drug, dose=dose * 0.9, unit=unit, route="IV", weight_kg=weight)
+    assert under["status"] == "below_range" and under["at_cap"] is False
+    assert call(env, "check_dose", drug=drug, dose=dose * 1.1, unit=unit, route="IV",
+                weight_kg=weight)["status"] == "exceeds_max_single_dose"
+
+
+def test_the_paediatric_cap_caps_a_child_dose_the_same_way(raw_drugdose):
+    """drugdose's paediatric glucose cap is 5 g: 0.5-1 g/kg for a 12 kg five-year-old (6-12 g) is capped at 5 g."""
+    from envs.domains.drug_interaction import logic as L
+    from envs.domains.drug_interaction.environment import load_db
+
+    route = L.find_route(load_db().dose_profiles["glucose"], "IV")
+    assert route.pediatric_max_dose == next(r for r in raw_drugdose["dextrose"]["routes"]
+                                            if r["route"] == "IV")["pediatric_max_dose_mg"] == 5000
+    child = L.dose_check(route, 5, "g", 12, age_years=5)
+    assert child["status"] == "within_range" and child["at_cap"] is True and "paediatric" in child["cap_note"]
+    assert L.dose_check(route, 4, "g", 12, age_years=5)["status"] == "below_range"
+    assert L.dose_check(route, 6, "g", 12, age_years=5)["status"] == "exceeds_max_single_dose"
+    # the adult cap (25 g) is above this range: 6 g is an ordinary within_range dose for a 12 kg adult
+    assert L.dose_check(route, 6, "g", 12)["at_cap"] is False
+
 # -- renal, hepatic, pregnancy ---------------------------------------------------------------------
 def test_renal_function_matches_open_medicine(env, built):
     from open_medicine.mcp.calculators.ckd_epi import CKDEPIParams, calculate_ckd_epi

@@ -615,20 +615,46 @@ def _r(x: float) -> float:
     return round(x, 4)
 
 
+def _close(a: float, b: float) -> bool:
+    """Equal within float noise from unit conversion (0.09 g -> 90.00000000000001 mg)."""
+    return abs(a - b) <= 1e-9 * max(1.0, abs(b))
+
+
 def dose_check(route: RouteDose, dose: float, unit: str, weight_kg: float | None, age_years: float | None = None) -> dict:
+    """Classify one dose against the route's range (drugdose `dose_min`-`dose_max`, times weight when per kg)
+    and its single-dose cap (drugdose `max_single_dose_mg`, or `pediatric_max_dose_mg` under 18).
+
+    Statuses: exceeds_max_single_dose (over the cap), above_range, below_range, within_range.
+    Where the weight-based minimum is above the cap, the cap is the dose the guideline or label gives: alteplase
+    0.9 mg/kg, maximum 90 mg (AHA/ASA 2019 acute ischaemic stroke) is 90 mg at 112 kg, not 100.8 mg;
+    likewise piperacillin-tazobactam 4.5 g (Zosyn label), tranexamic acid 1 g (CRASH-2), glucose 25 g. A dose equal to
+    the cap there is within_range with `at_cap` true and a `cap_note` saying so; a dose under the cap
+    stays below_range (it is below both the weight-based dose and the capped one)."""
     if dose <= 0 or not math.isfinite(dose):
         raise ValueError(f"dose must be a positive number, got {dose}")
     rng = dose_range(route, weight_kg, age_years)
     given = convert(dose, unit, rng["unit"])
     cap = rng["max_single_dose_cap"]
-    if cap is not None and given > cap + 1e-9:
+    cap_below_range = cap is not None and rng["min"] > cap and not _close(rng["min"], cap)
+    at_cap = False
+    if cap is not None and given > cap and not _close(given, cap):
         status = "exceeds_max_single_dose"
     elif rng["max"] > 0 and given > rng["max"] + 1e-9:
         status = "above_range"
+    elif cap_below_range and _close(given, cap):
+        status, at_cap = "within_range", True
     elif given < rng["min"] - 1e-9:
         status = "below_range"
     else:
         status = "within_range"
+    cap_note = None
+    if at_cap:
+        which = "paediatric " if rng["cap_applied"] == "pediatric" else ""
+        span = f"{rng['min']:g}" if _close(rng["min"], rng["max"]) else f"{rng['min']:g}-{rng['max']:g}"
+        per_kg = f"{route.dose_min:g}" if route.dose_min == route.dose_max else f"{route.dose_min:g}-{route.dose_max:g}"
+        basis = f"{per_kg} {route.dose_unit} x {weight_kg:g} kg = {span}" if route.per_kg else span
+        cap_note = (f"{basis} {rng['unit']} is above the {which}single-dose cap of {cap:g} {rng['unit']}; "
+                    f"the dose is capped at {cap:g} {rng['unit']}")
     reference = cap if cap is not None else (rng["max"] if rng["max"] > 0 else None)
-    return {**rng, "dose_given": _r(given), "status": status,
+    return {**rng, "dose_given": _r(given), "status": status, "at_cap": at_cap, "cap_note": cap_note,
             "ratio_to_max": _r(given / reference) if reference else None}
