@@ -145,3 +145,34 @@ def test_the_agent_condition_reports_a_text_answer():
     out = asyncio.run(run_agent(Chat(), LocalEnv(3), task, "ward", None, 0, ConditionSettings(max_turns=3)))
     assert (out.end_reason, out.answer) == ("parse_failure", None)
     json.dumps(out.messages)  # the transcript stays serialisable
+
+
+class _PoolBuilt(Exception):
+    """Raised by the stand-in EnvPool: the trainer got as far as building its env pool."""
+
+
+def test_the_trainer_builds_its_env_pool_from_the_rollout_section(tmp_path, monkeypatch, ward_policy_dir):
+    """`Trainer._build` passes rollout.text_turn_ends_episode (as env arguments), env_batch_calls and
+    env_stream_after_s to the `EnvPool` it creates (the policy, Ray and the other actors stubbed out:
+    only the pool's arguments are checked)."""
+    import learner.sft
+    import learner.train as train
+
+    seen: dict = {}
+
+    def pool(**kwargs):
+        seen.update(kwargs)
+        raise _PoolBuilt
+
+    monkeypatch.setattr(learner.sft, "prepare_policy", lambda cfg, run_dir, log=None: ward_policy_dir)
+    for name, value in (("select_tasks", lambda *a, **k: []), ("init_ray", lambda cfg: None),
+                        ("check_run_fits", lambda cfg: None), ("start_kb_service", lambda cfg: None),
+                        ("start_generators", lambda *a: []), ("start_learner", lambda *a: None), ("EnvPool", pool)):
+        monkeypatch.setattr(train, name, value)
+    cfg = load_config(write_config(tmp_path, {"text_turn_ends_episode": True, "env_batch_calls": True,
+                                              "env_stream_after_s": 0.004, "num_env_actors": 3}),
+                      overrides=[f"output_dir={tmp_path / 'run'}", "data.domains=[ward]"])
+    with pytest.raises(_PoolBuilt):
+        train.Trainer(cfg, log=lambda line: None)._build()
+    assert seen["env_kwargs"] == {"text_turn_ends_episode": True}
+    assert (seen["batch_calls"], seen["stream_after_s"], seen["num_actors"]) == (True, 0.004, 3)
