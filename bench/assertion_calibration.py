@@ -6,8 +6,9 @@ assertions with `RuleGrader` (the default grader without an LLM judge):
 * **gold replay**: the task's expected actions run in a fresh environment, then the gold answer
   submitted (`envs.validate.gold_replay`, the replay `hcgym tasks validate` uses);
 * **other task's replay** (a wrong episode): the gold replay of another task of the same domain with
-  a different gold answer, graded against this task's assertions: a well-formed, competent-looking
-  episode about the wrong patient or question;
+  a different gold answer and different assertions (not the same workflow on another patient),
+  graded against this task's assertions: a well-formed, competent-looking episode about the wrong
+  patient or question;
 * **gold answer, no tools**: only `submit_answer` with the gold answer.
 
 It prints, per domain and overall, the distribution (min, 10th percentile, median, mean) of the
@@ -94,8 +95,13 @@ def run(domains: list[str], limit: int | None) -> dict:
     started = time.perf_counter()
     for domain, pairs in replays.items():
         for i, (task, trajectory) in enumerate(pairs):
+            # a wrong episode does another job: a different gold answer AND different criteria (the
+            # same workflow replayed on another patient, as ehr_management's are, meets patient-agnostic
+            # criteria by doing what they ask: it is not a wrong answer to them)
             other = next((pairs[(i + k) % len(pairs)] for k in range(1, len(pairs))
-                          if pairs[(i + k) % len(pairs)][0].correct_answer != task.correct_answer), None)
+                          if pairs[(i + k) % len(pairs)][0].correct_answer != task.correct_answer
+                          and set(pairs[(i + k) % len(pairs)][0].evaluation_criteria.nl_assertions)
+                          != set(task.evaluation_criteria.nl_assertions)), None)
             episodes = {"gold_replay": trajectory, "gold_answer_no_tools": answer_only(task)}
             if other is not None:
                 episodes["other_task_replay"] = other[1]
