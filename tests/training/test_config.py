@@ -114,3 +114,18 @@ def test_extends_cycle_and_missing_file(tmp_path):
         load_config(tmp_path / "a.yaml")
     with pytest.raises(ConfigError, match="not found"):
         load_config(tmp_path / "nope.yaml")
+
+
+def test_the_demo_config_is_tiny_ttopd_with_the_vllm_generator_only():
+    """`make demo` runs tiny_cpu_ttopd_vllm.yaml: its figures are compared with tiny_cpu_ttopd.yaml's
+    (docs/benchmarks.md), which holds only if nothing but the generator differs."""
+    root = Path(__file__).resolve().parents[2] / "configs"
+    hf = load_config(root / "tiny_cpu_ttopd.yaml").model_dump(mode="json")
+    vllm = load_config(root / "tiny_cpu_ttopd_vllm.yaml").model_dump(mode="json")
+    differing = {k for k in hf if hf[k] != vllm[k]}
+    assert differing == {"name", "output_dir", "generator"}, differing
+    assert vllm["generator"]["backend"] == "vllm" and hf["generator"]["backend"] == "hf"
+    same = {k: v for k, v in hf["generator"].items() if k not in ("backend", "options")}
+    assert same == {k: v for k, v in vllm["generator"].items() if k not in ("backend", "options")}
+    makefile = (root.parent / "Makefile").read_text()
+    assert "--config configs/tiny_cpu_ttopd_vllm.yaml" in makefile
