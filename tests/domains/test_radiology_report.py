@@ -184,3 +184,52 @@ def test_reset_and_tool_latency(tasks):
             assert out.ok, (t.id, a.name, out.error)
     for name, values in times.items():
         assert statistics.median(values) < 0.005, (name, statistics.median(values))
+
+
+def _study_measurements() -> dict[str, set[tuple[float, str]]]:
+    """Per authored study the (value, unit) measurements a report can quote: lung-nodule axes and
+    mean diameters (mm), thyroid-nodule dimensions (cm), breast finding sizes (mm)."""
+    import json
+    from pathlib import Path
+
+    studies = json.loads((Path(rad_build.__file__).parent / "studies_authored.json").read_text(encoding="utf-8"))
+    out: dict[str, set[tuple[float, str]]] = {}
+    for s in studies:
+        values: set[tuple[float, str]] = set()
+        for f in s["findings"] + ((s.get("prior") or {}).get("findings") or []):
+            for key in ("long_axis_mm", "short_axis_mm", "solid_long_mm", "solid_short_mm", "size_mm"):
+                if f.get(key):
+                    values.add((round(float(f[key]), 1), "mm"))
+            if f.get("long_axis_mm") and f.get("short_axis_mm"):
+                values.add((mean_diameter(f["long_axis_mm"], f["short_axis_mm"]), "mm"))
+            if f.get("solid_long_mm") and f.get("solid_short_mm"):
+                values.add((mean_diameter(f["solid_long_mm"], f["solid_short_mm"]), "mm"))
+            for d in f.get("dimensions_cm") or []:
+                values.add((round(float(d), 1), "cm"))
+        out[s["study_id"]] = values
+    return out
+
+
+def test_gold_reports_are_real_reports(tasks):
+    """A gold draft_report is a reference report: no placeholder findings or recommendation, and an
+    authored gold's findings quote at least one measurement (number and unit) of its own study."""
+    import re
+
+    placeholders = ("as described", "per the acr/fleischner recommendation for this category", "findings as analysed",
+                    "as per the guideline for this category")
+    measurements = _study_measurements()
+    drafts = collections.Counter()
+    for t in tasks:
+        for a in t.evaluation_criteria.actions:
+            if a.name != "draft_report":
+                continue
+            drafts[t.description.source] += 1
+            args = a.arguments
+            for field in ("findings", "recommendation", "impression"):
+                text = args[field].lower()
+                assert not any(p in text for p in placeholders), (t.id, field, args[field])
+            if t.description.source == "authored":
+                quoted = {(round(float(v), 1), u) for v, u in re.findall(r"(\d+(?:\.\d+)?)\s*(mm|cm)\b", args["findings"])}
+                assert quoted & measurements[args["study_id"]], (t.id, args["findings"], sorted(measurements[args["study_id"]]))
+    # every authored task and the generated report workflows were checked
+    assert drafts["authored"] >= 20 and drafts["generated"] >= 10, drafts
