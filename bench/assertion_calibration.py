@@ -98,10 +98,10 @@ def run(domains: list[str], limit: int | None) -> dict:
             # a wrong episode does another job: a different gold answer AND different criteria (the
             # same workflow replayed on another patient, as ehr_management's are, meets patient-agnostic
             # criteria by doing what they ask: it is not a wrong answer to them)
-            other = next((pairs[(i + k) % len(pairs)] for k in range(1, len(pairs))
-                          if pairs[(i + k) % len(pairs)][0].correct_answer != task.correct_answer
-                          and set(pairs[(i + k) % len(pairs)][0].evaluation_criteria.nl_assertions)
-                          != set(task.evaluation_criteria.nl_assertions)), None)
+            criteria = set(task.evaluation_criteria.nl_assertions)
+            following = (pairs[(i + k) % len(pairs)] for k in range(1, len(pairs)))
+            other = next((p for p in following if p[0].correct_answer != task.correct_answer
+                          and set(p[0].evaluation_criteria.nl_assertions) != criteria), None)
             episodes = {"gold_replay": trajectory, "gold_answer_no_tools": answer_only(task)}
             if other is not None:
                 episodes["other_task_replay"] = other[1]
