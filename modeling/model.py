@@ -259,12 +259,29 @@ def build_tiny_model(
     )
     torch.manual_seed(seed)
     model = AutoModelForCausalLM.from_config(config, dtype=torch.float32)
+    return save_model_dir(model, tokenizer, eos_ids, output_dir, safe_serialization=True)
+
+
+def save_model_dir(model, tokenizer, eos_ids: list[int], output_dir: str | os.PathLike, **save_kwargs) -> Path:
+    """Write a freshly built model and its tokenizer as one model directory that generators load
+    as they are: generation stops at `eos_ids`, pads with the tokenizer's pad id, and adds no BOS.
+
+    Args:
+        model: A `PreTrainedModel`.
+        tokenizer: Its tokenizer (saved next to it).
+        eos_ids: Token ids that end generation.
+        output_dir: Directory to write (created).
+        **save_kwargs: Passed to `save_pretrained` (e.g. `max_shard_size`).
+
+    Returns:
+        `output_dir` as a Path.
+    """
     model.generation_config.eos_token_id = eos_ids
     model.generation_config.pad_token_id = tokenizer.pad_token_id
     model.generation_config.bos_token_id = None
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    model.save_pretrained(str(out), safe_serialization=True)
+    model.save_pretrained(str(out), **save_kwargs)
     tokenizer.save_pretrained(str(out))
     return out
 

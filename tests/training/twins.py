@@ -117,7 +117,7 @@ def build_twin(family: str, out_dir: str | os.PathLike, tokenizer_dir: str | os.
     """
     import transformers
 
-    from modeling.model import load_tokenizer
+    from modeling.model import load_tokenizer, save_model_dir
 
     tokenizer = load_tokenizer(tokenizer_dir)
     config, eos = _twin_config(family, tokenizer)
@@ -125,13 +125,7 @@ def build_twin(family: str, out_dir: str | os.PathLike, tokenizer_dir: str | os.
     torch.manual_seed(seed)
     model = cls(config).to(dtype)
     model.config.architectures = [TWIN_ARCHITECTURES[family]]
-    model.generation_config.eos_token_id = eos
-    model.generation_config.pad_token_id = tokenizer.pad_token_id
-    model.generation_config.bos_token_id = None
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    model.save_pretrained(str(out), max_shard_size=max_shard_size)
-    tokenizer.save_pretrained(str(out))
+    out = save_model_dir(model, tokenizer, eos, out_dir, max_shard_size=max_shard_size)
     index = out / "model.safetensors.index.json"
     shards = set(json.loads(index.read_text())["weight_map"].values()) if index.exists() else set()
     if len(shards) < 2:
