@@ -233,15 +233,18 @@ class Learner:
         """Overwrite the policy weights (the optimizer state is kept)."""
         self._all("load_full_state_dict", state)
 
-    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> None:
+    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> dict[str, str]:
         """Join a collective weight-sync group as its sender (call while the receivers join theirs).
 
         Args:
             config: `WeightSyncConfig` fields (backend, bucket_mb, timeout_s, master_addr, master_port).
             world_size: 1 + number of receivers.
             peer_names: Readable names for error messages, rank 0 (this learner) first.
+
+        Returns:
+            {"transport": "nccl" | "gloo-cpu-staged", "reason": ...}: what the members' devices chose.
         """
-        self._all("join_weight_sync", dict(config), world_size, list(peer_names))
+        return self._all("join_weight_sync", dict(config), world_size, list(peer_names))[0]
 
     def broadcast_weights(self) -> dict[str, float]:
         """Send the current weights (version = policy_version) through the group; receivers call

@@ -213,6 +213,9 @@ class WeightSyncConfig(ConfigModel):
     """Learner -> generators / teacher weight transfer."""
 
     transport: Literal["object_store", "collective"] = "object_store"
+    # The collective backend when every member has a GPU of its own; gloo with the buckets staged
+    # through CPU memory whenever a member is on the CPU or two members share a GPU (decided from
+    # the members' device identities at join: modeling.weight_sync.choose_transport).
     backend: Literal["nccl", "gloo"] = "nccl"
     bucket_mb: float = Field(default=512.0, gt=0, description="size cap of one broadcast bucket")
     # One limit for a weight sync, whichever transport: a collective broadcast, or a generator loading a

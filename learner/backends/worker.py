@@ -337,17 +337,18 @@ class RankWorker:
     def load_full_state_dict(self, state: dict[str, torch.Tensor] | None) -> None:
         self.backend.load_full_state_dict(state or {})
 
-    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> bool:
-        """Rank 0 joins the private weight-sync group as its sender (blocks until every member joined)."""
+    def join_weight_sync(self, config: dict, world_size: int, peer_names: list[str]) -> dict[str, str] | None:
+        """Rank 0 joins the private weight-sync group as its sender (blocks until every member joined);
+        returns the transport the group chose and why (None on the other ranks)."""
         if self.rank != 0:
-            return False
+            return None
         from modeling.config_models import WeightSyncConfig
         from modeling.weight_sync import WeightSyncGroup
 
         device = "cuda" if self.config.device == "cuda" else "cpu"
         self._sync_group = WeightSyncGroup(0, world_size, WeightSyncConfig.model_validate(config), peer_names,
                                            device=device)
-        return True
+        return {"transport": self._sync_group.transport, "reason": self._sync_group.transport_reason}
 
     def broadcast_weights(self, version: int) -> dict[str, float] | None:
         """Every rank walks the model module by module (ZeRO-3 gathers are collective); rank 0 sends."""
