@@ -68,10 +68,14 @@ class Teacher:
         self.model, self.tokenizer = load_policy(model_dir, dtype=dtype)
         self.model.to(self.config.device).requires_grad_(False)
         self.pad_id = self.tokenizer.pad_token_id if self.tokenizer.pad_token_id is not None else 0
-        # EMA in fp32: alpha = 0.995 moves bf16 weights by less than their rounding step.
+        # EMA in fp32: alpha = 0.995 moves bf16 weights by less than their rounding step. The shadow
+        # lives on the teacher's device or in host memory (ema_shadow_device); EMA and hard copies act on
+        # it where it is and copy the result into the model's weights.
         self._shadow: dict[str, torch.Tensor] | None = None
         if dtype != torch.float32:
-            self._shadow = {k: v.detach().float().clone() for k, v in self.model.state_dict().items()}
+            where = self.shadow_device
+            self._shadow = {k: v.detach().to(device=where, dtype=torch.float32, copy=True)
+                            for k, v in self.model.state_dict().items()}
         self._version = 0
         self._history: list[dict[str, Any]] = []
         hints = self.config.hints
@@ -94,6 +98,11 @@ class Teacher:
         if start_worker:
             self._thread = threading.Thread(target=self._worker, name="teacher-worker", daemon=True)
             self._thread.start()
+
+    @property
+    def shadow_device(self) -> torch.device:
+        """Where the fp32 EMA shadow is (or would be) kept: the model's device or the CPU."""
+        return torch.device("cpu") if self.config.ema_shadow_device == "cpu" else torch.device(self.config.device)
 
     def _encode(self, text: str) -> list[int]:
         return list(self.tokenizer.encode(text, add_special_tokens=False))

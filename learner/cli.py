@@ -1,4 +1,4 @@
-"""`hcgym train`, `hcgym plot`, `hcgym replay` and `hcgym model fetch` (registered by `envs.cli`)."""
+"""`hcgym train`, `hcgym plot`, `hcgym replay`, `hcgym plan` and `hcgym model fetch` (registered by `envs.cli`)."""
 
 from __future__ import annotations
 
@@ -55,6 +55,24 @@ def _model_fetch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    from learner.config import load_config
+    from modeling.plan import format_plan, plan_run
+
+    cfg = load_config(args.config, args.set)
+    try:
+        plan = plan_run(cfg, args.gpu)
+    except ValueError as exc:
+        print(f"hcgym plan: {exc}", file=sys.stderr)
+        return 2
+    print(plan.model_dump_json(indent=1) if args.json else format_plan(plan))
+    if not plan.fits:
+        print(f"hcgym plan: {args.config} does not fit on {plan.gpu}:\n  " + "\n  ".join(plan.problems),
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def register(subparsers) -> None:
     """Add the training subcommands to the `hcgym` parser."""
     from learner.train import build_arg_parser
@@ -79,6 +97,20 @@ def register(subparsers) -> None:
     replay.add_argument("--model-dir", required=True, help="weights to evaluate (e.g. RUN_DIR/model/sft)")
     replay.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     replay.set_defaults(func=_replay)
+
+    from modeling.plan import GPUS
+
+    plan = subparsers.add_parser(
+        "plan", help="memory per actor, GPUs, CPUs and checkpoint time of a config on a GPU kind",
+        description="Print what a run config needs on a GPU kind, per actor (ZeRO-3 states per rank, activations, "
+                    "the teacher's weights and EMA shadow, the generators' KV cache), the GPUs, CPUs and nodes, host "
+                    "memory for offload, and the checkpoint size and write time (modeling/plan.py has the formulas). "
+                    "Exits 1, naming what to change, when the config does not fit.")
+    plan.add_argument("--config", required=True)
+    plan.add_argument("--gpu", choices=sorted(GPUS), default=None, help="GPU kind (default: the config's cluster.gpu)")
+    plan.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
+    plan.add_argument("--json", action="store_true", help="print the plan as JSON")
+    plan.set_defaults(func=_plan)
 
     model = subparsers.add_parser("model", help="model checkpoints (the Hugging Face cache)")
     model_sub = model.add_subparsers(dest="model_command", required=True)

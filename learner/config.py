@@ -37,6 +37,7 @@ from actors.agent_loop import RolloutLimits
 from actors.generator import SamplingConfig
 from modeling.config_models import (OFFPOLICY_TIS_CAP, ConfigModel, LearnerConfig, TeacherConfig,
                                    WeightSyncConfig)
+from modeling.plan import ClusterConfig
 
 
 class ConfigError(ValueError):
@@ -332,6 +333,7 @@ class RunConfig(ConfigModel):
     ray: RayConfig = Field(default_factory=RayConfig)
     kb: KBConfig = Field(default_factory=KBConfig)
     metrics: MetricsConfig = Field(default_factory=MetricsConfig)
+    cluster: ClusterConfig = Field(default_factory=ClusterConfig)  # read only by `hcgym plan` (modeling/plan.py)
 
     @model_validator(mode="after")
     def _consistent(self) -> "RunConfig":

@@ -191,6 +191,10 @@ class TeacherConfig(ConfigModel):
     dtype: Literal["float32", "bfloat16"] = "float32"
     device: Literal["cpu", "cuda"] = "cpu"
     logprob_chunk_size: int = Field(default=1024, ge=1)
+    # Where the fp32 EMA master lives when the teacher computes in bf16 (4 bytes per parameter: 38 GB
+    # for a 9B model beside its 19 GB of bf16 weights): "model" = the teacher's device, "cpu" = host
+    # memory, leaving the GPU to the scoring forward; `hcgym plan` says which one fits.
+    ema_shadow_device: Literal["model", "cpu"] = "model"
 
 
 def teacher_update_action(step: int, config: TeacherConfig) -> Literal["hard_copy", "ema", "none"]:
