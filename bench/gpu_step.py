@@ -1,19 +1,24 @@
 """GPU throughput: DeepSpeed ZeRO-3 learner tokens/s and MFU, vLLM generation tokens/s, 0.5B-config model.
 
 Needs a CUDA GPU. Without one it prints that no GPU was found and exits with status 0 (so
-`make bench` passes on the CPU machines). Each part runs in its own subprocess, so vLLM's memory
-reservation and DeepSpeed's process group never share a process.
+`make bench` passes on the CPU machines); `--cpu` rehearses it on the CPU (tiny model, the same
+code paths). Each half runs in its own subprocess and interpreter, as on the cluster nodes, where
+DeepSpeed and vLLM live in two venvs: the learner half in this interpreter (~/hcgym-venv), the vLLM
+half in `--vllm-python` (default auto: this interpreter if it imports vllm, else .venv-vllm, else
+~/hcgym-vllm). Each half prints its figures as soon as it ends (a `PHASE <name> {...}` line) and
+`--json-out` is rewritten after each, so a later failure keeps what was measured.
 
 * learner: our `Learner` with `backend: deepspeed` (ZeRO-3, 1 rank, bf16) on synthetic multi-turn
-  samples; tokens/s counts every position of the batch; MFU = (6 + 2) * N * tokens/s / peak, i.e.
-  policy forward+backward plus the frozen reference forward (attention FLOPs left out).
+  samples; tokens/s counts every position of the batch; FLOPs = 8 (N - N_head) tokens +
+  8 N_head loss_tokens (bench/gpu_figures.py: the LM head runs on the loss positions only);
+  MFU against the dense bf16 peak of the device model (none for an unknown device).
 * vllm: `vllm.LLM` on the same weights, sampling with log-probs (as the generator does).
 
 The model: Qwen2 architecture in the 0.5B shape (hidden 896, 24 layers, 14 heads, 2 KV heads,
 intermediate 4864, vocabulary 151,936, tied embeddings), randomly initialised, tokenizer trained
 locally (the prompts are token ids, so its size does not matter).
 
-Run: python bench/gpu_step.py [--steps 5] [--batch 8] [--seq 2048] [--peak-tflops 989]
+Run: python bench/gpu_step.py [--steps 5] [--batch 8] [--seq 2048] [--vllm-python PY] [--json-out F]
 """
 
 from __future__ import annotations
@@ -28,51 +33,51 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-PEAK_BF16_TFLOPS = {"H200": 989.0, "H100": 989.0, "A100": 312.0, "L40S": 362.0, "A10": 125.0}
+from gpu_figures import FigureLog, device_peak, head_params, learner_step_flops, mfu, resolve_vllm_python  # noqa: E402
 
 QWEN2_05B = {"hidden_size": 896, "intermediate_size": 4864, "num_hidden_layers": 24, "num_attention_heads": 14,
              "num_key_value_heads": 2, "tie_word_embeddings": True, "max_position_embeddings": 32768,
              "rope_theta": 1_000_000.0, "rms_norm_eps": 1e-6}
+# --cpu: the same architecture at a size a CPU core runs in seconds (head_dim 64: vLLM's CPU
+# attention rejects smaller heads).
+QWEN2_CPU = {"hidden_size": 128, "intermediate_size": 256, "num_hidden_layers": 2, "num_attention_heads": 2,
+             "num_key_value_heads": 1, "tie_word_embeddings": True, "max_position_embeddings": 4096,
+             "rope_theta": 1_000_000.0, "rms_norm_eps": 1e-6}
+VOCAB = 151_936
+VOCAB_CPU = 4096
 
 
-def detect_gpu(parser: argparse.ArgumentParser, args: argparse.Namespace, script: str) -> str | None:
-    """The GPU's name on a GPU node (and `args.peak_tflops` filled from it when not given); else prints
-    why nothing runs and returns None, so the script exits 0 on CPU machines."""
+def detect_gpu(script: str) -> str | None:
+    """The GPU's name, or None after printing why nothing runs (the script then exits 0)."""
     import torch
 
     if not torch.cuda.is_available():
         print(f"{script}: no GPU found (torch {torch.__version__}, torch.cuda.is_available() is False); "
-              "nothing run. Run it on a GPU node (cluster.yaml installs both venvs).")
+              "nothing run. Run it on a GPU node (cluster.yaml installs both venvs), or pass --cpu to rehearse.")
         return None
-    name = torch.cuda.get_device_name(0)
-    if args.peak_tflops is None:
-        args.peak_tflops = next((v for k, v in PEAK_BF16_TFLOPS.items() if k in name), None)
-        if args.peak_tflops is None:
-            parser.error(f"unknown GPU {name!r}: pass --peak-tflops (dense bf16) for the MFU")
-    return name
+    return torch.cuda.get_device_name(0)
 
 
-def build_model(root: Path) -> str:
+def build_model(root: Path, cpu: bool = False) -> str:
     import torch
     from transformers import AutoModelForCausalLM, Qwen2Config
 
-    from modeling.model import train_tokenizer
+    from modeling.model import load_tokenizer, train_tokenizer
 
-    tok_dir = train_tokenizer(["Healthcare AI GYM GPU benchmark corpus."] * 10, 4096, root / "tok",
-                              max_stdlib_files=100)
-    from modeling.model import load_tokenizer
-
-    tok = load_tokenizer(tok_dir)
-    config = Qwen2Config(vocab_size=151_936, pad_token_id=tok.pad_token_id, eos_token_id=tok.eos_token_id,
-                         bos_token_id=None, **QWEN2_05B)
+    tok = load_tokenizer(train_tokenizer(["Healthcare AI GYM GPU benchmark corpus."] * 10, 4096, root / "tok",
+                                         max_stdlib_files=100))
+    config = Qwen2Config(vocab_size=VOCAB_CPU if cpu else VOCAB, pad_token_id=tok.pad_token_id,
+                         eos_token_id=tok.eos_token_id, bos_token_id=None, **(QWEN2_CPU if cpu else QWEN2_05B))
     torch.manual_seed(0)
-    model = AutoModelForCausalLM.from_config(config, dtype=torch.bfloat16)
+    model = AutoModelForCausalLM.from_config(config, dtype=torch.float32 if cpu else torch.bfloat16)
     out = root / "model"
     model.save_pretrained(str(out), safe_serialization=True)
     tok.save_pretrained(str(out))
     n = sum(p.numel() for p in model.parameters())
-    (out / "bench_params.json").write_text(json.dumps({"params": n}))
+    (out / "bench_params.json").write_text(json.dumps({"params": n, "head_params": head_params(config),
+                                                       "vocab": config.vocab_size}))
     return str(out)
 
 
@@ -103,40 +108,50 @@ def part_learner(args) -> dict:
     from modeling.config_models import LearnerConfig
     from learner.learner_actor import Learner
 
-    params = json.loads((Path(args.model_dir) / "bench_params.json").read_text())["params"]
-    cfg = LearnerConfig(backend="deepspeed", device="cuda", dtype="bfloat16", gradient_checkpointing=True,
+    meta = json.loads((Path(args.model_dir) / "bench_params.json").read_text())
+    cuda = not args.cpu
+    cfg = LearnerConfig(backend="deepspeed", device="cuda" if cuda else "cpu",
+                        dtype="bfloat16" if cuda else "float32", gradient_checkpointing=True,
                         optim={"lr": 1e-6, "micro_batch_size": args.micro_batch},
-                        deepspeed={"world_size": 1, "num_gpus_per_rank": 1})
+                        deepspeed={"world_size": 1, "num_gpus_per_rank": 1 if cuda else 0})
     learner = Learner(cfg, args.model_dir, seed=0)
-    samples = synthetic_samples(args.batch, args.seq, 151_936)
+    samples = synthetic_samples(args.batch, args.seq, meta["vocab"])
+    sync = torch.cuda.synchronize if cuda else (lambda: None)
     learner.train_step(samples)  # warm-up (allocations, kernels)
-    torch.cuda.synchronize()
+    sync()
     t0 = time.perf_counter()
     for _ in range(args.steps):
         learner.train_step(samples)
-    torch.cuda.synchronize()
+    sync()
     dt = time.perf_counter() - t0
-    tokens = args.steps * args.batch * args.seq
-    tps = tokens / dt
-    peak = args.peak_tflops * 1e12
-    mfu = (6 + 2) * params * tps / peak
+    tokens = args.steps * sum(len(s.input_ids) for s in samples)
+    loss_tokens = args.steps * sum(sum(s.loss_mask) for s in samples)
+    flops = learner_step_flops(meta["params"], meta["head_params"], tokens, loss_tokens,
+                               reference=cfg.loss.grpo.kl_beta > 0)
+    peak = device_peak(torch.cuda.get_device_name(0) if cuda else "cpu", args.peak_tflops)
     learner.shutdown()
-    return {"learner_tokens_per_s": tps, "learner_step_s": dt / args.steps, "mfu": mfu, "params": params,
-            "peak_tflops": args.peak_tflops, "max_mem_gib": torch.cuda.max_memory_allocated() / 2**30}
+    return {"learner_tokens_per_s": tokens / dt, "learner_step_s": dt / args.steps, "tokens_per_step":
+            tokens // args.steps, "loss_tokens_per_step": loss_tokens // args.steps, "params": meta["params"],
+            "head_params": meta["head_params"], "tflops_achieved": flops / dt / 1e12, "mfu": mfu(flops, dt, peak),
+            "peak_tflops": peak.tflops, "peak_reason": peak.reason,
+            "max_mem_gib": torch.cuda.max_memory_allocated() / 2**30 if cuda else None}
 
 
 def part_vllm(args) -> dict:
     try:
         from vllm import LLM, SamplingParams
     except ImportError as exc:
-        return {"vllm": f"not installed ({exc}); run this part with the vLLM venv's python "
-                         "(~/hcgym-vllm on cluster.yaml nodes, docs/cluster.md)"}
+        return {"error": f"vllm not installed in {sys.executable} ({exc}); pass --vllm-python with the vLLM "
+                         "venv's python (~/hcgym-vllm/bin/python on cluster.yaml nodes, docs/cluster.md)"}
     import random
 
-    llm = LLM(model=args.model_dir, dtype="bfloat16", max_model_len=args.seq + args.new_tokens,
-              gpu_memory_utilization=0.6, seed=0)
+    vocab = json.loads((Path(args.model_dir) / "bench_params.json").read_text())["vocab"]
+    options = {} if not args.cpu else {"max_num_batched_tokens": args.seq + args.new_tokens}
+    llm = LLM(model=args.model_dir, dtype="float32" if args.cpu else "bfloat16",
+              max_model_len=args.seq + args.new_tokens, seed=0,
+              **({} if args.cpu else {"gpu_memory_utilization": 0.6}), **options)
     rng = random.Random(0)
-    prompts = [{"prompt_token_ids": [rng.randrange(10, 151_936) for _ in range(args.seq // 4)]}
+    prompts = [{"prompt_token_ids": [rng.randrange(10, vocab) for _ in range(args.seq // 4)]}
                for _ in range(args.prompts)]
     params = SamplingParams(temperature=1.0, max_tokens=args.new_tokens, ignore_eos=True, logprobs=1)
     llm.generate(prompts[:4], params)  # warm-up
@@ -144,10 +159,33 @@ def part_vllm(args) -> dict:
     outs = llm.generate(prompts, params)
     dt = time.perf_counter() - t0
     generated = sum(len(o.outputs[0].token_ids) for o in outs)
-    return {"vllm_tokens_per_s": generated / dt, "vllm_prompts": args.prompts, "vllm_new_tokens": args.new_tokens}
+    return {"vllm_tokens_per_s": generated / dt, "vllm_prompts": args.prompts, "vllm_new_tokens": args.new_tokens,
+            "python": sys.executable}
 
 
-def main() -> int:
+def run_part(args, part: str, model_dir: str, python: str) -> dict:
+    """One half in its own interpreter; its figures, or the reason it has none."""
+    cmd = [python, __file__, "--part", part, "--model-dir", model_dir, "--steps", str(args.steps),
+           "--batch", str(args.batch), "--micro-batch", str(args.micro_batch), "--seq", str(args.seq),
+           "--prompts", str(args.prompts), "--new-tokens", str(args.new_tokens)]
+    if args.peak_tflops is not None:
+        cmd += ["--peak-tflops", str(args.peak_tflops)]
+    if args.cpu:
+        cmd.append("--cpu")
+    env = {**os.environ, "DS_ACCELERATOR": "cpu" if args.cpu else "cuda"}
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False, timeout=args.part_timeout)
+    except subprocess.TimeoutExpired as exc:
+        tail = (exc.stderr or b"")[-2000:]
+        return {"error": f"timed out after {args.part_timeout:.0f}s", "stderr_tail": str(tail)}
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+    if proc.returncode != 0 or not lines:
+        return {"error": f"exit {proc.returncode}", "python": python, "stderr_tail": proc.stderr[-3000:]}
+    return {**json.loads(lines[-1][len("RESULT "):]), "wall_s": time.perf_counter() - t0}
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--batch", type=int, default=8)
@@ -155,36 +193,41 @@ def main() -> int:
     parser.add_argument("--seq", type=int, default=2048)
     parser.add_argument("--prompts", type=int, default=64)
     parser.add_argument("--new-tokens", type=int, default=512)
-    parser.add_argument("--peak-tflops", type=float, default=None, help="dense bf16 peak of the GPU")
+    parser.add_argument("--peak-tflops", type=float, default=None,
+                        help="dense bf16 peak of the GPU (default: from the device model; unknown -> no MFU)")
+    parser.add_argument("--vllm-python", default="auto", help="interpreter with vLLM for the vLLM half")
+    parser.add_argument("--json-out", default=None, help="figures file, rewritten as each half ends")
+    parser.add_argument("--part-timeout", type=float, default=600.0, help="seconds each half may take")
+    parser.add_argument("--parts", default="learner,vllm", help="comma-separated halves to run")
+    parser.add_argument("--cpu", action="store_true", help="rehearse on the CPU (tiny model, gloo, vLLM CPU build)")
     parser.add_argument("--part", choices=["learner", "vllm"], default=None, help=argparse.SUPPRESS)
     parser.add_argument("--model-dir", default=None, help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    parts = [p for p in args.parts.split(",") if p]
+    if unknown := sorted(set(parts) - {"learner", "vllm"}):
+        parser.error(f"--parts: unknown {unknown} (learner, vllm)")
 
-    name = detect_gpu(parser, args, "bench/gpu_step.py")
-    if name is None:
-        return 0
-    import torch
     if args.part:
         result = part_learner(args) if args.part == "learner" else part_vllm(args)
         print("RESULT " + json.dumps(result))
         return 0
+    name = "cpu" if args.cpu else detect_gpu("bench/gpu_step.py")
+    if name is None:
+        return 0
+    import torch
 
-    root = Path(tempfile.mkdtemp(prefix="bench_gpu_"))
-    model_dir = build_model(root)
-    results = {"device": name, "torch": torch.__version__}
-    for part in ("learner", "vllm"):
-        cmd = [sys.executable, __file__, "--part", part, "--model-dir", model_dir, "--steps", str(args.steps),
-               "--batch", str(args.batch), "--micro-batch", str(args.micro_batch), "--seq", str(args.seq),
-               "--prompts", str(args.prompts), "--new-tokens", str(args.new_tokens),
-               "--peak-tflops", str(args.peak_tflops)]
-        env = {**os.environ, "DS_ACCELERATOR": "cuda"}
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-        if proc.returncode != 0 or not lines:
-            results[part] = f"failed (exit {proc.returncode}): {proc.stderr[-2000:]}"
-        else:
-            results.update(json.loads(lines[-1][len("RESULT "):]))
-    print(json.dumps(results, indent=1))
+    log = FigureLog(args.json_out, {"bench": "gpu_step", "device": name, "torch": torch.__version__,
+                                    "cpu_rehearsal": args.cpu})
+    try:
+        vllm_python = resolve_vllm_python(args.vllm_python) if "vllm" in parts else None
+    except ValueError as exc:
+        log.record("vllm", {"error": str(exc)})
+        parts, vllm_python = [p for p in parts if p != "vllm"], None
+    t0 = time.perf_counter()
+    model_dir = build_model(Path(tempfile.mkdtemp(prefix="bench_gpu_")), cpu=args.cpu)
+    log.record("build", {"seconds": time.perf_counter() - t0, "model_dir": model_dir})
+    for part in parts:
+        log.record(part, run_part(args, part, model_dir, sys.executable if part == "learner" else vllm_python))
     return 0
 
 

@@ -48,9 +48,9 @@ import time
 from collections.abc import Iterable, Iterator
 from datetime import timedelta
 
-import torch
 from typing import Literal
 
+import torch
 from pydantic import BaseModel, ConfigDict, Field
 
 from modeling.config_models import WeightSyncConfig
