@@ -48,8 +48,10 @@ def test_truncate_refuses_an_episode_that_is_over_or_not_started():
         env.unwrapped.truncate("token_limit")
     task = registry.get_tasks("cross_domain", "test")[0]
     env.reset(seed=0, options={"task_id": task.id})
-    reward, info = env.unwrapped.truncate("context_limit")
-    assert info["end_reason"] == "context_limit" and "reward_components" in info
+    with pytest.raises(ValueError, match="context_limit.*not one of"):  # one vocabulary of end reasons
+        env.unwrapped.truncate("context_limit")
+    reward, info = env.unwrapped.truncate("context_overflow")
+    assert info["end_reason"] == "context_overflow" and "reward_components" in info
     with pytest.raises(RuntimeError, match=task.id):
         env.unwrapped.truncate("token_limit")
     # A step after the runner ended the episode changes nothing and says so.
