@@ -606,3 +606,60 @@ def format_plan(plan: Plan) -> str:
     ]
     lines += ["\nDOES NOT FIT:"] + [f"  - {p}" for p in plan.problems] if plan.problems else ["\nfits."]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# The node check of cluster.yaml's setup
+# ---------------------------------------------------------------------------------------------
+
+#: Minimum Linux driver of each CUDA build the pinned torch wheel may be (NVIDIA's CUDA toolkit /
+#: driver table: CUDA 13.0 GA needs >= 580.65.06). The torch 2.13.0 wheel on PyPI is a CUDA 13.0 build
+#: (its metadata requires the CUDA 13 runtime and NCCL cu13).
+MIN_DRIVER_FOR_CUDA: dict[str, str] = {"13.0": "580.65.06"}
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.strip().split(".") if part.isdigit())
+
+
+def driver_problem(torch_cuda: str | None, driver: str | None) -> str | None:
+    """Why a node's NVIDIA driver cannot run torch's CUDA build, or None when it can."""
+    if torch_cuda is None:
+        return "torch is a CPU build (torch.version.cuda is None): install the CUDA wheel (PyPI's torch==2.13.0)"
+    key = ".".join(torch_cuda.split(".")[:2])
+    needed = MIN_DRIVER_FOR_CUDA.get(key)
+    if driver is None:
+        return (f"no NVIDIA driver found (nvidia-smi missing or failing); torch's CUDA {torch_cuda} build needs driver "
+                f">= {needed or 'the one in NVIDIA CUDA compatibility table'}")
+    if needed is not None and _version(driver) < _version(needed):
+        return f"NVIDIA driver {driver} is older than {needed}, the minimum for torch's CUDA {torch_cuda} build"
+    return None
+
+
+def check_gpu_node() -> str:
+    """cluster.yaml's setup check: torch sees a GPU (else: the driver found and the one needed) and a C
+    compiler is on PATH (Triton and DeepSpeed's JIT ops build with it). Returns a one-line summary.
+
+    Raises:
+        SystemExit: naming what is missing.
+    """
+    import shutil
+    import subprocess
+
+    import torch
+
+    problems = []
+    if not torch.cuda.is_available():
+        try:
+            out = subprocess.run(["nvidia-smi", "--query-gpu=driver_version", "--format=csv,noheader"],
+                                 capture_output=True, text=True, timeout=60, check=True).stdout.split()
+            driver = out[0] if out else None
+        except (OSError, subprocess.SubprocessError):
+            driver = None
+        problems.append(driver_problem(torch.version.cuda, driver)
+                        or f"torch {torch.__version__} sees no GPU although driver {driver} supports CUDA {torch.version.cuda}")
+    if shutil.which("gcc") is None and shutil.which("cc") is None:
+        problems.append("no C compiler on PATH (Triton compiles its launcher with it): apt-get install build-essential")
+    if problems:
+        raise SystemExit("GPU node check failed: " + "; ".join(problems))
+    return f"torch {torch.__version__} CUDA {torch.version.cuda}, {torch.cuda.device_count()} GPU(s)"

@@ -154,3 +154,41 @@ def test_ray_runs_from_the_venv_with_token_auth_and_a_loopback_dashboard(cluster
     # The token that `ray get-auth-token --generate` wrote on the user's machine, on every node.
     assert cluster["file_mounts"]["/home/ubuntu/.ray/auth_token"] == "~/.ray/auth_token"
     assert {".venv", ".venv-vllm"} <= set(cluster["rsync_exclude"])  # local CPU venvs stay local
+
+
+def test_nodes_run_an_image_whose_driver_fits_torchs_cuda_build_and_check_it(cluster):
+    from modeling.plan import MIN_DRIVER_FOR_CUDA, check_gpu_node, driver_problem
+
+    setup = commands(cluster, "setup_commands")
+    check = [i for i, c in enumerate(setup) if "check_gpu_node" in c]
+    install = next(i for i, c in enumerate(setup) if "hcgym-venv/bin/python -c constraints-cpu.txt -e ." in c)
+    assert check and check[0] > install, "the GPU check runs right after the project (and torch) is installed"
+    assert any("build-essential" in c for c in setup[:install])  # gcc for Triton and DeepSpeed's JIT ops
+    assert any("flash-linear-attention" in c and "hcgym-venv" in c for c in setup)
+    for node in cluster["available_node_types"].values():
+        image = node["node_config"]["ImageId"]
+        assert image.startswith("resolve:ssm:/aws/service/deeplearning/ami/x86_64/base-oss-nvidia-driver"), image
+        ebs = node["node_config"]["BlockDeviceMappings"][0]["Ebs"]
+        assert ebs["VolumeType"] == "gp3" and ebs["Throughput"] == 1000 and ebs["Iops"] >= ebs["Throughput"] * 4
+    # The driver requirement is derived in one place, from torch's CUDA build: PyPI's torch 2.13.0 is CUDA 13.0.
+    assert MIN_DRIVER_FOR_CUDA["13.0"] == "580.65.06"
+    assert driver_problem("13.0", "580.95.05") is None and driver_problem("13.0", "595.91.07") is None
+    assert driver_problem("13.0", "535.104.05") == (
+        "NVIDIA driver 535.104.05 is older than 580.65.06, the minimum for torch's CUDA 13.0 build")
+    assert "needs driver >= 580.65.06" in driver_problem("13.0", None)
+    assert "CPU build" in driver_problem(None, None)
+    # On this CPU machine the check fails and says what it found and what it needs.
+    import torch
+
+    if not torch.cuda.is_available():
+        with pytest.raises(SystemExit, match="GPU node check failed: .*(CPU build|driver)"):
+            check_gpu_node()
+
+
+def test_the_shipped_configs_plan_for_cluster_yamls_nodes(cluster):
+    from learner.config import load_config
+
+    node = cluster["available_node_types"][cluster["head_node_type"]]
+    planned = load_config(SUBMITTED_CONFIG).cluster
+    assert (planned.gpus_per_node, planned.cpus_per_node) == (node["resources"]["GPU"], node["resources"]["CPU"])
+    assert planned.checkpoint_volume_mib_s == node["node_config"]["BlockDeviceMappings"][0]["Ebs"]["Throughput"]
