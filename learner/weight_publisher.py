@@ -21,6 +21,38 @@ from actors.generator import GeneratorClient
 from learner.config import RunConfig
 
 
+@dataclass(frozen=True)
+class GroupLayout:
+    """Ranks of one weight-sync group: 0 is the learner's rank 0; generator i owns `ranks_per_generator`
+    consecutive ranks from `generator_ranks[i]` (a vLLM engine's tensor-parallel workers each join as
+    `generator_ranks[i] + tp_rank`); the teacher, when present, is last."""
+
+    names: list[str]
+    generator_ranks: list[int]
+    teacher_rank: int | None
+
+    @property
+    def world_size(self) -> int:
+        return len(self.names)
+
+
+def weight_sync_layout(num_generators: int, ranks_per_generator: int, with_teacher: bool) -> GroupLayout:
+    """The group's ranks and a readable name per rank (`generator-1-tp0`, ... with tensor parallelism)."""
+    if ranks_per_generator < 1:
+        raise ValueError(f"ranks_per_generator must be >= 1, got {ranks_per_generator}")
+    names = ["learner-rank0"]
+    firsts = []
+    for i in range(num_generators):
+        firsts.append(len(names))
+        names += ([f"generator-{i}"] if ranks_per_generator == 1
+                  else [f"generator-{i}-tp{r}" for r in range(ranks_per_generator)])
+    teacher_rank = None
+    if with_teacher:
+        teacher_rank = len(names)
+        names.append("teacher")
+    return GroupLayout(names=names, generator_ranks=firsts, teacher_rank=teacher_rank)
+
+
 @dataclass
 class Published:
     """Where one version's weights went: the object-store ref (None with the collective transport)
@@ -72,13 +104,14 @@ class WeightPublisher:
         self.formations += 1
         self.teacher_in_group = None
         teacher = await self.teacher_member() if self.teacher_member is not None else None
-        names = ["learner-rank0"] + [f"generator-{i}" for i in range(len(self.generators))]
-        names += ["teacher"] if teacher is not None else []
-        world = len(names)
+        layout = weight_sync_layout(len(self.generators), self.cfg.generator.ranks_per_generator(),
+                                    teacher is not None)
+        names, world = layout.names, layout.world_size
         joins = [self.learner.join_weight_sync.remote(config, world, names),
-                 *[g.join_weight_sync.remote(config, i + 1, world, names) for i, g in enumerate(self.generators)]]
+                 *[g.join_weight_sync.remote(config, first, world, names)
+                   for g, first in zip(self.generators, layout.generator_ranks)]]
         if teacher is not None:
-            joins.append(teacher.join_weight_sync.remote(config, world - 1, world, names))
+            joins.append(teacher.join_weight_sync.remote(config, layout.teacher_rank, world, names))
         await asyncio.wait_for(asyncio.gather(*joins), self.cfg.weight_sync.timeout_s + 30)
         self.teacher_in_group = teacher
 

