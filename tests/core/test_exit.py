@@ -1,0 +1,55 @@
+"""How a test process ends: a crash during interpreter exit prints every thread's stack."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+# A throwaway test module whose process crashes (SIGSEGV) in an atexit handler, i.e. after pytest has
+# finished and unconfigured, while a second thread is parked in a function with a recognisable name.
+CRASHING_TEST = '''
+import atexit, faulthandler, threading, time
+
+def parked_thread_of_the_crashing_process():
+    while True:
+        time.sleep(0.05)
+
+def crash_at_exit():
+    started = threading.Event()
+    threading.Thread(target=lambda: (started.set(), parked_thread_of_the_crashing_process()),
+                     name="parked", daemon=True).start()
+    started.wait(10)
+    faulthandler._sigsegv()
+
+def test_registers_a_crash_at_exit():
+    atexit.register(crash_at_exit)
+'''
+
+
+def _run_crashing_pytest(tmp_path: Path, *plugins: str) -> subprocess.CompletedProcess:
+    (tmp_path / "test_crash.py").write_text(CRASHING_TEST)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONFAULTHANDLER"}
+    env["PYTHONPATH"] = str(REPO_ROOT)
+    args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path)]
+    for plugin in plugins:
+        args += ["-p", plugin]
+    return subprocess.run([*args, "test_crash.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_a_crash_after_pytest_finished_prints_every_threads_stack(tmp_path):
+    # pytest alone switches faulthandler off at unconfigure: the process dies silently.
+    bare = _run_crashing_pytest(tmp_path)
+    assert bare.returncode == -11, (bare.returncode, bare.stderr[-2000:])
+    assert "1 passed" in bare.stdout and "Fatal Python error" not in bare.stderr
+
+    # With the suite's exit guard the same crash names itself and shows both threads' stacks.
+    guarded = _run_crashing_pytest(tmp_path, "tests.exit_guard")
+    assert guarded.returncode == -11, (guarded.returncode, guarded.stderr[-2000:])
+    assert "Fatal Python error: Segmentation fault" in guarded.stderr, guarded.stderr[-2000:]
+    assert "in crash_at_exit" in guarded.stderr                          # the crashing (main) thread
+    assert "in parked_thread_of_the_crashing_process" in guarded.stderr  # every other thread too
