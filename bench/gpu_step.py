@@ -146,10 +146,12 @@ def part_vllm(args) -> dict:
     import random
 
     vocab = json.loads((Path(args.model_dir) / "bench_params.json").read_text())["vocab"]
-    options = {} if not args.cpu else {"max_num_batched_tokens": args.seq + args.new_tokens}
+    # CPU build: the fraction is of host RAM (0.1 starts on a shared box), no chunked prefill.
+    options = ({"gpu_memory_utilization": 0.1, "enforce_eager": True,
+                "max_num_batched_tokens": args.seq + args.new_tokens} if args.cpu
+               else {"gpu_memory_utilization": 0.6})
     llm = LLM(model=args.model_dir, dtype="float32" if args.cpu else "bfloat16",
-              max_model_len=args.seq + args.new_tokens, seed=0,
-              **({} if args.cpu else {"gpu_memory_utilization": 0.6}), **options)
+              max_model_len=args.seq + args.new_tokens, seed=0, **options)
     rng = random.Random(0)
     prompts = [{"prompt_token_ids": [rng.randrange(10, vocab) for _ in range(args.seq // 4)]}
                for _ in range(args.prompts)]
@@ -173,12 +175,16 @@ def run_part(args, part: str, model_dir: str, python: str) -> dict:
     if args.cpu:
         cmd.append("--cpu")
     env = {**os.environ, "DS_ACCELERATOR": "cpu" if args.cpu else "cuda"}
+    if args.cpu:  # vLLM's CPU build: a 1 GiB KV cache, the engine core in this process (no spawn)
+        env.setdefault("VLLM_CPU_KVCACHE_SPACE", "1")
+        env.setdefault("VLLM_ENABLE_V1_MULTIPROCESSING", "0")
     t0 = time.perf_counter()
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False, timeout=args.part_timeout)
     except subprocess.TimeoutExpired as exc:
-        tail = (exc.stderr or b"")[-2000:]
-        return {"error": f"timed out after {args.part_timeout:.0f}s", "stderr_tail": str(tail)}
+        tail = exc.stderr or ""
+        tail = tail.decode(errors="replace") if isinstance(tail, bytes) else tail
+        return {"error": f"timed out after {args.part_timeout:.0f}s", "stderr_tail": tail[-2000:]}
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
     if proc.returncode != 0 or not lines:
         return {"error": f"exit {proc.returncode}", "python": python, "stderr_tail": proc.stderr[-3000:]}
