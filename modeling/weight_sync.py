@@ -21,8 +21,10 @@ derives the same answer everywhere:
   * gloo, buckets staged through CPU memory: a member on the CPU, `backend: gloo`, or two members
     on one GPU. The last case is the colocated learner + generator of a one-GPU node (fractional
     `num_gpus`): NCCL refuses two ranks of a communicator on one device ("Duplicate GPU detected").
-    verl and OpenRLHF hand colocated engines CUDA IPC handles instead (no copy through the host);
-    gloo is used here because it is the path the CPU tests run bit for bit.
+    verl, OpenRLHF and vLLM's own RLHF example (`examples/offline_inference/rlhf_utils.py`,
+    `ColocateWorkerExtension`) hand colocated engines CUDA IPC handles instead
+    (`torch.multiprocessing.reductions.reduce_tensor`: no copy through the host); gloo is used here
+    because it is the path the CPU tests run bit for bit, and IPC handles can only be tested on a GPU.
 The choice and its reason are `group.transport` / `group.transport_reason`, logged by rank 0 (the
 learner).
 
