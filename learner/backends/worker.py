@@ -228,6 +228,19 @@ class RankWorker:
         stats = token_stats(self.backend.policy, ids, torch.ones_like(ids))
         return stats.logprobs.sum() * 0.0
 
+    def _pad_forwards(self, *, old: bool) -> None:
+        """A padding micro-batch's share of the no-grad forwards the other ranks run on real ones:
+        the reference's (when there is one) and pi_old's (`old`, with several updates per batch).
+        Under ZeRO-3 every forward gathers each module's parameters collectively, so a rank that
+        skipped them would pair its next gather with another rank's reference gather."""
+        ids = torch.full((1, 2), self.pad_id, dtype=torch.long, device=self.backend.device)
+        with torch.no_grad(), self.backend.autocast():
+            if self.backend.reference is not None and self.config.loss.grpo.kl_beta > 0:
+                token_stats(self.backend.reference, ids, torch.ones_like(ids))
+            if old:
+                self.backend.begin_forward()
+                token_stats(self.backend.policy, ids, torch.ones_like(ids))
+
     # -- the step ------------------------------------------------------------------------------
     def _forward(self, t: dict[str, torch.Tensor], *, grad: bool):
         d = self.config.loss.distill
@@ -260,6 +273,7 @@ class RankWorker:
         ref_s = 0.0  # where the step's time goes: reference forwards vs the policy's forward/backward
         for idx in batches:
             if not idx:
+                self._pad_forwards(old=n_updates > 1)
                 cache.append({})
                 continue
             t = self._tensors(prep, idx)
@@ -285,6 +299,9 @@ class RankWorker:
                 if not entry:
                     if update:
                         self.backend.backward(self._dummy_loss())
+                    else:  # evaluate: the other ranks' policy forwards gather too
+                        with torch.no_grad():
+                            self._dummy_loss()
                     continue
                 t = entry["t"]
                 stats = self._forward(t, grad=update)
