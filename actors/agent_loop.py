@@ -13,7 +13,9 @@ those ids. When a turn is cut by the token limit (no `<|im_end|>` sampled), the 
 
 Limits (paper, Appendix D): at most 5 assistant turns, 8,192 prompt tokens, 12,288 response
 tokens (everything after the prompt: generated ids and observations). An episode that hits a
-limit is flagged `truncated` and says which limit in `metadata["truncation"]`.
+limit is flagged `truncated`; `metadata["end_reason"]` says how every episode ended (the env's
+`EpisodeEnd.reason`, `envs.episode.EndReason`) and `metadata["truncation"]` names a cut in the
+`reward.penalize` vocabulary ("max_turns", "response_tokens"; "" for an answer).
 
 The loop talks to two async callables, so the same code runs in-process (tests, the plain-loop
 benchmark, SFT data) and against Ray actors (training):
@@ -35,6 +37,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from actors.generator import GenerationRequest, GenerationResult
 from actors.types import RolloutSample, TurnSpan
+from envs.episode import EndReason, EpisodeEnd, cut_observation
 
 
 class RolloutLimits(BaseModel):
@@ -87,9 +90,13 @@ class PromptTooLongError(ValueError):
 
 
 class EnvHandle(Protocol):
+    """An episode's env, in-process or remote. `step` is the env's `step(text)`; a step that ends the
+    episode carries its `EpisodeEnd` in `info["end"]`; `finish(reason)` cuts the episode (an
+    `EndReason`) and returns its `EpisodeEnd` (idempotent)."""
+
     async def reset(self, spec: EpisodeSpec) -> tuple[str, dict[str, Any]]: ...
     async def step(self, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]: ...
-    async def finish(self, reason: str) -> dict[str, Any]: ...
+    async def finish(self, reason: EndReason) -> EpisodeEnd: ...
     async def close(self) -> None: ...
 
 
@@ -102,45 +109,23 @@ def turn_seed(episode_seed: int, turn: int) -> int:
     return int.from_bytes(digest, "little") & 0x7FFF_FFFF_FFFF_FFFF
 
 
-def finished_info(env, reason: str = "token_limit") -> dict[str, Any]:
+def finish_episode(env, reason: EndReason | str = "token_limit") -> EpisodeEnd:
     """Score an episode the agent loop had to stop (a token limit) before the env ended it.
 
-    The env scores it (`HealthcareGymEnv.truncate`: the domain's own scorer, as a turn-limit
-    truncation); nothing here re-implements scoring.
+    The env scores it (`HealthcareGymEnv.finish`: the domain's own scorer, as a turn-limit
+    truncation); nothing here re-implements scoring. Idempotent, as `finish` is.
     """
-    reward, info = env.unwrapped.truncate(reason)
-    return summarize_final_info(info, reward)
+    return env.unwrapped.finish(reason=reason)
 
 
-def summarize_final_info(info: dict[str, Any], reward: float) -> dict[str, Any]:
-    """The parts of the env's final `info` that cross process boundaries (no pydantic objects).
-
-    Besides the reward, the evaluation harness (evals/) reads the submitted answer and the safety
-    violations counted by severity ("1".."5"), which exist only while the final info still holds
-    the trajectory and the reward breakdown.
-    """
-    violations: dict[str, int] = {}
-    for violation in (info.get("reward_breakdown") or {}).get("violations") or []:
-        level = str(violation.get("severity"))
-        violations[level] = violations.get(level, 0) + 1
-    trajectory = info.get("trajectory")
-    return {"reward": float(reward), "reward_components": dict(info.get("reward_components") or {}),
-            "is_correct": bool(info.get("is_correct", False)), "safety_violations": violations,
-            "submitted_answer": getattr(trajectory, "submitted_answer", None),
-            "episode": episode_record(trajectory)}
+#: How training's `metadata["truncation"]` (what `reward.penalize` names) calls a cut end.
+TRUNCATION_LABELS: dict[str, str] = {"turn_limit": "max_turns", "token_limit": "response_tokens"}
 
 
-#: What `episode_record` leaves out: the system prompt (the same for every episode of a domain) and
-#: wall-clock durations (so the record of a re-run episode is identical).
-_EPISODE_EXCLUDE = {"system_prompt": True,
-                    "turns": {"__all__": {"duration_s": True, "tool_calls": {"__all__": {"duration_s"}}}}}
-
-
-def episode_record(trajectory: Any) -> dict[str, Any] | None:
-    """The env's `Trajectory` as plain JSON data for `RolloutSample.episode` (None without one)."""
-    if trajectory is None or not hasattr(trajectory, "model_dump"):
-        return None
-    return trajectory.model_dump(mode="json", exclude=_EPISODE_EXCLUDE)
+def truncation_label(end: EpisodeEnd) -> str:
+    """`metadata["truncation"]` of an episode: "" when the agent answered, else the cut's name in the
+    `reward.penalize` vocabulary ("max_turns", "response_tokens") or its end reason."""
+    return "" if end.terminated else TRUNCATION_LABELS.get(end.reason, end.reason)
 
 
 def make_env(domain: str, split: str | None, max_turns: int, env_kwargs: dict[str, Any] | None = None):
@@ -174,13 +159,12 @@ class LocalEnv:
 
     async def step(self, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if terminated or truncated:
-            info = {**info, "final": summarize_final_info(info, float(reward))}
-            info.pop("trajectory", None)
+        if terminated or truncated:  # what crosses a process boundary: the typed end, no pydantic record
+            info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
         return obs, float(reward), terminated, truncated, info
 
-    async def finish(self, reason: str) -> dict[str, Any]:
-        return finished_info(self.env)
+    async def finish(self, reason: EndReason) -> EpisodeEnd:
+        return finish_episode(self.env, reason)
 
     async def close(self) -> None:
         return None
@@ -222,9 +206,7 @@ class AgentLoop:
         """What the template renders after a finished assistant turn, up to the next generation prompt."""
         from modeling.model import tool_turn_text
 
-        cap = self.limits.max_observation_chars
-        if cap is not None and len(observation) > cap:
-            observation = observation[:cap] + f" ...[{len(observation) - cap} more characters]"
+        observation = cut_observation(observation, self.limits.max_observation_chars)
         if had_tool_calls:
             return tool_turn_text(observation)
         return f"\n{self.im_start}user\n{observation}{self.im_end}\n{self.im_start}assistant\n"
@@ -258,13 +240,13 @@ class AgentLoop:
         versions = [-1] * prompt_length
         turns: list[TurnSpan] = []
         num_tool_calls = 0
-        final: dict[str, Any] | None = None
-        truncation = ""
+        end: EpisodeEnd | None = None
+        limit_hit: EndReason | None = None  # a limit of this loop that cut the episode
         turn = 0
         while True:
             budget = limits.max_response_tokens - (len(ids) - prompt_length)
             if budget <= 0:
-                truncation = "response_tokens"
+                limit_hit = "token_limit"
                 break
             request = GenerationRequest(
                 request_id=f"{spec.sample_id}:t{turn}", prompt_ids=ids,
@@ -292,10 +274,8 @@ class AgentLoop:
             observation, reward, terminated, env_truncated, step_info = await env.step(self.action_text(result.token_ids))
             timings["env_s"] += time.perf_counter() - t0
             num_tool_calls += len(step_info.get("tool_calls") or [])
-            if terminated or env_truncated:
-                final = step_info.get("final") or summarize_final_info(step_info, reward)
-                if env_truncated:  # an env actor ends an episode whose env raised as "env_error"
-                    truncation = "env_error" if step_info.get("env_error") else "max_turns"
+            if terminated or env_truncated:  # an env actor ends an episode whose env raised as "env_error"
+                end = step_info["end"]
                 break
             tail = ([self.im_end_id] if cut else []) + self.observation_ids(
                 observation, bool(step_info.get("tool_calls")))
@@ -303,20 +283,20 @@ class AgentLoop:
             if len(tail) >= room:
                 # The observation does not fit: keep what fits, and the episode ends here.
                 tail = tail[:max(room, 0)]
-                truncation = "response_tokens"
+                limit_hit = "token_limit"
             ids.extend(tail)
             mask.extend([0] * len(tail))
             logprobs.extend([0.0] * len(tail))
             versions.extend([-1] * len(tail))
-            if truncation:
+            if limit_hit:
                 break
             if turn >= limits.max_turns:  # the env enforces it too; this guards a mis-configured env
-                truncation = "max_turns"
+                limit_hit = "turn_limit"
                 break
 
-        if final is None:
+        if end is None:
             t0 = time.perf_counter()
-            final = await env.finish(truncation or "limit")
+            end = await env.finish(limit_hit or "token_limit")
             timings["env_s"] += time.perf_counter() - t0
         await env.close()
         response_tokens = sum(mask)
@@ -324,13 +304,13 @@ class AgentLoop:
             sample_id=spec.sample_id, task_id=spec.task_id, domain=spec.domain, group_id=spec.group_id,
             seed=spec.seed, prompt_length=prompt_length, input_ids=ids, loss_mask=mask,
             sampling_logprobs=logprobs, policy_versions=versions, turns=turns,
-            env_reward=float(final["reward"]), env_correct=bool(final["is_correct"]),
-            reward=float(final["reward"]), reward_components=dict(final["reward_components"]),
-            correct=bool(final["is_correct"]), truncated=bool(truncation), num_tool_calls=num_tool_calls,
-            response_tokens=response_tokens, episode=final.get("episode"),
-            metadata={"truncation": truncation, "num_turns": len(turns),
+            env_reward=end.reward, env_correct=end.is_correct,
+            reward=end.reward, reward_components=dict(end.reward_components),
+            correct=end.is_correct, truncated=end.truncated, num_tool_calls=num_tool_calls,
+            response_tokens=response_tokens, episode=end.episode,
+            metadata={"truncation": truncation_label(end), "end_reason": end.reason, "num_turns": len(turns),
                       "group_index": spec.group_index, "split": spec.split, **timings,
-                      **({"env_error": final["env_error"]} if final.get("env_error") else {})},
+                      **({"env_error": end.env_error} if end.env_error else {})},
         )
 
 

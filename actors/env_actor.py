@@ -15,7 +15,7 @@ so a test can check that nothing was lost or counted twice.
 
 Hostile actions and env failures. `env.step` never raises on any action (issue 13); should an env
 method raise anyway (a bug in a domain's toolkit or scorer), `EnvActor.step` / `finish` end that
-episode as truncated with reward 0 and `final["env_error"]` naming the failure, instead of raising
+episode as truncated with reward 0 and an `EpisodeEnd` (reason "env_error") naming the failure, instead of raising
 into the agent loop, which would fail the episode's whole group. The actor keeps serving (a Python
 exception never kills it) and does not reuse that episode's env.
 
@@ -43,7 +43,8 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finished_info, make_env, summarize_final_info
+from actors.agent_loop import AgentLoop, EpisodeSpec, GenerateFn, finish_episode, make_env
+from envs.episode import EpisodeEnd
 from actors.types import RolloutSample
 
 
@@ -130,40 +131,37 @@ class EnvActor:
     def step(self, key: str, action: str) -> tuple[str, float, bool, bool, dict[str, Any]]:
         """`env.step` for one episode. Never raises for a hostile action or a failing env method:
         `env.step` itself never raises on any action; an exception from the env anyway (a bug in a
-        domain's toolkit or scorer) ends that episode here, unscored (reward 0, `final["env_error"]`
-        naming the failure), so the rest of the batch and this actor carry on."""
+        domain's toolkit or scorer) ends that episode here, unscored (reward 0, an `EpisodeEnd` with
+        reason "env_error" naming the failure), so the rest of the batch and this actor carry on."""
         env = self._env(key)
         try:
             obs, reward, terminated, truncated, info = env.step(action)
-            final = summarize_final_info(info, float(reward)) if terminated or truncated else None
             info = {k: v for k, v in info.items() if k not in ("trajectory", "reward_breakdown")}
         except Exception as exc:
             return self._failed(key, env, "step", exc)
-        if final is not None:
-            info["final"] = final
         return obs, float(reward), bool(terminated), bool(truncated), info
 
-    def finish(self, key: str, reason: str) -> dict[str, Any]:
-        """Score an episode the agent loop stopped; a failure is returned as `env_error`, not raised."""
+    def finish(self, key: str, reason: str) -> EpisodeEnd:
+        """Score an episode the agent loop stopped (idempotent: an episode already over returns its
+        end); a failure is returned as an `env_error` end, not raised."""
         env = self._env(key)
         try:
-            return finished_info(env, reason)
+            return finish_episode(env, reason)
         except Exception as exc:
-            return self._failed(key, env, "finish", exc)[4]["final"]
+            return self._failed(key, env, "finish", exc)[4]["end"]
 
     def _failed(self, key: str, env: Any, method: str, exc: Exception) -> tuple[str, float, bool, bool, dict[str, Any]]:
         """The episode's end after its env raised: truncated, reward 0, the failure named in
-        `info["env_error"]` and `final["env_error"]`. The env is not reused (its state is unknown)."""
+        `info["env_error"]` and `info["end"].env_error`. The env is not reused (its state is unknown)."""
         record = getattr(env, "_record", None)
         where = f"{getattr(env, 'domain_name', '?')}/{getattr(record, 'task_id', '?')}"
         error = (f"env actor {self.actor_index}: {method} of episode {key!r} ({where}) failed: "
                  f"{type(exc).__name__}: {str(exc)[:500]}")
         self.env_errors += 1
         self._broken.add(key)
-        final = {"reward": 0.0, "reward_components": {}, "is_correct": False, "safety_violations": {},
-                 "submitted_answer": None, "env_error": error}
         observation = json.dumps({"error": "the environment failed on this action; the episode ends here"})
-        info = {"env_error": error, "final": final, "tool_calls": [], "parse_errors": [], "tool_errors": []}
+        info = {"env_error": error, "end": EpisodeEnd.failed(error), "tool_calls": [], "parse_errors": [],
+                "tool_errors": []}
         return observation, 0.0, False, True, info
 
     def release(self, key: str) -> None:

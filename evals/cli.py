@@ -128,14 +128,14 @@ def run_command(args: argparse.Namespace) -> int:
     return evaluate(args)
 
 
-def _run_limits(notes: dict) -> dict:
-    """The rollout limits of a run folder's config (so its policy is evaluated as it was trained)."""
+def _run_rollout(notes: dict):
+    """The rollout section of a run folder's config (so its policy is evaluated as it was trained),
+    loaded by the run config's own loader; None for a policy that is not a run."""
     if notes.get("kind") != "run":
-        return {}
-    import yaml
+        return None
+    from evals.policies import load_run_config
 
-    config = yaml.safe_load((Path(notes["run_dir"]) / "config.yaml").read_text()) or {}
-    return config.get("rollout") or {}
+    return load_run_config(notes["run_dir"]).rollout
 
 
 def evaluate(args: argparse.Namespace) -> int:
@@ -156,17 +156,19 @@ def evaluate(args: argparse.Namespace) -> int:
         print(note, file=sys.stderr)
     if notes.get("kind") == "run":
         notes["run_dir"] = args.policy
-    rollout = _run_limits(notes)
+    rollout = _run_rollout(notes)
+    defaults = ConditionSettings()
     settings = ConditionSettings(
-        max_turns=args.max_turns or rollout.get("max_turns", 5),
-        max_tokens=args.max_tokens or rollout.get("max_new_tokens_per_turn", 512),
-        max_response_tokens=args.max_response_tokens or rollout.get("max_response_tokens", 4096),
+        max_turns=args.max_turns or (rollout.max_turns if rollout else defaults.max_turns),
+        max_tokens=args.max_tokens or (rollout.max_new_tokens_per_turn if rollout else defaults.max_tokens),
+        max_response_tokens=args.max_response_tokens or (rollout.max_response_tokens if rollout
+                                                         else defaults.max_response_tokens),
         prompt_style=notes.get("prompt_style", "env"),
-        max_observation_chars=rollout.get("max_observation_chars"),
-        text_turn_ends_episode=bool(rollout.get("text_turn_ends_episode", False)),
+        max_observation_chars=rollout.max_observation_chars if rollout else None,
+        text_turn_ends_episode=rollout.text_turn_ends_episode if rollout else False,
     )
     env_vars = {k: os.environ[k] for k in ("HCGYM_EMBEDDINGS", "HCGYM_DATA_DIR") if k in os.environ}
-    env_vars.update(rollout.get("env_vars") or {})
+    env_vars.update(rollout.env_vars if rollout else {})
     options = EvalOptions(condition=args.condition, seeds=tuple(range(args.seeds)), settings=settings,
                           concurrency=args.concurrency, use_ray=not args.no_ray, num_env_actors=args.env_actors,
                           domain_modules=notes.get("domain_modules") or None, env_vars=env_vars or None,

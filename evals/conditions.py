@@ -10,9 +10,11 @@ handle (`actors.agent_loop.EnvHandle`: in-process `LocalEnv` or a Ray `RemoteEnv
 * `agent`: the multi-turn runner: the env's system prompt (or the run's compact prompt), its tools,
   its action parser, a turn budget and a response-token budget, as in training.
 
-End reasons (evals.types.END_REASONS): "answer" (submitted), "text_answer" (a turn without a tool
-call taken as the answer, `text_turn_ends_episode`), "turn_limit", "token_limit",
-"parse_failure" (no readable answer), "endpoint_error", "context_overflow".
+End reasons: the env's one vocabulary (`envs.episode.EndReason`, re-exported as
+`evals.types.EndReason`): "answer" (submitted), "text_answer" (a turn without a tool call taken as
+the answer, `text_turn_ends_episode`), "turn_limit", "tool_call_limit", "token_limit",
+"parse_failure" (no readable answer), "endpoint_error", "context_overflow", "env_error". Every
+episode's score is the env's `EpisodeEnd`.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from actors.agent_loop import EpisodeSpec, compact_system_prompt
+from envs.episode import EndReason, EpisodeEnd, cut_observation
 from evals.policies import submit_action
 from evals.types import PolicyReply
 
@@ -53,7 +56,7 @@ class ConditionSettings:
 class EpisodeOutcome:
     """What a condition learned about one episode (the runner adds identity and timing)."""
 
-    end_reason: str
+    end_reason: EndReason
     answer: str | None = None
     correct: bool | None = None
     reward: float | None = None
@@ -86,25 +89,25 @@ def _account(outcome: EpisodeOutcome, reply: PolicyReply) -> None:
         outcome.cost_usd = (outcome.cost_usd or 0.0) + reply.cost_usd
 
 
-def _error_end_reason(error_kind: str) -> str:
+def _error_end_reason(error_kind: str) -> EndReason:
     return "context_overflow" if error_kind == "context_overflow" else "endpoint_error"
 
 
-def _apply_final(outcome: EpisodeOutcome, final: dict[str, Any]) -> None:
-    outcome.reward = float(final["reward"])
-    outcome.reward_components = dict(final.get("reward_components") or {})
-    outcome.safety_violations = dict(final.get("safety_violations") or {})
+def _apply_end(outcome: EpisodeOutcome, end: EpisodeEnd) -> None:
+    outcome.reward = end.reward
+    outcome.reward_components = dict(end.reward_components)
+    outcome.safety_violations = dict(end.safety_violations)
     if outcome.correct is None:
-        outcome.correct = bool(final.get("is_correct", False))
-    if final.get("env_error"):  # an env actor ended the episode unscored (a toolkit/scorer bug)
-        outcome.error_kind, outcome.extra["env_error"] = "env_error", final["env_error"]
+        outcome.correct = end.is_correct
+    if end.env_error:  # an env actor ended the episode unscored (a toolkit/scorer bug)
+        outcome.error_kind, outcome.extra["env_error"] = "env_error", end.env_error
 
 
-async def _submit(env, answer: str) -> tuple[dict[str, Any], bool]:
-    """Submit `answer` through the env; returns (final info, whether the env accepted it)."""
-    _, reward, terminated, truncated, info = await env.step(submit_action(answer[:MAX_ANSWER_CHARS]))
+async def _submit(env, answer: str) -> tuple[EpisodeEnd, bool]:
+    """Submit `answer` through the env; returns (the episode's end, whether the env accepted it)."""
+    _, _, terminated, truncated, info = await env.step(submit_action(answer[:MAX_ANSWER_CHARS]))
     if terminated or truncated:
-        return info.get("final") or {"reward": reward}, terminated
+        return info["end"], terminated
     return await env.finish("parse_failure"), False
 
 
@@ -131,7 +134,7 @@ async def run_text(policy, env, task, domain: str, split: str | None, seed: int,
     if reply.error_kind:
         outcome.end_reason, outcome.error_kind = _error_end_reason(reply.error_kind), reply.error_kind
         outcome.error_kinds[reply.error_kind] = 1
-        _apply_final(outcome, await env.finish(outcome.end_reason))
+        _apply_end(outcome, await env.finish(outcome.end_reason))
         outcome.correct = False
         return outcome
     if is_multiple_choice(task):
@@ -142,8 +145,8 @@ async def run_text(policy, env, task, domain: str, split: str | None, seed: int,
         outcome.answer = reply.text.strip() or None
         if outcome.answer is None:
             outcome.end_reason = "parse_failure"
-    final, _ = await _submit(env, reply.text)
-    _apply_final(outcome, final)
+    end, _ = await _submit(env, reply.text)
+    _apply_end(outcome, end)
     return outcome
 
 
@@ -171,14 +174,14 @@ async def run_logprob(policy, env, task, domain: str, split: str | None, seed: i
         outcome.end_reason = _error_end_reason(failure)
         outcome.error_kind = failure
         outcome.error_kinds[failure] = 1
-        _apply_final(outcome, await env.finish(outcome.end_reason))
+        _apply_end(outcome, await env.finish(outcome.end_reason))
         outcome.correct = False
         return outcome
     outcome.answer = max(letters, key=lambda letter: (scores[letter], -ord(letter[0])))
     outcome.correct = outcome.answer == task.correct_answer
     outcome.extra["option_logprobs"] = {k: float(v) for k, v in scores.items()}
-    final, _ = await _submit(env, outcome.answer)
-    _apply_final(outcome, final)
+    end, _ = await _submit(env, outcome.answer)
+    _apply_end(outcome, end)
     return outcome
 
 
@@ -227,7 +230,7 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
     messages: list[dict[str, Any]] = [{"role": "system", "content": system},
                                       {"role": "user", "content": user_content(info)}]
     outcome = EpisodeOutcome(end_reason="turn_limit")
-    final: dict[str, Any] | None = None
+    end: EpisodeEnd | None = None
     last_unparsed = False
     while True:
         budget = settings.max_response_tokens - outcome.completion_tokens
@@ -247,7 +250,7 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
         if reply.tool_calls:
             assistant["tool_calls"] = reply.tool_calls
         messages.append(assistant)
-        observation, reward, terminated, truncated, step_info = await env.step(action)
+        observation, _, terminated, truncated, step_info = await env.step(action)
         calls = step_info.get("tool_calls") or []
         outcome.tool_calls += len(calls)
         kinds = ["parse_error"] * len(step_info.get("parse_errors") or []) + list(step_info.get("tool_errors") or [])
@@ -257,23 +260,19 @@ async def run_agent(policy, env, task, domain: str, split: str | None, seed: int
         if not calls:
             outcome.error_kinds["no_tool_call"] = outcome.error_kinds.get("no_tool_call", 0) + 1
         if terminated or truncated:
-            final = step_info.get("final") or {"reward": reward}
-            if step_info.get("end_reason") == "text_answer":  # the env took a text turn as the answer
-                outcome.end_reason = "text_answer"
-            else:
-                outcome.end_reason = "answer" if terminated else ("parse_failure" if last_unparsed else "turn_limit")
+            end = step_info["end"]
+            # the env's end reason; a turn limit reached on a turn without a call had no readable answer
+            outcome.end_reason = "parse_failure" if end.reason == "turn_limit" and last_unparsed else end.reason
             break
-        cap = settings.max_observation_chars
-        if cap is not None and len(observation) > cap:  # the agent loop's cut, marker included
-            observation = observation[:cap] + f" ...[{len(observation) - cap} more characters]"
+        observation = cut_observation(observation, settings.max_observation_chars)  # as the agent loop cuts it
         messages.extend(_observation_messages(reply, observation, bool(calls)))
         if outcome.turns >= settings.max_turns:  # the env enforces it too
             outcome.end_reason = "turn_limit"
             break
-    if final is None:
-        final = await env.finish(outcome.end_reason)
-    _apply_final(outcome, final)
-    answer = final.get("submitted_answer") or None  # "" submitted = no answer
+    if end is None:
+        end = await env.finish(outcome.end_reason)
+    _apply_end(outcome, end)
+    answer = end.submitted_answer or None  # "" submitted = no answer
     if answer is not None and is_multiple_choice(task):
         from envs.rewards.choice import extract_choice
 

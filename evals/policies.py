@@ -156,6 +156,20 @@ def is_run_dir(path: Path) -> bool:
     return (path / "config.yaml").is_file() and ((path / "checkpoints").is_dir() or (path / "model").is_dir())
 
 
+def load_run_config(run_dir: str | os.PathLike):
+    """A run folder's `config.yaml` as a `learner.config.RunConfig`, through the run config's own
+    reader and validation (what `hcgym train` wrote is what evaluation reads). The domains and local
+    paths it names are not re-checked: a finished run is evaluated even where its data paths moved.
+
+    Raises:
+        learner.config.ConfigError: naming the file and the key path of every problem.
+    """
+    from learner.config import _read_yaml, validate_config
+
+    path = Path(run_dir) / "config.yaml"
+    return validate_config(_read_yaml(path), str(path), check_references=False)
+
+
 def run_policy(run_dir: str | os.PathLike) -> RunPolicy:
     """The newest policy of a run folder: the latest finished checkpoint's HF policy, else the
     warm start the run trained from (`model/policy.json`). The run's `rollout.system_prompt`
@@ -164,14 +178,12 @@ def run_policy(run_dir: str | os.PathLike) -> RunPolicy:
     Raises:
         FileNotFoundError: naming the run folder when it holds no policy yet.
     """
-    import yaml
-
     from modeling.checkpoint import latest_checkpoint
 
     run = Path(run_dir)
-    config = yaml.safe_load((run / "config.yaml").read_text()) or {}
-    prompt_style = ((config.get("rollout") or {}).get("system_prompt")) or "env"
-    domain_modules = dict(((config.get("data") or {}).get("domain_modules")) or {})
+    config = load_run_config(run)
+    prompt_style = config.rollout.system_prompt
+    domain_modules = dict(config.data.domain_modules)
     latest = latest_checkpoint(run)
     if latest is not None and (latest / "learner" / "policy" / "config.json").is_file():
         return RunPolicy(latest / "learner" / "policy", prompt_style, domain_modules, f"checkpoint {latest.name}")

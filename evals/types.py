@@ -14,9 +14,8 @@ from pydantic import BaseModel, ConfigDict, Field
 Condition = Literal["text", "logprob", "agent"]
 CONDITIONS: tuple[str, ...] = ("text", "logprob", "agent")
 
-EndReason = Literal["answer", "text_answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error", "context_overflow"]
-END_REASONS: tuple[str, ...] = ("answer", "text_answer", "turn_limit", "token_limit", "parse_failure", "endpoint_error",
-                                "context_overflow")
+# How an episode ended: the project's one vocabulary (envs.episode), shared with the env and training.
+from envs.episode import END_REASONS, EndReason  # noqa: E402,F401
 
 # The columns that identify one episode; a results folder never holds two rows with the same key.
 RESULT_KEY: tuple[str, ...] = ("policy_id", "benchmark", "task_id", "condition", "seed")

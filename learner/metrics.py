@@ -200,18 +200,23 @@ INDEX_COLUMNS = ("end_reason", "safety_max_severity", "error_kinds")
 def episode_index_fields(sample: RolloutSample) -> dict[str, Any]:
     """How the episode ended, its worst safety violation (0 = none) and the kinds of its errors
     (tool-call error kinds from envs.core.trajectory.ErrorKind, plus "parse_error")."""
+    from envs.episode import LEGACY_END_REASONS
+
     record = sample.episode
     truncation = str(sample.metadata.get("truncation") or "")
+    # the agent loop's `metadata["end_reason"]` (envs.episode.EndReason); samples written before it
+    # existed are mapped from their truncation label
+    ended = sample.metadata.get("end_reason") or LEGACY_END_REASONS.get(truncation, truncation)
     if record is None:
-        return {"end_reason": truncation or "unknown", "safety_max_severity": None, "error_kinds": []}
+        return {"end_reason": ended or "unknown", "safety_max_severity": None, "error_kinds": []}
     severities = [int(v.get("severity") or 0) for v in (record.reward_details.get("violations") or [])
                   if isinstance(v, dict)]
     kinds = {call.error_kind for turn in record.turns for call in turn.tool_calls if call.error_kind}
     if any(turn.parse_errors for turn in record.turns):
         kinds.add("parse_error")
     # "text_answer": a turn without a tool call ended the episode (rollout.text_turn_ends_episode)
-    end = truncation or record.metadata.get("end_reason") or (
-        "answer" if record.submitted_answer is not None else "turn_limit" if record.truncated else "ended")
+    end = ended or record.metadata.get("end_reason") or (
+        "answer" if record.submitted_answer is not None else "turn_limit" if record.truncated else "unknown")
     return {"end_reason": end, "safety_max_severity": max(severities, default=0), "error_kinds": sorted(kinds)}
 
 

@@ -102,6 +102,19 @@ def _read_projected(path: Path, columns: tuple[str, ...], types: dict[str, pa.Da
     return pa.table(dict(zip(columns, arrays)))
 
 
+def _current_end_reasons(table: pa.Table) -> pa.Table:
+    """Episodes written before the one end-reason vocabulary (`envs.episode.EndReason`) named a cut by
+    training's truncation label ("max_turns", "response_tokens"): shown under the current names, so
+    the column (and its filter) holds one vocabulary across old and new files."""
+    from envs.episode import LEGACY_END_REASONS
+
+    column = table.column("end_reason")
+    if not pc.any(pc.is_in(column, value_set=pa.array(list(LEGACY_END_REASONS), pa.string()))).as_py():
+        return table
+    mapped = [None if v is None else LEGACY_END_REASONS.get(v, v) for v in column.to_pylist()]
+    return table.set_column(table.schema.get_field_index("end_reason"), "end_reason", pa.array(mapped, pa.string()))
+
+
 def _mask_for(table: pa.Table, query: EpisodeQuery) -> pa.ChunkedArray | None:
     conditions = []
     names = set(table.column_names)
@@ -251,7 +264,7 @@ class RunSource(_Source):
 
                 def read(item: tuple[int, tuple[str, Path]]) -> pa.Table:
                     number, (part, path) = item
-                    table = _read_projected(path, RUN_INDEX_COLUMNS, RUN_INDEX_TYPES)
+                    table = _current_end_reasons(_read_projected(path, RUN_INDEX_COLUMNS, RUN_INDEX_TYPES))
                     n = table.num_rows
                     return (table.append_column("part", pa.array([part] * n, pa.string()))
                             .append_column("file", pa.array([number] * n, pa.int32()))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from actors.agent_loop import finished_info, make_env
+from actors.agent_loop import finish_episode, make_env
 from envs import registry
 from envs.rewards import score_episode
 
@@ -28,18 +28,18 @@ def test_runner_truncation_equals_the_envs_own_truncation_with_the_domain_scorer
     cut = make_env("cross_domain", "test", max_turns=10)
     cut.reset(seed=0, options={"task_id": task.id})
     cut.step(ACTION)
-    result = finished_info(cut)
-    assert result["reward"] == pytest.approx(float(reward))
-    assert result["reward_components"] == pytest.approx(info["reward_components"])
-    assert result["is_correct"] is bool(info["is_correct"])
+    end = finish_episode(cut)
+    assert end.reward == pytest.approx(float(reward))
+    assert end.reward_components == pytest.approx(info["reward_components"])
+    assert end.is_correct is bool(info["is_correct"])
 
     # The pathway scorer is what decided: the generic reward scores the same record differently.
     record = cut.unwrapped.trajectory()
     generic = score_episode(record, cut.unwrapped.task, weights=cut.unwrapped.reward_weights,
                             context=cut.unwrapped.domain_env.safety_context)
     assert cut.unwrapped.domain_env.scorer is not None
-    assert abs(generic.total - result["reward"]) > 0.05
-    assert record.truncated and record.reward == pytest.approx(result["reward"])
+    assert abs(generic.total - end.reward) > 0.05
+    assert record.truncated and record.reward == pytest.approx(end.reward)
 
 
 def test_truncate_refuses_an_episode_that_is_over_or_not_started():

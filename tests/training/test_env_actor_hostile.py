@@ -95,8 +95,8 @@ def test_hostile_actions_never_raise_inside_the_actor(ray_cluster):
             assert "env_error" not in info, info["env_error"]
             if terminated or truncated:
                 ended += 1
-                final = info["final"]
-                assert final["reward"] == reward and set(final["reward_components"]) >= {"accuracy", "total"}
+                end = info["end"]
+                assert end.reward == reward and set(end.reward_components) >= {"accuracy", "total"}
                 ray.get(actor.release.remote(key))
                 episode += 1
                 key = f"e{episode}"
@@ -145,21 +145,21 @@ def test_failing_env_method_ends_only_its_episode_and_the_batch_completes(ray_cl
             assert sample.correct and "env_error" not in sample.metadata, sample.metadata
 
 
-def test_finish_after_the_episode_ended_returns_an_env_error(ray_cluster):
+def test_finish_after_the_episode_ended_returns_the_same_end(ray_cluster):
     ray = ray_cluster
     actor = new_actor(ray)
     try:
         ray.get(actor.reset.remote("k", spec_for("ward_dose", 0).model_dump()))
         first = ray.get(actor.finish.remote("k", "token_limit"))
-        assert "env_error" not in first and set(first["reward_components"]) >= {"accuracy", "total"}
-        again = ray.get(actor.finish.remote("k", "token_limit"))  # truncate() raises: already over
-        assert again["reward"] == 0.0 and "RuntimeError" in again["env_error"] and "already over" in again["env_error"]
-        ray.get(actor.release.remote("k"))  # the failed env is dropped, not reused
+        assert first.env_error is None and set(first.reward_components) >= {"accuracy", "total"}
+        again = ray.get(actor.finish.remote("k", "turn_limit"))  # the env's finish is idempotent
+        assert again == first and again.reason == "token_limit"
+        ray.get(actor.release.remote("k"))  # a healthy env goes back to the idle pool
         ray.get(actor.reset.remote("k2", spec_for("ward_dose", 1).model_dump()))
         pong = ray.get(actor.ping.remote())
     finally:
         ray.kill(actor)
-    assert pong["env_errors"] == 1 and pong["active"] == 1
+    assert pong["env_errors"] == 0 and pong["active"] == 1
 
 
 def test_a_group_with_an_env_error_is_dropped_not_trained_on(ray_cluster, ward_policy_dir, tmp_path):
@@ -195,13 +195,13 @@ def test_a_group_with_an_env_error_is_dropped_not_trained_on(ray_cluster, ward_p
 
 
 def test_an_eval_episode_ended_by_an_env_error_says_so():
-    from evals.conditions import EpisodeOutcome, _apply_final
+    from envs.episode import EpisodeEnd
+    from evals.conditions import EpisodeOutcome, _apply_end
 
-    outcome = EpisodeOutcome(end_reason="turn_limit")
-    _apply_final(outcome, {"reward": 0.0, "reward_components": {}, "is_correct": False,
-                           "env_error": "env actor 0: step of episode 'k' (ward_faulty/ward_choice) failed: RuntimeError: x"})
+    outcome = EpisodeOutcome(end_reason="env_error")
+    _apply_end(outcome, EpisodeEnd.failed("env actor 0: step of episode 'k' (ward_faulty/ward_choice) failed: RuntimeError: x"))
     assert outcome.error_kind == "env_error" and "RuntimeError: x" in outcome.extra["env_error"]
     assert outcome.reward == 0.0 and outcome.correct is False
     plain = EpisodeOutcome(end_reason="answer")
-    _apply_final(plain, {"reward": 1.0, "is_correct": True})
+    _apply_end(plain, EpisodeEnd(reason="answer", terminated=True, truncated=False, reward=1.0, is_correct=True))
     assert plain.error_kind is None and "env_error" not in plain.extra

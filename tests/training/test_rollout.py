@@ -164,13 +164,14 @@ def test_turn_token_limit_closes_the_turn_without_training_on_it(tokenizer, hf):
         if span.end < len(sample.input_ids):  # not the final turn: <|im_end|> closes it, untrained
             assert sample.input_ids[span.end] == loop.im_end_id and sample.loss_mask[span.end] == 0
     assert sample.truncated  # a random model never submits: it runs out of turns
-    assert sample.metadata["truncation"] == "max_turns"
+    assert sample.metadata["truncation"] == "max_turns" and sample.metadata["end_reason"] == "turn_limit"
 
 
 def test_response_budget_truncates_the_episode(tokenizer, hf):
     loop = AgentLoop(tokenizer, RolloutLimits(max_turns=5, max_new_tokens_per_turn=8, max_response_tokens=30))
     sample = run(loop.run(spec(seed=9), LocalEnv(5), hf_generate(hf)))
     assert sample.truncated and sample.metadata["truncation"] == "response_tokens"
+    assert sample.metadata["end_reason"] == "token_limit"
     assert len(sample.input_ids) - sample.prompt_length <= 30
     assert "accuracy" in sample.reward_components  # scored by the env's grader despite the early stop
 

@@ -114,7 +114,7 @@ def test_the_pool_from_the_config_ends_text_turns_as_the_plain_loop_does(ray_clu
     # (the replay repeats its last action) to the turn limit
     default = asyncio.run(plain({}))
     assert all(s.metadata["num_turns"] == 4 and s.truncated for s in default)
-    assert all(episode_index_fields(s)["end_reason"] == "max_turns" for s in default)
+    assert all(episode_index_fields(s)["end_reason"] == "turn_limit" for s in default)  # one vocabulary
 
 
 def test_the_agent_condition_reports_a_text_answer():
