@@ -314,7 +314,7 @@ async function episodePage(root, params) {
   }
   const gold = s.gold;
   root.append(el("div", { class: "panel kv", id: "answer" }, el("span", {}, "submitted answer"), el("span", { id: "submitted" }, fmt(ep.submitted_answer)),
-    el("span", {}, "gold"), el("span", { id: "gold" }, fmt(gold)), el("span", {}, "end reason"), el("span", {}, s.end_reason || (s.metadata || {}).truncation || "–"),
+    el("span", {}, "gold"), el("span", { id: "gold" }, fmt(gold)), el("span", {}, "end reason"), el("span", {}, s.end_reason || (s.metadata || {}).end_reason || (s.metadata || {}).truncation || "–"),
     el("span", {}, "sample"), el("span", {}, s.sample_id)));
   if (s.teacher_hint && s.teacher_hint !== "none") {
     root.append(el("div", { class: "panel", id: "hint" }, el("h3", {}, `Teacher hint (${s.teacher_hint})`), el("pre", {}, s.hint_text || s.teacher_hint)));
