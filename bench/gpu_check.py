@@ -277,7 +277,13 @@ def main(argv: list[str] | None = None) -> int:
         vllm_error = None
 
     env = {"learner": probe(sys.executable, TIMEOUTS["env"] / 2)}
-    env["vllm"] = probe(vllm_python, TIMEOUTS["env"] / 2) if vllm_python else {"error": vllm_error}
+    if vllm_python is None:
+        env["vllm"] = {"error": vllm_error}
+    elif os.path.abspath(vllm_python) == os.path.abspath(sys.executable):
+        # One interpreter for both sides (not realpath: every venv's python links to the same base).
+        env["vllm"] = env["learner"]
+    else:
+        env["vllm"] = probe(vllm_python, TIMEOUTS["env"] / 2)
     learner_torch = env["learner"].get("modules", {}).get("torch")
     device = "cpu" if args.cpu else ((env["learner"].get("devices") or [None])[0])
     log.set("device", device or "none")
