@@ -122,7 +122,8 @@ CPU_TWIN_OVERRIDES: tuple[TwinOverride, ...] = (
        "each vLLM CPU engine is a process with its own KV cache (~25 s start); one serves a CPU machine"),
     _o("rollout.num_env_actors", 2, "scaled", "8 env processes would only compete for a CPU machine's cores"),
     _o("trainer.batch_size", 2, "scaled", "8 groups of 3 episodes per step -> 2 (CPU time per step)"),
-    _o("trainer.max_steps", 2, "scaled", "a rehearsal: two steps reach every per-step path (sync, teacher, checkpoint)"),
+    _o("trainer.max_steps", 2, "scaled", "a rehearsal: two steps run the per-step paths (rollouts, learner, weight sync, teacher scoring, final "
+       "checkpoint and validation); the teacher's first EMA (step 5) is past it"),
     _o("learner.loss.distill.drop_length_truncated_turns", False, "twin",
        "a random twin almost never ends a turn before its token limit: every turn would be dropped and the "
        "distillation term (Eq. 2) would never run"),
