@@ -153,8 +153,10 @@ class MetricsSink:
             self._tb.flush()
 
     def close(self) -> None:
+        """Flush and stop the TensorBoard writer and its thread (again: a no-op)."""
         if self._tb is not None:
             self._tb.close()
+            self._tb = None
 
 
 def json_record(record: dict[str, Any]) -> dict[str, Any]:

@@ -276,6 +276,10 @@ class Trainer:
     def shutdown(self) -> None:
         import ray
 
+        # The TensorBoard writer runs a daemon thread; a run that fails must stop it too, or it is
+        # still alive (and waking up) while the interpreter exits.
+        if self.sink is not None:
+            self.sink.close()
         if self.kb_client is not None:
             self.kb_client.shutdown()
         if self.learner is not None:
