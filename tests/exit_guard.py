@@ -61,6 +61,29 @@ def describe(threads: list[threading.Thread]) -> str:
     return "".join(lines)
 
 
+def release_stopped_ray_nodes() -> int:
+    """Drop the GCS clients of Ray nodes this process started and stopped; returns how many.
+
+    Ray pins every node it starts in-process (each `ray.cluster_utils.Cluster` node, a local
+    `ray.init`'s head) in an atexit closure until the process exits, and with it the node's GCS
+    client, whose gRPC polling thread (`client.poll0`) keeps running against the dead GCS. Measured:
+    5 such threads after tests/training/test_placement.py's simulated cluster was shut down; they were
+    torn down only during interpreter finalization. Dropping the client stops its thread now (the
+    atexit handler only kills the node's processes, it does not use the client)."""
+    import ray
+    from ray._private.node import Node
+
+    if ray.is_initialized():
+        return 0
+    released = 0
+    for obj in gc.get_objects():
+        if isinstance(obj, Node) and getattr(obj, "_gcs_client", None) is not None:
+            obj._gcs_client = None
+            released += 1
+    gc.collect()
+    return released
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """After every fixture's teardown: stop a Ray driver a test left connected (its own atexit
@@ -68,6 +91,8 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
     ray = sys.modules.get("ray")
     if ray is not None and ray.is_initialized():
         ray.shutdown()
+    if ray is not None:
+        release_stopped_ray_nodes()
     # Objects the tests dropped inside reference cycles (weight-sync groups with their gloo process
     # group and TCPStore server thread, asyncio loops) are destroyed now, while the interpreter is
     # whole, not by the last collection of interpreter shutdown, after the thread states are gone

@@ -53,3 +53,45 @@ def test_a_crash_after_pytest_finished_prints_every_threads_stack(tmp_path):
     assert "Fatal Python error: Segmentation fault" in guarded.stderr, guarded.stderr[-2000:]
     assert "in crash_at_exit" in guarded.stderr                          # the crashing (main) thread
     assert "in parked_thread_of_the_crashing_process" in guarded.stderr  # every other thread too
+
+
+# A throwaway test that starts and stops a simulated two-node Ray cluster, as
+# tests/training/test_placement.py does, and records at exit how many gRPC polling threads of Ray
+# clients are still running (atexit handlers run while the interpreter is still whole).
+CLUSTER_TEST = '''
+import atexit, os, sys
+
+def _running(name):
+    count = 0
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            count += open(f"/proc/self/task/{tid}/comm").read().strip() == name
+        except OSError:  # the thread ended while we looked
+            pass
+    return count
+
+def test_a_simulated_cluster_comes_and_goes():
+    import ray
+    from ray.cluster_utils import Cluster
+
+    sim = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    sim.add_node(num_cpus=1)
+    ray.init(address=sim.address, log_to_driver=False)
+    assert ray.get(ray.put(7)) == 7
+    ray.shutdown()
+    sim.shutdown()
+    out = sys.argv[-1].replace("test_cluster.py", "threads_at_exit.txt")
+    atexit.register(lambda: open(out, "w").write(str(_running("client.poll0"))))
+'''
+
+
+def test_a_stopped_ray_cluster_leaves_no_grpc_client_thread_running_into_exit(tmp_path):
+    (tmp_path / "test_cluster.py").write_text(CLUSTER_TEST)
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "PYTHONFAULTHANDLER": "1", "RAY_USAGE_STATS_ENABLED": "0"}
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path),
+                           "-p", "tests.exit_guard", str(tmp_path / "test_cluster.py")],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.returncode, proc.stdout[-3000:], proc.stderr[-3000:])
+    # Ray keeps every node it started in-process (and the node's GCS client with its gRPC polling
+    # thread) alive until interpreter exit; the guard releases them at the end of the session.
+    assert (tmp_path / "threads_at_exit.txt").read_text() == "0"
