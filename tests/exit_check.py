@@ -2,10 +2,10 @@
 non-zero exit (`make exit-check`, or `.venv/bin/python tests/exit_check.py -n 10`).
 
 A crash while the interpreter exits is rare (one full `make test` in two died with SIGSEGV after
-"2141 passed"), so one green run says little: this repeats the subset that starts what the suite's
-process starts in-process (a local Ray cluster several times over, gloo process groups and TCP
-stores, the KB's numba kernel and tantivy index, the gc-frozen ICD-10/HPO indexes, a vLLM OpenAI
-server client, threads of asyncio loops and HTTP servers) and reports every exit code. Each run has
+"2141 passed"), so one green run says little: this repeats a subset that starts, in the pytest
+process, what the suite starts there (a local Ray cluster three times over, gloo process groups and
+TCP stores, the KB's numba kernel and tantivy index, the gc-frozen ICD-10/HPO indexes, a simulated
+Ray cluster in a child pytest) and reports every exit code. Each run has
 PYTHONFAULTHANDLER=1 (a crash prints every thread's Python stack) and core dumps on in its own
 folder; when a run dies of a signal and gdb is installed, the native stack of every thread is
 written next to the report, which is where a crash in a C++ thread shows itself.
@@ -28,9 +28,10 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
-# About 90-120 s on 2 busy cores. Ray is started and shut down three times (evals' module cluster,
-# the KB service's, the KB API errors test's), gloo groups and TCP stores live in the pytest process
-# (weight sync), and the ICD-10 / HPO indexes are gc-frozen (clinical diagnosis tools).
+# Sized to stay under 2 minutes a run on 2 cores. Ray is started and shut down three times (evals'
+# module cluster, the KB service's, the KB API errors test's), gloo groups and TCP stores live in the
+# pytest process (weight sync), the ICD-10 / HPO indexes are gc-frozen (clinical diagnosis tools), and
+# tests/core/test_exit.py runs a simulated two-node Ray cluster in a child pytest.
 DEFAULT_SUBSET = (
     "tests/kb/test_service.py",
     "tests/kb/test_kb_api_errors.py",
