@@ -18,6 +18,7 @@ COMMAND_MODULES = [
     "learner.cli",
     "evals.cli",
     "viewer.cli",
+    "envs.serve.cli",
 ]
 
 

@@ -1,0 +1,1 @@
+"""Serving the environment to agents and trainers outside the project (`hcgym serve`)."""

@@ -1,0 +1,47 @@
+"""`hcgym serve`: the environment as a server other agents and trainers reach."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("serve", help="serve the environment (--mcp: MCP over streamable HTTP)")
+    p.add_argument("--mcp", action="store_true", help="serve MCP (streamable HTTP at /mcp)")
+    p.add_argument("--host", default="127.0.0.1", help="bind address (default loopback; others need --token)")
+    p.add_argument("--port", type=int, default=8765)
+    p.add_argument("--domain", action="append", dest="domains", metavar="DOMAIN",
+                   help="a domain to serve (repeat for several; the first is the default)")
+    p.add_argument("--split", default="test", help="split start_episode draws from by default")
+    p.add_argument("--max-episodes", type=int, default=64, help="episodes running at once (more: busy)")
+    p.add_argument("--idle-timeout", type=float, default=600.0, help="seconds before an idle episode is dropped")
+    p.add_argument("--max-turns", type=int, default=40)
+    p.add_argument("--max-tool-calls", type=int, default=None)
+    p.add_argument("--max-tool-result-chars", type=int, default=50_000)
+    p.add_argument("--max-argument-chars", type=int, default=100_000)
+    p.add_argument("--token", default=None, help="bearer token clients must send (default $HCGYM_SERVE_TOKEN)")
+    p.add_argument("--no-warmup", action="store_true", help="skip loading graders before serving")
+    p.set_defaults(func=cmd_serve)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    if not args.mcp:
+        raise ValueError("choose a protocol: --mcp (MCP over streamable HTTP)")
+    from pydantic import ValidationError
+
+    from envs.serve.mcp_server import ServeSettings, serve
+
+    fields = dict(host=args.host, port=args.port, split=args.split, max_episodes=args.max_episodes,
+                  idle_timeout_s=args.idle_timeout, max_turns=args.max_turns, max_tool_calls=args.max_tool_calls,
+                  max_tool_result_chars=args.max_tool_result_chars, max_argument_chars=args.max_argument_chars,
+                  token=args.token or os.environ.get("HCGYM_SERVE_TOKEN") or None)
+    if args.domains:
+        fields["domains"] = args.domains
+    try:
+        settings = ServeSettings(**fields)
+    except ValidationError as exc:
+        raise ValueError("; ".join(f"{'.'.join(map(str, e['loc'])) or 'settings'}: {e['msg']}"
+                                   for e in exc.errors())) from None
+    serve(settings, warmup=not args.no_warmup)
+    return 0
