@@ -130,7 +130,8 @@ def test_a_gold_episode_over_mcp_scores_as_in_process(srv, mode):
 
 
 def test_concurrent_episodes_are_isolated(srv):
-    meds = lambda r: {o["order_id"]: o["status"] for o in json.loads(r.content[0].text)["medication_orders"]}
+    def meds(result) -> dict[str, str]:
+        return {o["order_id"]: o["status"] for o in json.loads(result.content[0].text)["medication_orders"]}
 
     async def episode(c, write: bool):
         started = await c.call_tool("start_episode", {"domain": "ehr_management", "seed": 1})
