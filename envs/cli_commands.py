@@ -17,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     build.add_argument("--force", action="store_true", help="rebuild even when up to date")
     build.set_defaults(func=cmd_data_build)
 
-    tasks = sub.add_parser("tasks", help="list, show, validate, import tasks")
+    tasks = sub.add_parser("tasks", help="list, show, validate, import, export tasks")
     tasks_sub = tasks.add_subparsers(dest="tasks_command", required=True)
     lst = tasks_sub.add_parser("list", help="list task ids")
     lst.add_argument("--domain")
@@ -62,6 +62,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "default: detected per file (any 0 means 0-based), the assumption printed when ambiguous")
     imp.add_argument("path")
     imp.set_defaults(func=cmd_tasks_import)
+    exp = tasks_sub.add_parser("export", help="write tasks as a dataset (Parquet or JSONL) for other trainers (TRL, "
+                               "datasets.load_dataset): prompt messages, tool schemas, answer metadata")
+    exp.add_argument("--out", required=True, help="folder to write <domain>.<format> files into")
+    exp.add_argument("--domain", help="one domain (default: every domain)")
+    exp.add_argument("--split", help="one split (default: every split; each row names its split)")
+    exp.add_argument("--format", choices=("parquet", "jsonl"), default="parquet")
+    exp.set_defaults(func=cmd_tasks_export)
 
     play = sub.add_parser("play", help="play one episode at the terminal")
     play.add_argument("--domain", default="drug_interaction")
@@ -159,6 +166,28 @@ def cmd_tasks_import(args: argparse.Namespace) -> int:
     from envs.converters.importing import run_import
 
     return run_import(args)
+
+
+def cmd_tasks_export(args: argparse.Namespace) -> int:
+    from envs import registry
+    from envs.export import export_tasks
+
+    domains = _domains(args.domain)
+    if args.domain is None and args.split is not None:
+        # Every domain that has the split; naming one domain without it is an error (export_tasks says so).
+        domains = [d for d in domains if args.split in registry.get_splits(d)]
+    try:
+        written = export_tasks(args.out, domains=domains, split=args.split, fmt=args.format)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not written:
+        print(f"error: no task matches --domain {args.domain} --split {args.split}", file=sys.stderr)
+        return 1
+    for domain, row in written.items():
+        print(f"{domain}: {row['rows']} rows -> {row['path']}")
+    print(f"total: {sum(r['rows'] for r in written.values())} rows")
+    return 0
 
 
 def cmd_play(args: argparse.Namespace) -> int:
