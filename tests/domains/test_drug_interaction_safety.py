@@ -73,7 +73,8 @@ def test_prescribing_to_the_pregnant_patient_is_detected(env, drug):
     ("warfarin", "amiodarone", "major", "Cordarone"), ("warfarin", "fluconazole", "major", "Diflucan"),
     ("warfarin", "metronidazole", "major", "Flagyl"), ("digoxin", "amiodarone", "major", "Cordarone"),
     ("theophylline", "ciprofloxacin", "major", "Cipro"), ("sertraline", "tramadol", "major", "Ultram"),
-    ("selegiline", "sertraline", "major", "selegiline"), ("selegiline", "tramadol", "contraindicated", "4 CONTRAINDICATIONS"),
+    ("selegiline", "sertraline", "contraindicated", "Emsam"), ("rasagiline", "sertraline", "major", "Azilect"),
+    ("safinamide", "sertraline", "moderate", "Xadago"), ("selegiline", "tramadol", "contraindicated", "4 CONTRAINDICATIONS"),
     ("alteplase", "warfarin", "major", "Activase"), ("oxycodone", "alprazolam", "major", "boxed warning"),
     ("clopidogrel", "omeprazole", "major", "Plavix"), ("clopidogrel", "esomeprazole", "major", "Plavix"),
     ("lovastatin", "clarithromycin", "contraindicated", "Mevacor"),
@@ -94,8 +95,9 @@ def test_dose_conditional_levels_are_evaluated_at_the_patients_dose(env):
 
     apixaban, aspirin = L.resolve_drug(env.db, "apixaban"), L.resolve_drug(env.db, "aspirin")
     at = lambda mg: L.pair_severity(env.db, apixaban, aspirin, L.PairContext(daily_mg=(("aspirin", mg),)))  # noqa: E731
-    assert at(81) == "major" and at(1500) == "major" and at(4000) == "contraindicated"
-    assert L.pair_severity(env.db, apixaban, aspirin) == "contraindicated"  # dose unknown: the most severe band
+    # no US label contraindicates aspirin with an oral anticoagulant at any dose (labels 5/7: bleeding)
+    assert at(81) == "major" and at(1500) == "major" and at(4000) == "major"
+    assert L.pair_severity(env.db, apixaban, aspirin) == "major"  # dose unknown: the most severe band
     assert L.daily_dose_mg(81, "mg", "once daily") == 81 and L.daily_dose_mg(500, "mg", "every 8 hours") == 1500
     assert L.daily_dose_mg(1, "g", "as needed") is None
     # the write tool evaluates the order's own dose: low-dose aspirin for a patient on warfarin is recorded

@@ -476,29 +476,78 @@ def renal_tier(profile: RenalProfile, value: float) -> dict:
     return profile.tiers[-1].model_dump()
 
 
-# Stated policy (not a source fact): what a hepatic caution flag means for each Child-Pugh class.
+# The formulary's default convention (not a source fact): what a hepatic caution flag means for each
+# Child-Pugh class, for flagged drugs without a drug-specific label rule below.
 HEPATIC_POLICY = {
     None: "no_adjustment",
     "A": "use_with_caution",
     "B": "reduce_dose_and_monitor",
     "C": "avoid_or_specialist_review",
 }
+HEPATIC_DEFAULT_BASIS = "formulary default convention for a hepatic caution flag (no drug-specific label rule encoded)"
+
+
+@dataclass(frozen=True)
+class HepaticLabelRule:
+    """A drug's hepatic recommendation per Child-Pugh class as its US label states it, with the label
+    section it comes from. "avoid" = the label says avoid / not recommended (not a contraindication)."""
+    by_class: dict[str, str]
+    label: str
+    statement: str
+
+
+# Drug-specific rules transcribed from US labels (USPI sections named in `label`). Where a label
+# states one recommendation for any hepatic impairment, the three classes carry it.
+HEPATIC_LABEL_RULES: dict[str, HepaticLabelRule] = {
+    "insulin human": HepaticLabelRule(
+        {"A": "reduce_dose_and_monitor", "B": "reduce_dose_and_monitor", "C": "reduce_dose_and_monitor"},
+        "Humulin R USPI 5.3 Hypoglycemia (hepatic impairment a risk factor) and 8 USE IN SPECIFIC POPULATIONS (hepatic impairment)",
+        "hepatic impairment: monitor glucose more often and adjust (usually reduce) the insulin dose; not a contraindication"),
+    "metformin": HepaticLabelRule(
+        {"A": "avoid", "B": "avoid", "C": "avoid"},
+        "Glucophage/metformin USPI boxed warning and 5.1 Lactic acidosis (hepatic impairment)",
+        "avoid use in patients with clinical or laboratory evidence of hepatic disease (risk of lactic acidosis)"),
+    "sacubitril/valsartan": HepaticLabelRule(
+        {"A": "no_adjustment", "B": "reduce_dose_and_monitor", "C": "avoid"},
+        "Entresto USPI 2 DOSAGE AND ADMINISTRATION (hepatic impairment) and 8.6 Hepatic Impairment",
+        "mild (Child-Pugh A): no starting-dose adjustment; moderate (B): start at half the usual dose (24/26 mg twice daily); severe (C): not recommended"),
+    "ondansetron": HepaticLabelRule(
+        {"A": "no_adjustment", "B": "no_adjustment", "C": "reduce_dose_and_monitor"},
+        "Zofran USPI 2 DOSAGE AND ADMINISTRATION and 8.6 Hepatic Impairment",
+        "mild or moderate: no adjustment; severe (Child-Pugh score >= 10): do not exceed 8 mg total daily dose"),
+}
+
+HEPATIC_RECOMMENDATIONS = ("no_adjustment", "no_flagged_concern", "use_with_caution", "reduce_dose_and_monitor",
+                           "avoid", "avoid_or_specialist_review", "no_data")
 
 
 def hepatic_assessment(db: DrugInteractionDB, drug: Drug, child_pugh: str | None) -> dict:
+    """The hepatic recommendation for a drug at a Child-Pugh class: the drug's label rule where one is
+    encoded (`HEPATIC_LABEL_RULES`, with its section in `basis`), else the default convention for the
+    source packages' hepatic caution flags."""
     flags = {}
     if drug.id in db.dose_profiles:
         flags["drugdose.hepatic_caution"] = db.dose_profiles[drug.id].hepatic_caution
     if drug.id in db.renal_profiles:
         flags["open-medicine.hepatic_interaction_flag"] = db.renal_profiles[drug.id].hepatic_flag
-    if not flags:
-        recommendation = "no_data"
+    rule = HEPATIC_LABEL_RULES.get(drug.id)
+    label = None
+    if rule is not None:
+        recommendation = rule.by_class[child_pugh] if child_pugh else "no_adjustment"
+        basis = f"US label: {rule.label}"
+        label = {"source": rule.label, "statement": rule.statement}
+    elif not flags:
+        recommendation, basis = "no_data", "no hepatic data for this drug in the formulary sources"
     elif not any(flags.values()):
-        recommendation = "no_flagged_concern"
+        recommendation, basis = "no_flagged_concern", "no hepatic caution flag in the formulary sources"
     else:
-        recommendation = HEPATIC_POLICY[child_pugh]
-    return {"drug": drug.id, "child_pugh_class": child_pugh, "hepatic_flags": flags,
-            "hepatic_caution": any(flags.values()) if flags else None, "recommendation": recommendation}
+        recommendation, basis = HEPATIC_POLICY[child_pugh], HEPATIC_DEFAULT_BASIS
+    out = {"drug": drug.id, "child_pugh_class": child_pugh, "hepatic_flags": flags,
+           "hepatic_caution": any(flags.values()) if flags else None, "recommendation": recommendation,
+           "basis": basis}
+    if label:
+        out["label_rule"] = label
+    return out
 
 
 PREGNANCY_CATEGORIES = {

@@ -460,9 +460,9 @@ class Generator:
             by.setdefault(item[0], []).append(item)
         for rec, group in sorted(by.items()):
             for _, pid, drug in self.sample(sorted(group), 5):
-                ticket = (f"{pid} has chronic liver disease. Under the formulary hepatic policy, what is the "
-                          f"recommendation for {drug} in {pid}? One of: no_flagged_concern, use_with_caution, "
-                          f"reduce_dose_and_monitor, avoid_or_specialist_review, no_data.")
+                ticket = (f"{pid} has chronic liver disease. Using the drug's label rule where the formulary has one "
+                          f"(else its default convention for hepatic caution flags), what is the recommendation for "
+                          f"{drug} in {pid}? One of: {', '.join(L.HEPATIC_RECOMMENDATIONS)}.")
                 self.add(Spec(
                     id=f"di-gen-hepatic_policy-{pid}-{_slug(drug)}", task_type="hepatic_policy", ticket=ticket,
                     patient_id=pid,

@@ -356,7 +356,8 @@ class DrugInteractionTools(BaseDomainTools):
     @is_tool(ToolType.READ)
     def check_hepatic_adjustment(self, drug: str, child_pugh_class: Literal["A", "B", "C"] | None = None,
                                  patient_id: str | None = None) -> dict:
-        """Check hepatic cautions for a drug and the formulary policy for a Child-Pugh class (or the patient's).
+        """Check hepatic cautions for a drug and its recommendation for a Child-Pugh class (or the patient's):
+        the drug's US-label rule where the formulary has one, else the default convention for flagged drugs.
 
         Args:
             drug: Generic or brand name.
@@ -367,9 +368,10 @@ class DrugInteractionTools(BaseDomainTools):
         if child_pugh_class is None and patient_id:
             child_pugh_class = self._patient(patient_id).child_pugh_class  # type: ignore[assignment]
         result = L.hepatic_assessment(self.db, d, child_pugh_class)
-        result["policy"] = {"no liver disease": "no_adjustment", "A": "use_with_caution", "B": "reduce_dose_and_monitor",
-                            "C": "avoid_or_specialist_review",
-                            "applies_to": "drugs with a hepatic caution flag in drugdose or open-medicine"}
+        result["default_convention"] = {"no liver disease": "no_adjustment", "A": "use_with_caution",
+                                        "B": "reduce_dose_and_monitor", "C": "avoid_or_specialist_review",
+                                        "applies_to": "drugs with a hepatic caution flag in drugdose or open-medicine "
+                                                      "and no drug-specific label rule"}
         return result
 
     @is_tool(ToolType.READ)
