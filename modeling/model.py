@@ -81,6 +81,20 @@ CHAT_TEMPLATE = (
     "{%- if add_generation_prompt -%}{{- '<|im_start|>assistant\\n' -}}{%- endif -%}"
 )
 
+# How a reply rendered by CHAT_TEMPLATE parses back into a message (transformers' `response_template`,
+# read by `tokenizer.parse_response`; TRL's tool loop needs it and recognises only the chat templates
+# it ships): optional <think> reasoning, Hermes <tool_call> JSON blocks, the text up to <|im_end|>.
+RESPONSE_TEMPLATE: dict = {
+    "defaults": {"role": "assistant"},
+    "start_anchor": "<|im_start|>assistant\n",
+    "fields": {
+        "reasoning_content": {"open": "<think>", "close_pattern": r"</think>\s*", "content": "text"},
+        "tool_calls": {"open": "<tool_call>", "close_pattern": r"</tool_call>\s*", "repeats": True,
+                       "content": "json", "transform": {"type": "function", "function": "{content}"}},
+        "content": {"close_pattern": r"<\|im_end\|>\s*", "content": "text"},
+    },
+}
+
 
 def tool_turn_text(tool_result: str) -> str:
     """The text that follows a finished assistant turn when the environment answers with a tool result.
@@ -172,6 +186,7 @@ def train_tokenizer(
         clean_up_tokenization_spaces=False,
     )
     tokenizer.chat_template = CHAT_TEMPLATE
+    tokenizer.response_template = RESPONSE_TEMPLATE
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
     tokenizer.save_pretrained(str(out))
@@ -192,7 +207,10 @@ def load_tokenizer(tokenizer_dir: str | os.PathLike):
     path = Path(tokenizer_dir)
     if not (path / "tokenizer.json").exists() and not (path / "tokenizer_config.json").exists():
         raise FileNotFoundError(f"no tokenizer in {path} (expected tokenizer.json / tokenizer_config.json)")
-    return AutoTokenizer.from_pretrained(str(path), local_files_only=True)
+    tokenizer = AutoTokenizer.from_pretrained(str(path), local_files_only=True)
+    if tokenizer.chat_template == CHAT_TEMPLATE and getattr(tokenizer, "response_template", None) is None:
+        tokenizer.response_template = RESPONSE_TEMPLATE  # saved before the template shipped one
+    return tokenizer
 
 
 TINY_MODEL_DEFAULTS: dict[str, object] = {

@@ -19,8 +19,9 @@ import pytest
 from envs import registry
 from envs.core.build_order import build_requires_in_source, ordered_builders
 from envs.core.domain import BuiltDomain, read_policy
-from envs.core.tools import Toolkit, parse_google_docstring
+from envs.core.tools import Toolkit, is_tool, parse_google_docstring
 from envs.data.build import BUILDERS
+from envs.integrations.trl import reserved_name_problems
 
 DOMAINS_ROOT = Path(registry.__file__).parent / "domains"
 # The domains shipped in envs/domains/ (tests may register fixture domains such as tests/fixtures/ward_domain).
@@ -84,6 +85,50 @@ def test_docstring_check_catches_a_stale_and_a_missing_argument():
 
     assert docstring_problems(tool) == ["Args names 'dose', which is not an argument",
                                         "argument 'dose_mg' is not described under Args"]
+
+
+def reserved_tool_names(classes: list[type[Toolkit]]) -> list[str]:
+    """Tools whose names a trainer integration reserves (TRL's environment_factory turns every public
+    method into a tool, except `reset` / `get_reward` and its own members): one line per tool."""
+    return [f"{cls.__name__}: {p}" for cls in classes for p in reserved_name_problems(sorted(cls._definitions))]
+
+
+@pytest.mark.parametrize("domain", ALL_DOMAINS)
+def test_tool_names_are_not_reserved(domain):
+    from envs.shared import shared_toolkits
+
+    classes = _toolkit_classes(domain) + [type(t) for t in shared_toolkits()]
+    problems = reserved_tool_names(classes)
+    assert not problems, "\n".join(problems)
+
+
+def test_reserved_tool_name_check_names_the_tool():
+    class Clashing(Toolkit):
+        @is_tool()
+        def reset(self, patient_id: str) -> str:
+            """Reset a patient's chart.
+
+            Args:
+                patient_id: The patient identifier.
+            """
+            return patient_id
+
+        @is_tool()
+        def get_reward(self) -> float:
+            """The reward."""
+            return 0.0
+
+        @is_tool()
+        def lookup(self, name: str) -> str:
+            """Look a name up.
+
+            Args:
+                name: The name.
+            """
+            return name
+
+    problems = reserved_tool_names([Clashing])
+    assert len(problems) == 2 and "'get_reward'" in problems[0] and "'reset'" in problems[1], problems
 
 
 @pytest.mark.parametrize("domain", ALL_DOMAINS)
