@@ -32,6 +32,7 @@ from __future__ import annotations
 import inspect
 import keyword
 import threading
+from collections import deque
 from typing import Any, Literal
 
 from envs.episode import EpisodeEnd
@@ -44,6 +45,9 @@ REWARD_NAMES: tuple[str, ...] = DIMENSIONS + ("total",)
 #: column) and the attributes the generated class keeps for itself; a tool of that name could not
 #: be a TRL tool. Names starting with "_" are never tools for TRL either.
 RESERVED_NAMES: frozenset[str] = frozenset({"reset", "get_reward", "env", "domain", "env_kwargs", "episodes"})
+
+#: How many finished rollouts a generated class keeps in `episodes`.
+EPISODE_LOG_SIZE = 1024
 
 _JSON_TYPES: dict[str, Any] = {"string": str, "integer": int, "number": float, "boolean": bool,
                                "object": dict, "array": list}
@@ -118,13 +122,14 @@ class HealthcareGymTRLEnv:
     Attributes:
         domain: The domain (a class attribute of each generated class).
         env: This instance's `HealthcareGymEnv`.
-        episodes: Class-wide list of every finished rollout's `(task_id, EpisodeEnd)`, in the order
-            they ended (what the trainer's logged rewards are compared with).
+        episodes: Class-wide record of the last `EPISODE_LOG_SIZE` finished rollouts'
+            `(task_id, EpisodeEnd)`, in the order they ended (to compare the trainer's logged
+            rewards with, or to inspect episodes); bounded, as a training run ends many thousands.
     """
 
     domain: str = ""
     env_kwargs: dict[str, Any] = {}
-    episodes: list[tuple[str, EpisodeEnd]] = []
+    episodes: deque[tuple[str, EpisodeEnd]] = deque(maxlen=EPISODE_LOG_SIZE)
 
     def __init__(self) -> None:
         from envs.env import HealthcareGymEnv
@@ -219,7 +224,7 @@ def environment_class(domain: str, **env_kwargs: Any) -> type[HealthcareGymTRLEn
     problems = reserved_name_problems([s["function"]["name"] for s in schemas])
     if problems:
         raise ValueError(f"domain {domain!r}: " + "; ".join(problems))
-    members: dict[str, Any] = {"domain": domain, "env_kwargs": kwargs, "episodes": [],
+    members: dict[str, Any] = {"domain": domain, "env_kwargs": kwargs, "episodes": deque(maxlen=EPISODE_LOG_SIZE),
                                "__doc__": f"HealthcareGym {domain!r} for TRL's GRPOTrainer(environment_factory=...)."}
     for schema in schemas:
         members[schema["function"]["name"]] = _tool_method(schema)

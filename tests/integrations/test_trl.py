@@ -71,7 +71,7 @@ def test_tool_calls_go_through_the_env_and_rewards_read_it():
     completion = [{"role": "assistant", "content": "ignored: the episode already ended"}]
     rewards = {f.__name__: f(completions=[completion], environments=[instance]) for f in reward_functions()}
     assert rewards == {f"reward_{n}": [instance.env.reward_components[n]] for n in REWARD_NAMES}
-    assert rewards["reward_accuracy"] == [1.0] and cls.episodes == [("ward_dose", instance.env.end)]
+    assert rewards["reward_accuracy"] == [1.0] and list(cls.episodes) == [("ward_dose", instance.env.end)]
     # A rollout TRL stopped while it still called tools is a cut, not an answer.
     instance.reset(**row)
     end = instance._finish([{"role": "assistant", "content": "", "tool_calls": [{"type": "function"}]}])
@@ -155,10 +155,11 @@ def test_grpo_trainer_runs_two_steps_and_logs_the_env_rewards(tmp_path, monkeypa
 
     assert trainer.state.global_step == 2
     logged = [entry for entry in trainer.state.log_history if "rewards/reward_total/mean" in entry]
-    assert len(logged) == 2 and len(cls.episodes) == 2 * rollouts_per_step
-    assert {task_id for task_id, _ in cls.episodes} <= set(dataset["task_id"])
+    episodes = list(cls.episodes)
+    assert len(logged) == 2 and len(episodes) == 2 * rollouts_per_step
+    assert {task_id for task_id, _ in episodes} <= set(dataset["task_id"])
     for step, entry in enumerate(logged):
-        ends = [end for _, end in cls.episodes[step * rollouts_per_step:(step + 1) * rollouts_per_step]]
+        ends = [end for _, end in episodes[step * rollouts_per_step:(step + 1) * rollouts_per_step]]
         for name in REWARD_NAMES:
             env_mean = sum(end.reward_components[name] for end in ends) / len(ends)
             assert math.isclose(entry[f"rewards/reward_{name}/mean"], env_mean, abs_tol=1e-6), (step, name)
@@ -166,6 +167,6 @@ def test_grpo_trainer_runs_two_steps_and_logs_the_env_rewards(tmp_path, monkeypa
         assert math.isclose(entry["reward"], sum(e.reward for e in ends) / len(ends), abs_tol=1e-6)
         assert entry["tools/call_frequency"] > 0
     # TRL's tool loop ran the calls in the env: each episode recorded the call, answered by the tool.
-    called = [turn["tool_calls"][0] for _, end in cls.episodes for turn in end.episode["turns"] if turn["tool_calls"]]
+    called = [turn["tool_calls"][0] for _, end in episodes for turn in end.episode["turns"] if turn["tool_calls"]]
     assert called and all(c["name"] == "get_patient" and c["error"] is None and "P2" in c["result"] for c in called)
-    assert set(DIMENSIONS) <= set(cls.episodes[0][1].reward_components)
+    assert set(DIMENSIONS) <= set(episodes[0][1].reward_components)
