@@ -31,6 +31,10 @@ def test_counts_and_types(tasks, authored):
     assert len(generated) >= 200
     assert len(authored) >= 20
     types = collections.Counter(t.description.task_type for t in generated)
+    # pregnancy_label_risk asks one task per verified label entry, so it is as large as that table
+    from envs.domains.drug_interaction.logic import PREGNANCY_LABEL_RULES
+
+    assert types.pop("pregnancy_label_risk") == len(PREGNANCY_LABEL_RULES)
     assert len(types) >= 12 and min(types.values()) >= 10, types
     answer_types = collections.Counter(t.answer_type for t in tasks)
     assert {"choice", "category", "numeric", "exact"} <= set(answer_types)

@@ -361,10 +361,14 @@ def test_hepatic_policy(env, raw_drugdose):
 
 
 def test_pregnancy_category_from_drugdose(env, raw_drugdose):
-    out = call(env, "check_pregnancy_safety", drug="magnesium sulfate", patient_id="P005")
-    assert out["fda_category"] == raw_drugdose["magnesium_sulfate"]["pregnancy_category"] == "A"
+    # a drug without a label rule: drugdose's letter, named as package data
+    out = call(env, "check_pregnancy_safety", drug="midazolam", patient_id="P005")
+    assert out["fda_category"] == raw_drugdose["midazolam"]["pregnancy_category"]
+    assert out["basis"].startswith("drugdose 0.1.2 package data") and out["fda_category_date"] is None
     assert out["patient"]["pregnant"] is True
-    assert call(env, "check_pregnancy_safety", drug="midazolam")["fda_category"] == raw_drugdose["midazolam"]["pregnancy_category"]
+    # a label rule replaces the package letter (magnesium sulfate: drugdose "A", FDA category D since 2013)
+    assert raw_drugdose["magnesium_sulfate"]["pregnancy_category"] == "A"
+    assert call(env, "check_pregnancy_safety", drug="magnesium sulfate")["fda_category"] == "D"
     # no drugdose category: the US label's contraindication where there is one (Coumadin label 4), else no data
     warfarin = call(env, "check_pregnancy_safety", drug="warfarin")
     assert warfarin["fda_category"] is None and warfarin["recommendation"] == "contraindicated"

@@ -558,36 +558,106 @@ PREGNANCY_CATEGORIES = {
     "X": ("Fetal abnormalities or risk clearly outweigh any possible benefit.", "contraindicated"),
 }
 
+# drugdose's letters are package data: undated, and the 2015 Pregnancy and Lactation Labeling Rule
+# (PLLR) replaces letters in US labels with a risk summary (section 8.1), so a drugdose letter is
+# reported as such, never as the current label's wording.
+PACKAGE_LETTER_BASIS = ("drugdose 0.1.2 package data: FDA letter category, undated and not checked against the "
+                        "current label (the 2015 PLLR replaces letters with the section 8.1 risk summary)")
+
+
+@dataclass(frozen=True)
+class PregnancyLabelRule:
+    """A drug's pregnancy conclusion as its US label (or the FDA communication that changed it) states
+    it: the risk statement, the label section it comes from, and a letter only where the FDA assigned
+    one that the label carries, with its date."""
+    recommendation: str
+    statement: str
+    section: str
+    letter: str | None = None
+    letter_date: str | None = None
+    contraindicated_for: str | None = None  # the indication a section-4 contraindication is limited to
+
+
+# Drug-specific pregnancy rules from the labels' section 8.1 (PLLR risk summary), section 4 or the
+# FDA safety communication that changed the label; they replace drugdose's letter for these drugs.
+PREGNANCY_LABEL_RULES: dict[str, PregnancyLabelRule] = {
+    "magnesium sulfate": PregnancyLabelRule(
+        "limit_continuous_use_to_5_7_days",
+        "continuous administration beyond 5 to 7 days (off-label tocolysis) can cause fetal hypocalcaemia and bone "
+        "abnormalities (osteopenia, fractures); approved to prevent and control seizures in pre-eclampsia/eclampsia",
+        "Magnesium Sulfate Injection USP 50% label: WARNINGS (fetal harm) and pregnancy subsection, as relabelled "
+        "by FDA Drug Safety Communication of 30 May 2013 (category A -> D)",
+        letter="D", letter_date="2013-05-30"),
+    "glucose": PregnancyLabelRule(
+        "not_expected_to_cause_harm",
+        "appropriate administration is not expected to cause adverse developmental outcomes; maternal "
+        "hyperglycaemia from glucose infusion at delivery has been associated with neonatal hypoglycaemia",
+        "Dextrose Injection 50% USPI (Pfizer/Hospira) 8.1 Pregnancy, Risk Summary (PLLR format, no letter)"),
+    "calcium gluconate": PregnancyLabelRule(
+        "risk_not_established",
+        "limited data are insufficient to inform a drug-associated risk; untreated maternal hypocalcaemia carries "
+        "risks to mother and fetus (miscarriage, premature labour, neonatal hyperparathyroidism)",
+        "Calcium Gluconate Injection USPI (Fresenius Kabi, NDA 208418) 8.1 Pregnancy, Risk Summary and Clinical "
+        "Considerations (PLLR format, no letter)"),
+    "valproic acid": PregnancyLabelRule(
+        "contraindicated_for_migraine_prophylaxis",
+        "contraindicated in pregnant women for the prophylaxis of migraine headaches; for epilepsy and bipolar "
+        "mania the boxed warning on fetal risk (neural tube defects, other major malformations, decreased IQ) applies",
+        "Depakote/valproate USPI 4 CONTRAINDICATIONS (pregnant women, migraine prophylaxis) and boxed warning "
+        "Fetal Risk (5.2, 5.3, 5.4); FDA Drug Safety Communication of 6 May 2013",
+        contraindicated_for="migraine prophylaxis"),
+}
+
+PREGNANCY_RECOMMENDATIONS = ("acceptable", "use_only_if_benefit_justifies_risk", "avoid_unless_no_safer_alternative",
+                             "contraindicated", "limit_continuous_use_to_5_7_days", "not_expected_to_cause_harm",
+                             "risk_not_established", "contraindicated_for_migraine_prophylaxis", "no_data")
+
 
 # ANSM class ids -> the class names of the US-label pregnancy table (envs/rewards/safety_lexicon.py).
 _LABEL_CLASSES = {"ace-inhibitors": "ace inhibitors", "angiotensin-ii-receptor-blockers": "arbs"}
 
 
 def label_pregnancy_contraindication(db: DrugInteractionDB, drug: Drug) -> str | None:
-    """The US-label citation when the label contraindicates the drug (or its class) in pregnancy:
-    `safety_lexicon.PREGNANCY_CONTRAINDICATED`, boxed warnings and section 4 we transcribed."""
+    """The US-label citation when the label contraindicates the drug (or its class) in every pregnancy:
+    the domain's `PREGNANCY_LABEL_RULES` first (a contraindication limited to one indication is not
+    one), else `safety_lexicon.PREGNANCY_CONTRAINDICATED`, boxed warnings and section 4 we transcribed."""
     from envs.rewards import safety_lexicon as lex  # the reward's table: one source for tools and reward
 
+    rule = PREGNANCY_LABEL_RULES.get(drug.id)
+    if rule is not None:
+        return rule.section if rule.recommendation == "contraindicated" else None
     names = [drug.id, drug.id.replace(" ", "-"), lex.BRANDS.get(drug.id, ""), lex.BRANDS.get(drug.id.replace(" ", "-"), "")]
     names += [_LABEL_CLASSES.get(c, "") for c in drug.class_ids]
     return next((lex.PREGNANCY_CONTRAINDICATED[n] for n in names if n in lex.PREGNANCY_CONTRAINDICATED), None)
 
 
 def pregnancy_assessment(db: DrugInteractionDB, drug: Drug) -> dict:
-    """drugdose's FDA letter category (49 drugs); for a drug without one, the US label's pregnancy
-    contraindication when there is one (lisinopril, warfarin, isotretinoin), else no data."""
+    """The drug's pregnancy conclusion: its label rule where `PREGNANCY_LABEL_RULES` has one (section
+    in `label_section`, a letter only with its date); else drugdose's letter, named as package data;
+    else the US label's pregnancy contraindication when there is one; else no data."""
+    rule = PREGNANCY_LABEL_RULES.get(drug.id)
+    if rule is not None:
+        out = {"drug": drug.id, "fda_category": rule.letter, "fda_category_date": rule.letter_date,
+               "recommendation": rule.recommendation, "risk_summary": rule.statement, "label_section": rule.section,
+               "basis": "US label" + (f"; letter {rule.letter} assigned {rule.letter_date}" if rule.letter
+                                      else "; no letter category (PLLR risk summary)")}
+        if rule.contraindicated_for:
+            out["contraindicated_for"] = rule.contraindicated_for
+        return out
     profile = db.dose_profiles.get(drug.id)
     category = profile.pregnancy_category if profile else None
     if category not in PREGNANCY_CATEGORIES:
         label = label_pregnancy_contraindication(db, drug)
         if label:
             return {"drug": drug.id, "fda_category": None, "recommendation": "contraindicated", "us_label": label,
+                    "label_section": label,
                     "note": "no FDA letter category in drugdose; the US label contraindicates it in pregnancy"}
         return {"drug": drug.id, "fda_category": None, "recommendation": "no_data",
                 "note": "no FDA pregnancy category in the formulary sources (drugdose covers 49 emergency drugs) "
                         "and no pregnancy contraindication in the US-label table"}
     meaning, recommendation = PREGNANCY_CATEGORIES[category]
-    return {"drug": drug.id, "fda_category": category, "meaning": meaning, "recommendation": recommendation,
+    return {"drug": drug.id, "fda_category": category, "fda_category_date": None, "meaning": meaning,
+            "recommendation": recommendation, "label_section": None, "basis": PACKAGE_LETTER_BASIS,
             "source": profile.provenance[0].model_dump()}
 
 

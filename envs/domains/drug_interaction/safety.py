@@ -3,12 +3,14 @@
 The context reads the toolkit's *current* database (a failed WRITE restores a snapshot, so the
 object changes during an episode), so facts reflect the state at the end of the episode.
 
-Pregnancy: the database's only pregnancy source is drugdose 0.1.2 (MIT), whose FDA letter
-category covers 49 emergency drugs; category X is a contraindication. For a drug it does not
-cover, the reward lexicon's table of US-label pregnancy contraindications answers
-(`safety_lexicon.PREGNANCY_CONTRAINDICATED`: boxed warnings and section 4 of the labels, each
-entry citing its label), by drug and by class (ACE inhibitors, ARBs), so lisinopril, warfarin
-or isotretinoin in a pregnant patient are caught although drugdose has no category for them.
+Pregnancy: `logic.pregnancy_assessment`, as `check_pregnancy_safety` reports it. The domain's label
+table (`logic.PREGNANCY_LABEL_RULES`, each entry with its label section) answers first; a
+contraindication the label limits to one indication (valproate: migraine prophylaxis, section 4) is
+not a pregnancy contraindication here, because an order does not carry its indication. Else
+drugdose 0.1.2's letter (package data; category X is a contraindication); else the reward lexicon's
+table of US-label pregnancy contraindications (`safety_lexicon.PREGNANCY_CONTRAINDICATED`: boxed
+warnings and section 4 of the labels), by drug and by class (ACE inhibitors, ARBs), so lisinopril,
+warfarin or isotretinoin in a pregnant patient are caught although drugdose has no category for them.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ build: a generated task whose expected action errors is a builder bug.
 Types (task_type): interaction_severity, class_rule_severity, non_drug_interaction,
 class_membership, brand_lookup, patient_new_drug_severity, patient_contraindicated_combination,
 patient_interacting_pairs, renal_adjustment_patient, renal_adjustment_value, creatinine_clearance,
-max_single_dose, dose_check, pregnancy_category, hepatic_policy, allergy_conflict,
+max_single_dose, dose_check, pregnancy_category, pregnancy_label_risk, hepatic_policy, allergy_conflict,
 safer_alternative.
 """
 
@@ -474,17 +474,39 @@ class Generator:
                 ))
 
     def pregnancy_tasks(self) -> None:
+        # The seeded draw stays over drugdose's lettered drugs (the RNG stream of later generators is
+        # unchanged); a drawn drug whose label rule carries no letter is asked the label's conclusion.
         profiles = [p for p in self.db.dose_profiles.values() if p.pregnancy_category]
-        for profile in self.sample(sorted(profiles, key=lambda p: p.drug_id), 16):
-            drug = profile.drug_id
+        drawn = [p.drug_id for p in self.sample(sorted(profiles, key=lambda p: p.drug_id), 16)]
+        labelled = sorted(L.PREGNANCY_LABEL_RULES)
+        for drug in drawn:
+            rule = L.PREGNANCY_LABEL_RULES.get(drug)
+            if rule is not None and rule.letter is None:
+                continue  # asked below as pregnancy_label_risk
             ticket = (f"Obstetric consult: a pregnant patient may need {drug}. What FDA pregnancy category does the "
                       f"formulary give {drug}? Answer with the letter (A, B, C, D or X).")
             self.add(Spec(
                 id=f"di-gen-pregnancy_category-{_slug(drug)}", task_type="pregnancy_category", ticket=ticket,
                 calls=[("check_pregnancy_safety", {"drug": drug}, ["drug"])],
-                answer=lambda r: r[0]["fda_category"], answer_type="category", source="generated:drugdose",
-                provenance=_prov(self.drugdose, profile.source_name), category="pregnancy", difficulty="easy",
-                aliases=lambda ans: [f"category {ans}"],
+                answer=lambda r: r[0]["fda_category"], answer_type="category",
+                source="generated:us-label" if rule is not None else "generated:drugdose",
+                provenance=_prov(self.drugdose, self.db.dose_profiles[drug].source_name), category="pregnancy",
+                difficulty="easy", aliases=lambda ans: [f"category {ans}"],
+            ))
+        options = ", ".join(sorted({L.PREGNANCY_LABEL_RULES[d].recommendation for d in labelled}))
+        for drug in labelled:
+            if drug not in self.db.drugs:
+                continue
+            ticket = (f"Obstetric consult: a pregnant patient may need {drug}. What does the formulary's US-label "
+                      f"pregnancy entry conclude for {drug}? Answer with one of: {options}.")
+            self.add(Spec(
+                id=f"di-gen-pregnancy_label_risk-{_slug(drug)}", task_type="pregnancy_label_risk", ticket=ticket,
+                calls=[("check_pregnancy_safety", {"drug": drug}, ["drug"])],
+                answer=lambda r: r[0]["recommendation"], answer_type="category", source="generated:us-label",
+                provenance={"package": "authored", "version": "1", "license": "project",
+                            "records": L.PREGNANCY_LABEL_RULES[drug].section},
+                category="pregnancy", difficulty="easy",
+                challenges=["The conclusion is the label's section 8.1 / section 4 wording, not a letter category."],
             ))
 
     def dose_tasks(self) -> None:

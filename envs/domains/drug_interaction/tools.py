@@ -376,7 +376,7 @@ class DrugInteractionTools(BaseDomainTools):
 
     @is_tool(ToolType.READ)
     def check_pregnancy_safety(self, drug: str, patient_id: str | None = None) -> dict:
-        """Get a drug's FDA pregnancy category and what it means (and the patient's pregnancy status).
+        """Get a drug's pregnancy conclusion: its US label's risk summary and section where the formulary has it (a letter only with its date), else the FDA letter category from package data, and the patient's pregnancy status.
 
         Args:
             drug: Generic or brand name.
