@@ -39,6 +39,7 @@ from evals.types import (
     results_schema,
     row_to_record,
 )
+from learner.faults import fault_point
 
 
 def trajectory_schema():
@@ -93,11 +94,18 @@ class ResultsStore:
         # trajectories, so this run computes them again; every other row stays final.
         retried = {row_id(row.key()) for row in rows if retry_errors and is_retryable(row)}
         self.rows = [row for row in rows if row_id(row.key()) not in retried]
-        self.trajectories = [t for t in trajectories if t.get("row_id") not in retried]
+        # A flush renames trajectories.parquet before results.parquet: a crash or a full disk between
+        # the two leaves trajectories of episodes without a result row. Those episodes run again, so
+        # only the trajectories of kept rows stay, one per row id (the last written).
+        kept_ids = {row_id(row.key()) for row in self.rows}
+        by_id = {t.get("row_id"): t for t in trajectories if t.get("row_id") in kept_ids}
+        self.trajectories = list(by_id.values())
+        self.dropped_trajectories = len(trajectories) - len(self.trajectories)
         self.retried = len(retried)
         self.keys = {row.key() for row in self.rows}
         self.flush_every_s = flush_every_s
-        self._dirty = bool(retried)
+        self._dirty = bool(retried) or self.dropped_trajectories > 0
+        self._flushes = 0
         self._last_flush = time.monotonic()
 
     def _read_trajectories(self) -> list[dict[str, Any]]:
@@ -122,10 +130,13 @@ class ResultsStore:
 
         if not self._dirty:
             return
-        for name, records, schema in ((TRAJECTORIES_FILE, self.trajectories, trajectory_schema()),
-                                      (RESULTS_FILE, [row_to_record(r) for r in self.rows], results_schema())):
+        self._flushes += 1
+        for name, records, schema, point in (
+                (TRAJECTORIES_FILE, self.trajectories, trajectory_schema(), "eval_trajectories_written"),
+                (RESULTS_FILE, [row_to_record(r) for r in self.rows], results_schema(), "eval_results_written")):
             table = pa.Table.from_pylist(records, schema=schema)
             replace_atomic(self.dir / name, lambda tmp, table=table: pq.write_table(table, tmp))
+            fault_point(point, self._flushes)
         self._dirty = False
         self._last_flush = time.monotonic()
 

@@ -16,11 +16,15 @@ from __future__ import annotations
 import json
 import math
 import numbers
-from collections.abc import Iterable, Sequence
+import os
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from actors.types import RolloutSample, TeacherOutput
+from envs.core.files import replace_atomic, write_text_atomic
+
+VALIDATION_FILE = "validation.jsonl"  # one line per validation pass (learner/rollouts.py)
 
 REQUIRED_KEYS = (
     "step", "reward_mean", "accuracy", "response_length_mean", "turns_mean", "tool_calls_mean",
@@ -108,13 +112,21 @@ class MetricsSink:
         self._hists: dict[str, Any] = {}
         self._ray = ray_metrics
 
-    def truncate_after(self, step: int) -> None:
-        """On resume: drop records of steps after the checkpoint (they will be redone)."""
-        if not self.path.exists():
-            return
-        keep = [line for line in self.path.read_text(encoding="utf-8").splitlines()
-                if line.strip() and json.loads(line).get("step", 0) <= step]
-        self.path.write_text("".join(line + "\n" for line in keep), encoding="utf-8")
+    def truncate_after(self, step: int, log: Callable[[str], None] = print) -> None:
+        """On resume: drop the records of steps after the checkpoint from metrics.jsonl and
+        validation.jsonl (those steps will be redone), and a last line a crash or a full disk cut
+        short (`log` gets a warning naming the file and the line)."""
+        for path in (self.path, self.run_dir / VALIDATION_FILE):
+            if not path.exists():
+                continue
+            rows = read_jsonl_rows(path, torn_tail="cut", log=log)
+            keep = [json.dumps(row, allow_nan=False) for row in rows if int(row.get("step", 0)) <= step]
+            write_text_atomic(path, "".join(line + "\n" for line in keep))
+
+    def validated_steps(self) -> set[int]:
+        """The steps validation.jsonl has a row for."""
+        path = self.run_dir / VALIDATION_FILE
+        return {int(row.get("step", 0)) for row in read_jsonl_rows(path)} if path.exists() else set()
 
     def _ray_gauge(self, key: str):
         from ray.util.metrics import Gauge
@@ -140,6 +152,10 @@ class MetricsSink:
         step = int(record["step"])
         with self.path.open("a", encoding="utf-8") as handle:
             handle.write(json.dumps(json_record(record), sort_keys=False, allow_nan=False) + "\n")
+            # On disk before the step's checkpoint becomes `latest` (learner/train.py): a node that
+            # loses power after that must not come back with the row missing.
+            handle.flush()
+            os.fsync(handle.fileno())
         for key, value in record.items():
             if key == "step" or not isinstance(value, (int, float)) or isinstance(value, bool):
                 continue
@@ -184,9 +200,49 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, Any]]:
 
 
 def read_metric_rows(path: Path) -> list[dict[str, Any]]:
-    """Rows of a metrics JSONL file (metrics.jsonl, validation.jsonl), nulls read back as NaN."""
-    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    """Rows of a metrics JSONL file (metrics.jsonl, validation.jsonl), nulls read back as NaN.
+    A last line still being appended (no newline yet, not a whole record) is not read."""
+    rows = read_jsonl_rows(Path(path), torn_tail="skip")
     return [{k: (math.nan if v is None else v) for k, v in row.items()} for row in rows]
+
+
+def read_jsonl_rows(path: Path, *, torn_tail: str = "error",
+                    log: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+    """The JSON objects of an append-only JSONL file, one per line.
+
+    Args:
+        path: The file.
+        torn_tail: What to do with a last line that is not a whole JSON object (an append a crash
+            or a full disk cut short): "error" raises, "skip" leaves it out, "cut" also removes it
+            from the file, telling `log` which file and line.
+
+    Raises:
+        ValueError: naming the file and the line, for a line before the last that is not a JSON
+            object (damage no crash causes), or a torn last line with torn_tail="error".
+    """
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    rows: list[dict[str, Any]] = []
+    for number, raw in enumerate(lines, 1):
+        if not raw.strip():
+            continue
+        last = all(not rest.strip() for rest in lines[number:])
+        try:
+            row = json.loads(raw.decode("utf-8"))
+            if not isinstance(row, dict):
+                raise ValueError(f"a JSON {type(row).__name__}, not an object")
+        except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+            what = f"{path} line {number} ({len(raw)} bytes) is not a complete JSON record ({exc})"
+            if not last or torn_tail == "error":
+                raise ValueError(what) from None
+            if torn_tail == "cut":
+                good = data[:sum(len(line) + 1 for line in lines[:number - 1])]
+                replace_atomic(path, lambda tmp: tmp.write_bytes(good))
+                if log is not None:
+                    log(f"[resume] warning: {what}: cut short by a crash or a full disk; removed that line")
+            break
+        rows.append(row)
+    return rows
 
 
 # ---------------------------------------------------------------------------------------------

@@ -4,12 +4,14 @@ The layout is in modeling/checkpoint.py."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any, Callable
 
 from learner.batching import BatchScheduler
 from modeling.checkpoint import (CheckpointError, checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints,
                                 read_json, write_json_atomic)
+from learner.faults import fault_point
 from learner.teacher_client import TeacherClient
 
 DRIVER_STATE = "driver.json"
@@ -23,10 +25,25 @@ DRIVER_STATE_KEYS: dict[str, type | tuple[type, ...]] = {
 
 async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: TeacherClient | None,
                               scheduler: BatchScheduler, counters: dict[str, int], ledger: dict[str, Any],
-                              keep_last: int) -> Path:
-    """Write `RUN_DIR/checkpoints/step_N/` (learner, teacher, driver.json), then mark it `latest`."""
+                              keep_last: int, *, mark: bool = True) -> Path:
+    """Write `RUN_DIR/checkpoints/step_N/` (learner, teacher, driver.json), then (with `mark`) mark
+    it `latest`. The driver passes `mark=False` and calls `commit_run_checkpoint` once everything
+    else the step produced (trajectories, validation, its metrics row) is on disk: a crash before
+    that resumes from the previous checkpoint and redoes the step, so nothing of it is lost.
+
+    A step folder left by an earlier attempt that never became `latest` (a driver or a learner
+    killed mid-save, then resumed from an older checkpoint) is removed first, so none of its
+    leftovers (temporary files of an interrupted write, parts of another attempt) ends up in this one.
+    """
     directory = checkpoint_dir(run_dir, step)
-    directory.mkdir(parents=True, exist_ok=True)
+    latest = latest_checkpoint(run_dir)
+    if latest is not None and latest.name == directory.name:
+        # A resumed run that ends at the step it restored: that checkpoint is complete and already
+        # `latest`; rewriting it in place would leave no complete checkpoint while it is written.
+        return directory
+    if directory.exists():
+        shutil.rmtree(directory)
+    directory.mkdir(parents=True)
     await learner.save_checkpoint.remote(str(directory))
     if teacher is not None:
         await teacher.save(str(directory))
@@ -34,9 +51,17 @@ async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: Teache
         "step": step, "teacher_version": teacher.version if teacher is not None else 0,
         **scheduler.state_dict(), "counters": counters, "ledger": ledger,
     })
-    mark_latest(run_dir, step)
-    prune_checkpoints(run_dir, keep_last)
+    fault_point("checkpoint_saved", step)
+    if mark:
+        commit_run_checkpoint(run_dir, step, keep_last)
     return directory
+
+
+def commit_run_checkpoint(run_dir: Path, step: int, keep_last: int) -> None:
+    """Make the written checkpoint of `step` the one a resume starts from, then prune old ones."""
+    mark_latest(run_dir, step)
+    fault_point("latest_marked", step)
+    prune_checkpoints(run_dir, keep_last)
 
 
 async def restore_run_checkpoint(run_dir: Path, learner, teacher: TeacherClient | None, scheduler: BatchScheduler,

@@ -55,7 +55,8 @@ from learner.run_actors import (
     stop_learner,
     wait_started,
 )
-from learner.run_checkpoint import restore_run_checkpoint, save_run_checkpoint
+from learner.faults import fault_point
+from learner.run_checkpoint import commit_run_checkpoint, restore_run_checkpoint, save_run_checkpoint
 from learner.step_metrics import StepTimes, progress_line, step_record
 from learner.tasks import TaskRef, TaskSampler, episode_seed, load_task_refs, prompt_lengths, select_tasks
 from learner.teacher_client import TeacherClient
@@ -147,11 +148,14 @@ class Trainer:
         return await self.rollouts.group(seq, task, version, on_accepted=submit)
 
     async def _validate(self) -> dict[str, float]:
-        return await self.rollouts.validate(self.val_refs, self.step, self.scheduler.version)
+        metrics = await self.rollouts.validate(self.val_refs, self.step, self.scheduler.version)
+        fault_point("validation_written", self.step)
+        return metrics
 
-    async def _save_checkpoint(self) -> None:
+    async def _save_checkpoint(self, *, mark: bool = True) -> None:
         await save_run_checkpoint(self.run_dir, self.step, self.learner, self.teacher_client, self.scheduler,
-                                  self.counters, self.rollouts.ledger.balance(), self.cfg.trainer.keep_checkpoints)
+                                  self.counters, self.rollouts.ledger.balance(), self.cfg.trainer.keep_checkpoints,
+                                  mark=mark)
 
     async def _restore(self) -> bool:
         restored = await restore_run_checkpoint(self.run_dir, self.learner, self.teacher_client, self.scheduler,
@@ -190,8 +194,13 @@ class Trainer:
             teacher_action = await self.teacher_client.update(self.step, published.weights_ref,
                                                               published.teacher_result)
         sync_s = time.perf_counter() - t_sync
-        if cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0:
-            await self._save_checkpoint()
+        # The checkpoint captures the data position here (before `consumed` lets the next versions'
+        # work start), but becomes `latest` only after the step's trajectories, validation and
+        # metrics row are written: a crash in between resumes from the previous checkpoint and
+        # redoes this step instead of skipping what it had not recorded yet.
+        checkpoint_due = bool(cfg.trainer.checkpoint_interval) and self.step % cfg.trainer.checkpoint_interval == 0
+        if checkpoint_due:
+            await self._save_checkpoint(mark=False)
         val_metrics: dict[str, float] = {}
         val_due = bool(cfg.trainer.val_interval) and self.step % cfg.trainer.val_interval == 0 and bool(self.val_refs)
         if val_due and cfg.trainer.max_staleness == 0:
@@ -217,8 +226,12 @@ class Trainer:
         if cfg.trainer.save_trajectories:
             write_samples(samples, self.run_dir / "trajectories" / f"step_{self.step:06d}.parquet",
                           step=self.step, teacher=teacher_out)
+        fault_point("trajectories_written", self.step)
         record.update(val_metrics)
         self.sink.write(record)
+        fault_point("metrics_written", self.step)
+        if checkpoint_due:
+            commit_run_checkpoint(self.run_dir, self.step, cfg.trainer.keep_checkpoints)
         if cfg.metrics.progress:
             self.log(progress_line(record, cfg.trainer.max_steps))
         return record
@@ -231,7 +244,7 @@ class Trainer:
         self.sink = MetricsSink(self.run_dir, tensorboard=cfg.metrics.tensorboard, ray_metrics=cfg.metrics.ray_metrics,
                                 run_name=cfg.name, resume=resumed)
         if resumed:
-            self.sink.truncate_after(self.step)
+            self.sink.truncate_after(self.step, log=self.log)
         elif (self.run_dir / "validation.jsonl").exists():
             (self.run_dir / "validation.jsonl").unlink()
         started = time.perf_counter()
@@ -249,10 +262,13 @@ class Trainer:
             await self.scheduler.stop()
             await asyncio.gather(admission, return_exceptions=True)
             await self.scheduler.drain(finished, cfg.trainer.drain_timeout_s)
+        # The last validation comes before the last checkpoint becomes `latest`, so a crash during it
+        # redoes it on resume; a run resumed after it (the folder has its row) does not repeat it.
+        if (self.val_refs and cfg.trainer.val_interval and self.step % cfg.trainer.val_interval != 0
+                and self.step not in self.sink.validated_steps()):
+            await self._validate()
         if self.step and not (cfg.trainer.checkpoint_interval and self.step % cfg.trainer.checkpoint_interval == 0):
             await self._save_checkpoint()
-        if self.val_refs and cfg.trainer.val_interval and self.step % cfg.trainer.val_interval != 0:
-            await self._validate()
         self.sink.close()
         from learner.plot import plot_runs
 

@@ -243,12 +243,24 @@ def checkpoint_dir(run_dir: str | os.PathLike, step: int) -> Path:
 
 
 def mark_latest(run_dir: str | os.PathLike, step: int) -> None:
-    """Point `latest` at a finished checkpoint (call after every part is written)."""
+    """Point `latest` at a finished checkpoint (call after every part is written).
+
+    Temporary files of atomic writes (`.NAME.tmp`, `.NAME.XXXXXXXX.tmp`) still in the folder were
+    left by a writer killed before its rename; they are not part of the checkpoint and are removed
+    first, so a finished checkpoint never holds one."""
     target = checkpoint_dir(run_dir, step)
     if not target.is_dir():
         raise FileNotFoundError(f"cannot mark missing checkpoint {target} as latest")
+    for leftover in temp_files(target):
+        leftover.unlink(missing_ok=True)
     latest = Path(run_dir) / "checkpoints" / LATEST
     replace_atomic(latest, lambda tmp: tmp.write_text(target.name, encoding="utf-8"))
+
+
+def temp_files(directory: str | os.PathLike) -> list[Path]:
+    """Temporary files of interrupted atomic writes under `directory` (see `write_json_atomic` and
+    envs.core.files.replace_atomic: a dot, the file's name, `.tmp`)."""
+    return sorted(p for p in Path(directory).rglob(".*.tmp") if p.is_file())
 
 
 def latest_checkpoint(run_dir: str | os.PathLike) -> Path | None:
