@@ -37,6 +37,8 @@ def fault_point(name: str, step: int | None = None) -> None:
     """Record `name` (at `step`) and SIGKILL this process when `HCGYM_FAULT_AT` names it."""
     where = name if step is None else f"{name}:{step}"
     REACHED.append(where)
+    if len(REACHED) > 10_000:  # a long run or evaluation passes these points without end
+        del REACHED[:5_000]
     wanted = os.environ.get(FAULT_ENV)
     if wanted and wanted in (name, where):
         os.kill(os.getpid(), signal.SIGKILL)
