@@ -6,8 +6,9 @@ writes (`eval.json`, `results.parquet`, `trajectories.parquet`). Nothing is writ
 
 Speed on real sizes comes from reading only what a page needs: the episode table is an in-memory
 Arrow table of the scalar columns (projected reads; the token and JSON columns stay on disk),
-filtered with Arrow compute kernels and paged; one episode's full record is read from its own file
-when its page is opened.
+filtered with Arrow compute kernels and paged; one episode's full record is read from the row group
+of its own file that holds it, and decoded row groups are kept in a least-recently-used cache bounded
+in bytes, so a flood of episode requests costs one decode per row group, not one per request.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import json
 import math
 import threading
 from abc import ABC, abstractmethod
+from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +37,13 @@ RUN_INDEX_TYPES = {"sample_id": pa.string(), "task_id": pa.string(), "domain": p
                    "teacher_hint": pa.string(), "end_reason": pa.string(), "safety_max_severity": pa.int8(),
                    "error_kinds": pa.list_(pa.string())}
 MAX_PAGE = 500
+#: Accepted range of each integer filter: the column's own type bounds it (step int32, severity int8),
+#: so a 23-digit value is a bad request named as such, not an overflow inside Arrow.
+INT_RANGES = {"step": (0, 2**31 - 1), "min_severity": (0, 127), "offset": (0, 2**31 - 1), "limit": (1, MAX_PAGE)}
+#: Decoded trajectory row groups kept for episode pages (bytes of Arrow buffers).
+EPISODE_CACHE_BYTES = 256 * 2**20
+#: Columns an episode page never shows nor needs (per_turn_kl uses the masks and log-probs only).
+_EPISODE_SKIP = ("policy_versions", "input_ids")
 
 
 class ViewerError(ValueError):
@@ -85,12 +94,88 @@ class EpisodeQuery:
                 else:
                     value = raw
             except ValueError as exc:
-                raise ViewerError(f"filter {name}={raw!r}: {exc}") from None
+                raise ViewerError(f"filter {name}={_short(raw)}: {exc}") from None
+            if name in INT_RANGES and not INT_RANGES[name][0] <= value <= INT_RANGES[name][1]:
+                low, high = INT_RANGES[name]
+                raise ViewerError(f"filter {name}={_short(raw)}: expected an integer in [{low}, {high}]")
             setattr(out, name, value)
-        if out.offset < 0 or not 1 <= out.limit <= MAX_PAGE:
-            raise ViewerError(f"offset must be >= 0 and limit in [1, {MAX_PAGE}] (got offset={out.offset}, "
-                              f"limit={out.limit})")
         return out
+
+
+def _short(raw: str, limit: int = 40) -> str:
+    """A request value quoted for an error message, cut so a huge value does not come back whole."""
+    return repr(raw) if len(raw) <= limit else f"{raw[:limit]!r}... ({len(raw)} characters)"
+
+
+class RowGroupCache:
+    """Decoded row groups of trajectory files, least recently used first out, at most `max_bytes`.
+
+    Keyed by path, size and modification time, so a rewritten file is read again. One lock per row
+    group: concurrent requests for episodes of one step decode it once and share the table.
+    """
+
+    def __init__(self, max_bytes: int = EPISODE_CACHE_BYTES) -> None:
+        self.max_bytes = max_bytes
+        self._tables: OrderedDict[tuple, pa.Table] = OrderedDict()
+        self._layouts: OrderedDict[tuple, tuple[list[int], list[str]]] = OrderedDict()
+        self._locks: dict[tuple, threading.Lock] = {}
+        self._lock = threading.Lock()
+        self.reads = 0  # row groups decoded (a figure for tests and benchmarks)
+
+    def nbytes(self) -> int:
+        with self._lock:
+            return sum(t.nbytes for t in self._tables.values())
+
+    def row(self, path: Path, row: int) -> tuple[pa.Table, int, int]:
+        """(the decoded row group holding `row`, the row's index in it, the file's row count)."""
+        stat = path.stat()
+        key = (str(path), stat.st_size, stat.st_mtime_ns)
+        with self._lock:
+            layout = self._layouts.get(key)
+            if layout is not None:
+                self._layouts.move_to_end(key)
+        if layout is None:
+            meta = pq.ParquetFile(path).metadata
+            starts = [0]
+            for i in range(meta.num_row_groups):
+                starts.append(starts[-1] + meta.row_group(i).num_rows)
+            columns = [c for c in meta.schema.to_arrow_schema().names if c not in _EPISODE_SKIP]
+            layout = (starts, columns)
+            with self._lock:
+                self._layouts[key] = layout
+                while len(self._layouts) > 4096:
+                    self._layouts.popitem(last=False)
+        starts, columns = layout
+        total = starts[-1]
+        if not 0 <= row < total:
+            return pa.table({}), -1, total
+        group = next(i for i in range(len(starts) - 1) if starts[i] <= row < starts[i + 1])
+        group_key = (*key, group)
+        with self._lock:
+            table = self._tables.get(group_key)
+            if table is not None:
+                self._tables.move_to_end(group_key)
+                return table, row - starts[group], total
+            group_lock = self._locks.setdefault(group_key, threading.Lock())
+        with group_lock:
+            with self._lock:
+                table = self._tables.get(group_key)
+            if table is None:
+                table = pq.ParquetFile(path).read_row_group(group, columns=columns)
+                with self._lock:
+                    self.reads += 1
+                    if table.nbytes <= self.max_bytes:
+                        self._tables[group_key] = table
+                        used = sum(t.nbytes for t in self._tables.values())
+                        while used > self.max_bytes:
+                            _, dropped = self._tables.popitem(last=False)
+                            used -= dropped.nbytes
+            with self._lock:
+                self._locks.pop(group_key, None)
+        return table, row - starts[group], total
+
+
+EPISODE_CACHE = RowGroupCache()
 
 
 def _read_projected(path: Path, columns: tuple[str, ...], types: dict[str, pa.DataType]) -> pa.Table:
@@ -285,10 +370,10 @@ class RunSource(_Source):
         if not 0 <= file < len(files):
             raise ViewerError(f"run {self.id}: no trajectory file number {file} (the run has {len(files)})")
         part, path = files[file]
-        table = pq.read_table(path, columns=[c for c in pq.read_schema(path).names if c != "policy_versions"])
-        if not 0 <= row < table.num_rows:
-            raise ViewerError(f"{path.name}: no row {row} (the file has {table.num_rows})")
-        sample = table.slice(row, 1).to_pylist()[0]
+        table, index, total = EPISODE_CACHE.row(path, row)
+        if index < 0:
+            raise ViewerError(f"{path.name}: no row {row} (the file has {total})")
+        sample = table.slice(index, 1).to_pylist()[0]
         for name in ("turns", "reward_components", "metadata", "episode"):
             if isinstance(sample.get(name), str):
                 sample[name] = json.loads(sample[name])
