@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 
 import pytest
+from tests.domains.drug_interaction_fixtures import env  # noqa: F401  (module-scoped fixture)
 
 OVERLAY = Path(__file__).resolve().parents[2] / "envs" / "domains" / "drug_interaction" / "severity_overlay.json"
 
@@ -53,16 +54,6 @@ def test_contraindicated_only_where_a_us_label_contraindicates_the_pair(overlay)
     for pair, rid in contraindicated.items():
         rule = next(r for r in overlay["pairs"] if r["id"] == rid)
         assert "4 CONTRAINDICATIONS" in rule["evidence"] or "boxed warning" in rule["evidence"].lower(), rid
-
-
-@pytest.fixture(scope="module")
-def env():
-    from envs.domains.drug_interaction.environment import get_environment
-
-    try:
-        return get_environment()
-    except Exception as exc:  # the database is built by `hcgym data build`
-        pytest.skip(f"drug_interaction database unavailable: {type(exc).__name__}: {exc}")
 
 
 def test_aspirin_with_an_anticoagulant_without_a_dose_is_not_contraindicated(env):

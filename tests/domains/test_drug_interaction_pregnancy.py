@@ -9,19 +9,10 @@ import re
 import pytest
 
 from envs.domains.drug_interaction import logic as L
+from tests.domains.drug_interaction_fixtures import env  # noqa: F401  (module-scoped fixture)
 
 # a label section: "8.1", "4 CONTRAINDICATIONS", "WARNINGS", "boxed warning", or an FDA communication
 SECTION = re.compile(r"\b(8\.1|4 CONTRAINDICATIONS|WARNINGS|boxed warning|Drug Safety Communication)\b", re.I)
-
-
-@pytest.fixture(scope="module")
-def env():
-    from envs.domains.drug_interaction.environment import get_environment
-
-    try:
-        return get_environment()
-    except Exception as exc:  # the database is built by `hcgym data build`
-        pytest.skip(f"drug_interaction database unavailable: {type(exc).__name__}: {exc}")
 
 
 @pytest.fixture(scope="module")

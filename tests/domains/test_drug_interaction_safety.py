@@ -8,16 +8,7 @@ import pytest
 from envs.core.task import Task
 from envs.rewards import detect_violations
 from tests.rewards.builders import call, episode, turn
-
-
-@pytest.fixture(scope="module")
-def env():
-    from envs.domains.drug_interaction.environment import get_environment
-
-    try:
-        return get_environment()
-    except Exception as exc:  # the database is built by `hcgym data build`
-        pytest.skip(f"drug_interaction database unavailable: {type(exc).__name__}: {exc}")
+from tests.domains.drug_interaction_fixtures import env  # noqa: F401  (module-scoped fixture)
 
 
 @pytest.mark.parametrize("drug, cited", [
