@@ -168,8 +168,8 @@ class EpisodeStore:
                                 "--max-episodes); finish one or retry later")
             eid = uuid.uuid4().hex
             # Reserve the slot before building the env (outside the lock) so the bound holds under a burst.
-            placeholder = Episode(id=eid, domain=domain, env=None, task_id="", last_used=self.clock())
-            self._episodes[eid] = placeholder
+            reserved = Episode(id=eid, domain=domain, env=None, task_id="", last_used=self.clock())
+            self._episodes[eid] = reserved
         try:
             env = HealthcareGymEnv(domain=domain, split=split, max_turns=self.settings.max_turns,
                                    max_tool_calls=self.settings.max_tool_calls,
@@ -186,11 +186,11 @@ class EpisodeStore:
                 self._episodes.pop(eid, None)
             raise
         with self._lock:
-            placeholder.env, placeholder.task_id, placeholder.last_used = env, env.task.id, self.clock()
+            reserved.env, reserved.task_id, reserved.last_used = env, env.task.id, self.clock()
             if session_id:
                 self._by_session[session_id] = eid
         parts = env.prompt()
-        return placeholder, {"episode_id": eid, "domain": domain, "task_id": env.task.id, "split": split,
+        return reserved, {"episode_id": eid, "domain": domain, "task_id": env.task.id, "split": split,
                              "prompt": parts.model_dump(), "messages": parts.messages()}
 
     def get(self, episode_id: str | None, session_id: str | None) -> Episode:
