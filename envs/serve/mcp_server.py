@@ -15,8 +15,6 @@ carry no session id, so a call names its episode in the request `_meta` (`EPISOD
 
 from __future__ import annotations
 
-import hmac
-import ipaddress
 import json
 import threading
 import time
@@ -27,10 +25,12 @@ from typing import Any
 import anyio
 import mcp_types as types
 from mcp.server.lowlevel import Server
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, ValidationError
 
-from envs.env import MAX_TOOL_RESULT_CHARS, HealthcareGymEnv
+from envs.env import HealthcareGymEnv
 from envs.episode import END_REASONS, EpisodeEnd
+# The settings and the token rule are shared with the OpenEnv server; re-exported here for callers.
+from envs.serve.settings import LOOPBACK_HOSTS, BearerToken, ServeSettings, is_loopback  # noqa: F401
 
 EPISODE_META_KEY = "hcgym/episode_id"
 # The assistant text of the turn a call belongs to: the call opens a new assistant turn with it.
@@ -39,50 +39,6 @@ MESSAGE_META_KEY = "hcgym/message"
 SAME_TURN_META_KEY = "hcgym/same_turn"
 SESSION_HEADER = "mcp-session-id"
 EPISODE_TOOLS = ("start_episode", "finish_episode", "episode_result")
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
-
-
-class ServeSettings(BaseModel):
-    """What `hcgym serve --mcp` serves and its limits."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    host: str = "127.0.0.1"
-    port: int = Field(8765, ge=0, le=65535)
-    domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
-    split: str | None = "test"
-    max_episodes: int = Field(64, ge=1, description="episodes running at once; one more is refused as busy")
-    idle_timeout_s: float = Field(600.0, gt=0, description="an episode idle this long is dropped")
-    max_turns: int = Field(40, ge=1)
-    max_tool_calls: int | None = Field(None, ge=1)
-    max_tool_result_chars: int | None = Field(MAX_TOOL_RESULT_CHARS, ge=1)
-    max_argument_chars: int = Field(100_000, ge=1, description="a call's arguments as JSON, at most")
-    max_request_bytes: int = Field(1_000_000, ge=1024, description="an HTTP request body, at most")
-    token: str | None = Field(None, description="bearer token the server requires (required off loopback)")
-
-    @field_validator("domains")
-    @classmethod
-    def _known_domains(cls, value: list[str]) -> list[str]:
-        from envs.registry import list_domains
-
-        unknown = [d for d in value if d not in list_domains()]
-        if unknown:
-            raise ValueError(f"unknown domain(s) {unknown}; registered: {', '.join(list_domains())}")
-        return list(dict.fromkeys(value))
-
-    def model_post_init(self, _context: Any) -> None:
-        if not is_loopback(self.host) and not self.token:
-            raise ValueError(f"host {self.host!r} is not a loopback address: a --token (or HCGYM_SERVE_TOKEN) "
-                             "is required to serve beyond this machine")
-
-
-def is_loopback(host: str) -> bool:
-    if host in LOOPBACK_HOSTS:
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 class StartArgs(BaseModel):
@@ -367,25 +323,6 @@ def _parse(model: type[BaseModel], tool: str, arguments: dict[str, Any]) -> Any:
         problems = "; ".join(f"argument {'.'.join(str(p) for p in e['loc']) or '(all)'!r}: {e['msg']}"
                              for e in exc.errors())
         raise ToolCallError(f"{tool}: {problems}") from None
-
-
-class BearerToken:
-    """ASGI wrapper: every request must carry `Authorization: Bearer <token>`."""
-
-    def __init__(self, app: Any, token: str) -> None:
-        self.app, self.token = app, token.encode()
-
-    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
-        if scope["type"] == "http":
-            header = dict(scope.get("headers") or []).get(b"authorization", b"")
-            if not hmac.compare_digest(header, b"Bearer " + self.token):
-                body = b'{"error": "unauthorized: send Authorization: Bearer <token>"}'
-                await send({"type": "http.response.start", "status": 401,
-                            "headers": [(b"content-type", b"application/json"),
-                                        (b"www-authenticate", b"Bearer")]})
-                await send({"type": "http.response.body", "body": body})
-                return
-        await self.app(scope, receive, send)
 
 
 def build_app(settings: ServeSettings) -> tuple[Any, EpisodeStore]:
