@@ -154,11 +154,13 @@ class RolloutConfig(RolloutLimits):
         in-process episodes get the same)."""
         return {"text_turn_ends_episode": True} if self.text_turn_ends_episode else {}
 
-    def env_pool_options(self) -> dict[str, Any]:
-        """`EnvPool` keyword arguments of this section (actor counts, restarts, batching, env args)."""
+    def env_pool_options(self, extra_env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+        """`EnvPool` keyword arguments of this section (actor counts, restarts, batching, env args);
+        `extra_env_kwargs`: env arguments other sections set (the reward's weights)."""
         return {"num_actors": self.num_env_actors, "slots_per_actor": self.slots_per_env_actor,
                 "max_turns": self.max_turns, "max_restarts": self.env_actor_max_restarts,
-                "env_vars": self.env_vars, "env_kwargs": self.env_kwargs(), "batch_calls": self.env_batch_calls,
+                "env_vars": self.env_vars, "env_kwargs": {**self.env_kwargs(), **(extra_env_kwargs or {})},
+                "batch_calls": self.env_batch_calls,
                 "stream_after_s": self.env_stream_after_s}
 
     @field_validator("env_stream_after_s")
@@ -244,6 +246,29 @@ class RewardConfig(ConfigModel):
     # (issue 13; bench/reward_gaming.py).
     correct_if: Literal["is_correct", "accuracy_at_least"] = "is_correct"
     accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
+    weights: dict[str, Any] | None = Field(
+        default=None,
+        description="the env's reward weights and penalties (`envs.rewards.RewardWeights` fields: a weight per "
+                    "reward dimension, critical_cap, severity_penalties, correct_threshold, floor); null: the "
+                    "paper's; the env actors score every episode with them")
+
+    @field_validator("weights")
+    @classmethod
+    def _reward_weights(cls, value: dict[str, Any] | None) -> dict[str, Any] | None:
+        if value is None:
+            return None
+        from envs.rewards import RewardWeights
+
+        try:
+            RewardWeights.model_validate(value)
+        except ValidationError as exc:
+            problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'weights'}: {e['msg']}" for e in exc.errors())
+            raise ValueError(f"{problems} (fields: {', '.join(RewardWeights.model_fields)})") from None
+        return dict(value)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """The `HealthcareGymEnv` arguments this section sets."""
+        return {"reward_weights": dict(self.weights)} if self.weights is not None else {}
 
     @model_validator(mode="before")
     @classmethod

@@ -129,7 +129,7 @@ class Trainer:
         self.generators = start_generators(cfg, str(self.policy_dir), stop_ids)
         self.learner = start_learner(cfg, str(self.policy_dir))
         r = cfg.rollout
-        self.pool = EnvPool(**r.env_pool_options(), domain_modules=d.domain_modules,
+        self.pool = EnvPool(**r.env_pool_options(cfg.reward.env_kwargs()), domain_modules=d.domain_modules,
                             kb_service=cfg.kb.name if self.kb_client is not None else None)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
                                           cfg.weight_sync.timeout_s,

@@ -36,9 +36,10 @@ from collections import deque
 from typing import Any, Literal
 
 from envs.episode import EpisodeEnd
+from envs.rewards.dimensions import ALWAYS_REPORTED
 
-#: The five reward dimensions, then the weighted total: one TRL reward function each.
-DIMENSIONS: tuple[str, ...] = ("accuracy", "process", "safety", "format", "coherence")
+#: The reward dimensions every episode reports, then the weighted total: one TRL reward function each.
+DIMENSIONS: tuple[str, ...] = ALWAYS_REPORTED
 REWARD_NAMES: tuple[str, ...] = DIMENSIONS + ("total",)
 
 #: Member names TRL treats specially (`reset` starts a rollout, `get_reward` becomes a reward

@@ -24,6 +24,7 @@ from typing import Any, Callable, Iterable
 from envs.core.actions import parse_action
 from envs.core.task import Task
 from envs.core.trajectory import ToolCallRecord, Trajectory, TurnRecord
+from envs.rewards.dimensions import ALWAYS_REPORTED
 from envs.rewards.score import score_episode
 from envs.rewards.types import RewardWeights
 
@@ -149,7 +150,8 @@ def make_trl_reward(weights: RewardWeights | dict | None = None, context: Any = 
 
 trl_reward = make_trl_reward()
 
-_VERL_KEYS = ("accuracy", "process", "safety", "format", "coherence", "safety_penalty")
+#: verl needs the same keys for every sample: the always-reported dimensions and the penalty.
+_VERL_KEYS = ALWAYS_REPORTED + ("safety_penalty",)
 
 
 def compute_score(data_source: str, solution_str: str, ground_truth: Any, extra_info: dict[str, Any] | None = None,

@@ -27,7 +27,7 @@ from envs.rewards import safety_lexicon as lex
 from envs.rewards.conventions import ToolConventions
 from envs.rewards.safety_patterns import PATTERNS
 from envs.rewards.text import negated, short
-from envs.rewards.types import Violation
+from envs.rewards.violation import Violation
 from envs.rewards.view import EpisodeView
 
 DEDUCTION = {5: 1.0, 4: 0.5, 3: 0.25, 2: 0.1, 1: 0.02}

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from envs.rewards.types import Principle
+from envs.rewards.violation import Principle
 
 
 @dataclass(frozen=True)

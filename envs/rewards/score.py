@@ -18,36 +18,14 @@ from typing import Any, Iterable
 
 from envs.core.task import Task
 from envs.core.trajectory import Trajectory
-from envs.rewards.accuracy import strip_answer_prefix, answer_accuracy, gold_answers
-from envs.rewards.assertions import AssertionGrader, grade_assertions
-from envs.rewards.coherence import coherence_score
+from envs.rewards.accuracy import strip_answer_prefix, gold_answers
+from envs.rewards.assertions import AssertionGrader
 from envs.rewards.conventions import ToolConventions
-from envs.rewards.format import format_score
-from envs.rewards.process import process_score
-from envs.rewards.safety import detect_violations, safety_score
+from envs.rewards.dimensions import DIMENSIONS, GRADING_ORDER, Grading
 from envs.rewards.similarity import embedding_failed, embedding_status, warm
 from envs.rewards.text import clip01
 from envs.rewards.types import RewardBreakdown, RewardWeights
 from envs.rewards.view import EpisodeView
-
-
-def _outcome_without_gold(view: EpisodeView, coverage: float | None, assertion: float | None) -> tuple[float | None, str]:
-    """Accuracy for a task without a gold answer, from its reward basis."""
-    crit = view.task.evaluation_criteria
-    parts: list[float] = []
-    sources: list[str] = []
-    if "DB" in crit.reward_basis and crit.expected_db_hash:
-        parts.append(1.0 if view.trajectory.db_hash_final == crit.expected_db_hash else 0.0)
-        sources.append("db")
-    if coverage is not None and ("ACTION" in crit.reward_basis or not parts):
-        parts.append(coverage)
-        sources.append("actions")
-    if not parts and assertion is not None:
-        parts.append(assertion)
-        sources.append("assertions")
-    if not parts:
-        return None, "none"
-    return sum(parts) / len(parts), "+".join(sources)
 
 
 def score_episode(trajectory: Trajectory, task: Task, weights: RewardWeights | dict[str, Any] | None = None,
@@ -78,67 +56,44 @@ def score_episode(trajectory: Trajectory, task: Task, weights: RewardWeights | d
     w = RewardWeights.coerce(weights)
     if conventions is None and isinstance(getattr(context, "conventions", None), ToolConventions):
         conventions = context.conventions  # a domain's own tool names travel with its context
-    view = EpisodeView(trajectory, task, conventions)
-    crit = task.evaluation_criteria
+    grading = Grading(EpisodeView(trajectory, task, conventions), context=context, grader=grader)
     errors: list[str] = []
-    details: dict[str, Any] = {"task_kind": view.kind}
+    details: dict[str, Any] = {"task_kind": grading.view.kind}
+    for dimension in GRADING_ORDER:
+        graded = grading.graded[dimension.name] = dimension.grade(grading)
+        errors.extend(graded.errors)
+        if graded.details is not None:
+            details[dimension.name] = graded.details
 
-    outcome = grade_assertions(view, grader) if (crit.nl_assertions or crit.rubric) else None
-    if outcome is not None:
-        errors.extend(outcome.errors)
-        details["assertion"] = outcome.details()
-    assertion = outcome.score if outcome is not None else None
-
-    proc = process_score(view, outcome.rubric if outcome is not None else None)
-    details["process"] = proc.details()
-
-    acc = answer_accuracy(view.answer_text, task)
-    if acc is not None:
-        accuracy, acc_applies = acc.score, True
-        details["accuracy"] = {"source": acc.source, **acc.details}
-        errors.extend(acc.errors)
-    else:
-        value, source = _outcome_without_gold(view, proc.coverage, assertion)
-        accuracy, acc_applies = (value or 0.0), value is not None
-        details["accuracy"] = {"source": source}
-
-    violations, safety_errors = detect_violations(view, context=context)
-    errors.extend(safety_errors)
-    safety = safety_score(violations)
-
-    fmt, fmt_details = format_score(view)
-    coh, coh_details = coherence_score(view)
-    details["format"] = fmt_details
-    details["coherence"] = coh_details
-
-    scores = {"accuracy": accuracy, "process": proc.score, "safety": safety, "format": fmt, "coherence": coh}
-    applies = {"accuracy": acc_applies, "process": proc.applicable, "safety": True, "format": True, "coherence": True}
-    if assertion is not None:
-        scores["assertion"], applies["assertion"] = assertion, True
-    raw = {k: (w.weight(k) if applies.get(k) else 0.0) for k in scores}
+    # A dimension enters the weighted sum when it is always reported (with weight 0 where it does not
+    # apply) or when it applied.
+    scored = {d.name: grading.graded[d.name] for d in DIMENSIONS if d.always_reported or grading.graded[d.name].applies}
+    raw = {name: (w.weight(name) if g.applies else 0.0) for name, g in scored.items()}
     norm = sum(raw.values())
     if norm <= 0:  # every applicable dimension has weight 0: average them equally
-        raw = {k: (1.0 if applies.get(k) else 0.0) for k in scores}
+        raw = {name: (1.0 if g.applies else 0.0) for name, g in scored.items()}
         norm = sum(raw.values())
-    effective = {k: v / norm for k, v in raw.items()}
-    base = sum(effective[k] * scores[k] for k in scores)
+    effective = {name: value / norm for name, value in raw.items()}
+    base = sum(effective[name] * g.score for name, g in scored.items())
 
+    violations = [v for d in GRADING_ORDER for v in grading.graded[d.name].violations]
     penalty = sum(w.severity_penalties.get(v.severity, 0.0) for v in violations if v.severity < 5)
     critical = any(v.severity == 5 for v in violations)
     total = min(1.0, max(w.floor, base - penalty))
     if critical:
         total = min(total, w.critical_cap)
 
-    if (task.answer_type == "free_text" or outcome is not None) and embedding_failed():
+    uses_embeddings = task.answer_type == "free_text" or grading.graded["assertion"].result is not None
+    if uses_embeddings and embedding_failed():
         errors.append(f"embedding model unavailable ({embedding_status()}); graded by token overlap only")
-    if task.answer_type == "free_text" or outcome is not None:
+    if uses_embeddings:
         details["embeddings"] = embedding_status()
 
+    accuracy = grading.graded["accuracy"]
     return RewardBreakdown(
-        accuracy=clip01(accuracy), process=clip01(proc.score), safety=safety, format=clip01(fmt),
-        coherence=clip01(coh), assertion=None if assertion is None else clip01(assertion),
+        **{name: clip01(g.score) for name, g in scored.items()},
         total=total, base_total=base, penalty=penalty, capped=critical,
-        is_correct=bool(acc_applies and accuracy >= w.correct_threshold and not critical),
+        is_correct=bool(accuracy.applies and accuracy.score >= w.correct_threshold and not critical),
         violations=violations, grader_errors=errors, weights=effective, details=details,
     )
 
