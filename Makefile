@@ -19,7 +19,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 # A crash (also one during interpreter exit, after the last test) prints every thread's stack.
 export PYTHONFAULTHANDLER := 1
 
-.PHONY: setup vllm-cpu browser data demo tour test exit-check validate bench clean
+.PHONY: setup vllm-cpu verifiers browser data demo tour test exit-check validate bench clean
 
 setup: $(STAMP)
 
@@ -50,6 +50,32 @@ $(VLLM_STAMP): pyproject.toml constraints-cpu.txt
 	test "$$($(VLLM_VENV)/bin/python -c 'import sys; print(sys.version.split()[0])')" = \
 		"$$($(BIN)/python -c 'import sys; print(sys.version.split()[0])')"  # Ray workers need the driver's Python
 	touch $(VLLM_STAMP)
+
+# verifiers 0.4 (the `verifiers` extra) in its own interpreter: it pins mcp==2.0.0 and openai<3, while
+# `hcgym serve --mcp` runs on mcp 2.3.0 in .venv. The venv holds verifiers, the gym's runtime
+# dependencies, the gym itself and its verifiers environment package (envs/integrations/verifiers,
+# taskset id `healthcare-gym`), plus uv: verifiers' harnesses run their chat program (a PEP 723
+# script) through `uv sync --script`, whose dependencies are downloaded here, once, into
+# $(VF_VENV)/wheelhouse at the versions installed, so a run installs them with no index
+# (UV_NO_INDEX=1 UV_FIND_LINKS=$(VF_VENV)/wheelhouse; docs/integrations.md).
+VF_VENV := .venv-verifiers
+VF_STAMP := $(VF_VENV)/.installed
+VF_CHAT_DEPS := openai "mcp==2.0.0" httpx httpx2 tenacity certifi
+
+verifiers: $(VF_STAMP)
+
+$(VF_STAMP): pyproject.toml constraints-cpu.txt envs/integrations/verifiers/pyproject.toml
+	test -x $(VF_VENV)/bin/python || $(PYTHON) -m venv $(VF_VENV)
+	$(VF_VENV)/bin/pip install -q -c constraints-cpu.txt verifiers==0.4.0 uv==0.13.8 "gymnasium>=1.4,<1.5" \
+		"pydantic>=2.14,<3" "numpy>=2.3,<2.5" "scipy>=1.17,<1.18" "pyyaml>=6.0,<7" "pyarrow>=26,<27" \
+		"tantivy>=0.27,<0.28" "bm25s>=0.3.16,<0.4" "numba>=0.68,<0.69"
+	$(VF_VENV)/bin/pip install -q --no-deps -e . -e envs/integrations/verifiers
+	$(VF_VENV)/bin/pip freeze --exclude-editable > $(VF_VENV)/versions.txt
+	$(VF_VENV)/bin/pip download -q -d $(VF_VENV)/wheelhouse -c $(VF_VENV)/versions.txt $(VF_CHAT_DEPS)
+	$(VF_VENV)/bin/python -c "import verifiers, verifiers.v1 as vf, healthcare_gym, envs.export; \
+		assert verifiers.__version__ == '0.4.0', verifiers.__version__; \
+		assert vf.import_taskset('healthcare-gym') is healthcare_gym"
+	touch $(VF_STAMP)
 
 data: setup
 	$(BIN)/hcgym data build
@@ -90,4 +116,4 @@ bench: data
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) $(VLLM_VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) $(VLLM_VENV) $(VF_VENV) .pytest_cache .hypothesis
