@@ -8,24 +8,24 @@ from __future__ import annotations
 
 import importlib
 from functools import lru_cache
+from pathlib import Path
 from types import ModuleType
 
 from envs.core.domain import DomainEnvironment
 from envs.core.task import Task
 
-# Every domain folder under envs/domains/ with an environment.py. Add a line to register one.
-DOMAINS: dict[str, str] = {
-    "drug_interaction": "envs.domains.drug_interaction.environment",
-    "clinical_diagnosis": "envs.domains.clinical_diagnosis.environment",
-    "triage_emergency": "envs.domains.triage_emergency.environment",
-    "ehr_management": "envs.domains.ehr_management.environment",
-    "medical_qa": "envs.domains.medical_qa.environment",
-    "psychiatry": "envs.domains.psychiatry.environment",
-    "obstetrics": "envs.domains.obstetrics.environment",
-    "radiology_report": "envs.domains.radiology_report.environment",
-    "visual_diagnosis": "envs.domains.visual_diagnosis.environment",
-    "cross_domain": "envs.domains.cross_domain.environment",
-}
+#: Where the built-in domains live: every folder here with an `environment.py` is a domain, named
+#: after its folder (its `build.py`, if any, is its data builder: `envs.data.build`).
+DOMAINS_DIR = Path(__file__).resolve().parent / "domains"
+
+
+def discover_domains(root: Path = DOMAINS_DIR, package: str = "envs.domains") -> dict[str, str]:
+    """{domain name: environment module} for every folder of `root` with an `environment.py`, by name."""
+    return {path.parent.name: f"{package}.{path.parent.name}.environment"
+            for path in sorted(root.glob("*/environment.py")) if not path.parent.name.startswith(("_", "."))}
+
+
+DOMAINS: dict[str, str] = discover_domains()
 
 
 class DomainLoadError(ImportError):

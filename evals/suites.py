@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import yaml
@@ -75,11 +75,38 @@ class BenchmarkSpec(BaseModel):
     import_commands: list[str] = Field(default_factory=list, alias="import")
 
 
+#: `select.domain` of a benchmark that stands for every registered domain.
+EVERY_DOMAIN = "*"
+
+
 class SuiteSpec(BaseModel):
+    """A suite file. A benchmark whose `select.domain` is "*" stands for one benchmark per registered
+    domain (`envs.registry`), its `name` and `title` formatted with `{domain}`: a new domain joins the
+    gym suites without an edit."""
+
     model_config = ConfigDict(extra="forbid")
     name: str
     description: str = ""
     benchmarks: list[BenchmarkSpec] = Field(min_length=1)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _every_domain(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or not isinstance(data.get("benchmarks"), list):
+            return data
+        expanded: list[Any] = []
+        for bench in data["benchmarks"]:
+            select = bench.get("select") if isinstance(bench, dict) else None
+            if not (isinstance(select, dict) and select.get("domain") == EVERY_DOMAIN):
+                expanded.append(bench)
+                continue
+            from envs import registry
+
+            for domain in registry.list_domains():
+                expanded.append({**bench, "name": str(bench.get("name", "")).format(domain=domain),
+                                 "title": str(bench.get("title", "")).format(domain=domain),
+                                 "select": {**select, "domain": domain}})
+        return {**data, "benchmarks": expanded}
 
     @model_validator(mode="after")
     def _unique_names(self) -> SuiteSpec:

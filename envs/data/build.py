@@ -2,7 +2,8 @@
 
 A builder is a module with `build(offline: bool = False, force: bool = False) -> dict` that
 writes its output under `envs.core.paths.data_dir()` deterministically and returns a summary of
-counts. To add one, append its module path to BUILDERS; a domain builder that reads another
+counts. A domain's builder is its folder's `build.py` (found with the folder: `envs.registry`); a builder
+that is not a domain's is listed in BUILDERS. A domain builder that reads another
 domain's built data declares it in its own `BUILD_REQUIRES` and runs after it
 (`envs.core.build_order.ordered_builders`), whatever its place in the list. Builders read registry packages only
 through `envs.data.registry.open_package`, which hands out a package's wheel after checking it
@@ -15,19 +16,11 @@ import importlib
 import time
 
 from envs.core.build_order import ordered_builders
+from envs.registry import DOMAINS, DOMAINS_DIR
 
-BUILDERS: list[str] = [
-    "envs.domains.drug_interaction.build",
-    "envs.domains.clinical_diagnosis.build",
-    "envs.domains.triage_emergency.build",
-    "envs.domains.ehr_management.build",
-    "envs.domains.medical_qa.build",
-    "envs.domains.psychiatry.build",
-    "envs.domains.obstetrics.build",
-    "envs.domains.radiology_report.build",
-    "envs.domains.visual_diagnosis.build",
-    "kb_service.build_default",
-]
+#: Every domain folder's `build.py` (by domain name), then the knowledge base.
+BUILDERS: list[str] = [f"envs.domains.{path.parent.name}.build" for path in sorted(DOMAINS_DIR.glob("*/build.py"))
+                       if path.parent.name in DOMAINS] + ["kb_service.build_default"]
 
 
 def run_builders(names: list[str] | None = None, *, offline: bool = False, force: bool = False,

@@ -115,7 +115,13 @@ def test_gym_suites_resolve_to_the_built_splits():
     assert drug == [i.task_id for i in resolve("gym-validation").items if i.domain == "drug_interaction"]
     assert {i.split for i in validation.items if i.domain == "drug_interaction"} == {"test"}
     heldout = resolve("gym-heldout")
-    assert len(heldout.benchmarks) == 10 and {i.split for i in heldout.items} == {"test"}
+    from envs import registry
+
+    # one benchmark per registered domain: the ten built-in ones and the tests' ward domain
+    domains = [b.spec.select.domain for b in heldout.benchmarks]
+    assert domains == registry.list_domains() and heldout.missing == []
+    assert len([d for d in domains if registry.DOMAINS[d].startswith("envs.domains.")]) == 10
+    assert {i.split for i in heldout.items} == {"test"}
 
 
 def test_task_id_pattern_selects_the_demo_calculator_set():
