@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from pydantic import ValidationError
-
-from envs.core.db import DataFileError, format_validation_error
+from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment
+from envs.core.pathway import episode_database, validate_pathway_patient
 
 from . import knowledge
 from .data_model import ClinicalDiagnosisDB, Patient
@@ -24,18 +23,7 @@ DOMAIN = "clinical_diagnosis"
 
 def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
     """Validate `record` against the clinical-diagnosis patient model and insert it; returns the id."""
-    if not isinstance(record, dict):
-        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
-    fields = dict(record)
-    clock = fields.pop("encounter_time", None)
-    label = str(fields.get("patient_id") or "<no patient_id>")
-    where = f"{DOMAIN} patient record [{label}]"
-    try:
-        patient = Patient.model_validate(fields)
-    except ValidationError as exc:
-        raise DataFileError(
-            format_validation_error(exc, source=f"{DOMAIN} patient record", item=label)
-        ) from None
+    patient, clock, where = validate_pathway_patient(DOMAIN, record, Patient)
     index = knowledge.hpo_index()
     for i, finding in enumerate(patient.findings):
         if finding.hpo_id not in index.terms:
@@ -57,11 +45,7 @@ def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
                 f"{where} field 'findings.{i}.requires_test': {finding.requires_test!r} is neither "
                 f"resulted nor held back for this patient"
             )
-    db = domain_env.toolkit.db
-    if not isinstance(db, ClinicalDiagnosisDB):
-        raise DataFileError(
-            f"{DOMAIN}: the environment's database is {type(db).__name__}, not ClinicalDiagnosisDB"
-        )
+    db = episode_database(DOMAIN, domain_env, ClinicalDiagnosisDB)
     if patient.patient_id in db.patients:
         raise DataFileError(f"{where} field 'patient_id': already in the database")
     if clock is not None:

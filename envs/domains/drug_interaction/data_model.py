@@ -12,19 +12,16 @@ import hashlib
 import json
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, TypeAdapter
+from pydantic import BaseModel, Field, PrivateAttr, TypeAdapter
 
 from envs.core.db import DB
+from envs.core.models import StrictModel
 
 Severity = Literal["none", "minor", "moderate", "major", "contraindicated"]
 PartyKind = Literal["substance", "class", "non_drug", "route_group"]
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class Provenance(_Record):
+class Provenance(StrictModel):
     """Where a record comes from: a pinned registry package (and the file inside it), or us."""
 
     package: str
@@ -34,14 +31,14 @@ class Provenance(_Record):
     record: str | None = None
 
 
-class LocalizedText(_Record):
+class LocalizedText(StrictModel):
     """Source text in its own language; French ANSM text is kept as is, never machine-translated."""
 
     text: str
     language: Literal["fr", "en"]
 
 
-class Drug(_Record):
+class Drug(StrictModel):
     id: str = Field(description="canonical English name in the drug-named-entity-recognition vocabulary")
     name: str
     brand_names: list[str] = Field(default_factory=list)
@@ -56,7 +53,7 @@ class Drug(_Record):
     provenance: list[Provenance]
 
 
-class DrugClass(_Record):
+class DrugClass(StrictModel):
     id: str
     name: str
     name_fr: str
@@ -68,7 +65,7 @@ class DrugClass(_Record):
     provenance: list[Provenance]
 
 
-class Party(_Record):
+class Party(StrictModel):
     """One side of an ANSM rule: a substance (drug id) or a class, or a non-drug party."""
 
     kind: PartyKind
@@ -81,20 +78,20 @@ class Party(_Record):
         return f"{'drug' if self.kind == 'substance' else 'class'}:{self.id}" if self.id else None
 
 
-class DoseBand(_Record):
+class DoseBand(StrictModel):
     """A level that applies at a daily dose of one drug of the pair, in mg/day: min <= dose < max."""
     drug: str
     min_daily_mg: float | None = None
     max_daily_mg: float | None = None
 
 
-class RenalBand(_Record):
+class RenalBand(StrictModel):
     """A level that applies at the patient's eGFR (CKD-EPI 2021, mL/min/1.73 m2): min <= eGFR < max."""
     egfr_min: float | None = None
     egfr_max: float | None = None
 
 
-class SeverityLevel(_Record):
+class SeverityLevel(StrictModel):
     label_fr: str
     label: str = Field(description="English translation of the ANSM level")
     level: Severity = Field(description="normalised level used by the reward")
@@ -109,7 +106,7 @@ class SeverityLevel(_Record):
     renal_band: RenalBand | None = Field(default=None, description="US overlay: the eGFR band this level applies to")
 
 
-class InteractionRule(_Record):
+class InteractionRule(StrictModel):
     id: str
     party_a: Party
     party_b: Party
@@ -126,7 +123,7 @@ class InteractionRule(_Record):
     reviews: list[str] = Field(default_factory=list, description="US overlay: the ANSM rule ids this rule re-rates")
 
 
-class RouteDose(_Record):
+class RouteDose(StrictModel):
     route: str
     dose_min: float
     dose_max: float
@@ -140,7 +137,7 @@ class RouteDose(_Record):
     notes: str = ""
 
 
-class DoseProfile(_Record):
+class DoseProfile(StrictModel):
     drug_id: str
     source_name: str
     display_name: str
@@ -158,7 +155,7 @@ class DoseProfile(_Record):
     provenance: list[Provenance]
 
 
-class RenalTier(_Record):
+class RenalTier(StrictModel):
     min: float
     max: float | None = None
     dose: str
@@ -167,7 +164,7 @@ class RenalTier(_Record):
     warnings: list[str] = Field(default_factory=list)
 
 
-class RenalProfile(_Record):
+class RenalProfile(StrictModel):
     drug_id: str
     source_name: str
     drug_class: str
@@ -184,7 +181,7 @@ class RenalProfile(_Record):
     provenance: list[Provenance]
 
 
-class Allergy(_Record):
+class Allergy(StrictModel):
     allergen: str
     kind: Literal["substance", "class"]
     drug_id: str | None = None
@@ -193,7 +190,7 @@ class Allergy(_Record):
     severity: Literal["mild", "moderate", "severe"]
 
 
-class MedicationOrder(_Record):
+class MedicationOrder(StrictModel):
     drug_id: str
     dose: float
     unit: str
@@ -203,7 +200,7 @@ class MedicationOrder(_Record):
     status: Literal["active", "discontinued"] = "active"
 
 
-class Patient(_Record):
+class Patient(StrictModel):
     patient_id: str
     name: str
     age: int
@@ -225,7 +222,7 @@ class Patient(_Record):
         return [m for m in self.medications if m.status == "active"]
 
 
-class MedicationChange(_Record):
+class MedicationChange(StrictModel):
     change_id: str
     patient_id: str
     action: Literal["add", "discontinue", "dose_change"]
@@ -234,7 +231,7 @@ class MedicationChange(_Record):
     reason: str = ""
 
 
-class BuildInfo(_Record):
+class BuildInfo(StrictModel):
     builder_version: str
     inputs_hash: str
     sources: list[Provenance]

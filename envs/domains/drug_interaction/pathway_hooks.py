@@ -17,6 +17,7 @@ from pydantic import ValidationError
 
 from envs.core.db import DataFileError, format_validation_error
 from envs.core.domain import DomainEnvironment
+from envs.core.pathway import episode_database, pathway_record, record_label
 
 from . import logic as L
 from .data_model import Allergy, DrugInteractionDB, MedicationOrder, Patient, Provenance
@@ -33,15 +34,9 @@ PATHWAY_PROVENANCE = Provenance(
 def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
     """Resolve, validate and insert a pathway patient; returns the patient id (upper case, as the
     domain's tools look patients up)."""
-    if not isinstance(record, dict):
-        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
-    db = domain_env.toolkit.db
-    if not isinstance(db, DrugInteractionDB):
-        raise DataFileError(
-            f"{DOMAIN}: the environment's database is {type(db).__name__}, not DrugInteractionDB"
-        )
-    label = str(record.get("patient_id") or "<no patient_id>")
-    where = f"{DOMAIN} patient record [{label}]"
+    record = pathway_record(DOMAIN, record)
+    db = episode_database(DOMAIN, domain_env, DrugInteractionDB)
+    label, where = record_label(DOMAIN, record)
     fields = {k: v for k, v in record.items() if k not in ("medications", "allergies", "provenance")}
     medications, allergies = [], []
     for i, med in enumerate(record.get("medications") or []):

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from pydantic import ValidationError
-
-from envs.core.db import DataFileError, format_validation_error
+from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment
+from envs.core.pathway import episode_database, validate_pathway_patient
 
 from .data_model import EHRDB, EHRPatient
 
@@ -30,18 +29,7 @@ def _time(value: str, where: str, field: str) -> str:
 
 def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
     """Validate `record` against the EHR patient model and insert it; returns the patient id."""
-    if not isinstance(record, dict):
-        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
-    fields = dict(record)
-    clock = fields.pop("encounter_time", None)
-    label = str(fields.get("patient_id") or "<no patient_id>")
-    where = f"{DOMAIN} patient record [{label}]"
-    try:
-        patient = EHRPatient.model_validate(fields)
-    except ValidationError as exc:
-        raise DataFileError(
-            format_validation_error(exc, source=f"{DOMAIN} patient record", item=label)
-        ) from None
+    patient, clock, where = validate_pathway_patient(DOMAIN, record, EHRPatient)
     last = ""
     for a, adm in enumerate(patient.admissions):  # the tools parse every event time: check them now
         _time(adm.admit_time, where, f"admissions.{a}.admit_time")
@@ -53,9 +41,7 @@ def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
                     f"admissions.{a}.{kind}.{e}",
                 )
                 last = max(last, stamp)
-    db = domain_env.toolkit.db
-    if not isinstance(db, EHRDB):
-        raise DataFileError(f"{DOMAIN}: the environment's database is {type(db).__name__}, not EHRDB")
+    db = episode_database(DOMAIN, domain_env, EHRDB)
     if patient.patient_id in db.patients:
         raise DataFileError(f"{where} field 'patient_id': already in the database")
     if clock is not None:

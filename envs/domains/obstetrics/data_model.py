@@ -11,22 +11,19 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import ForkableDB
+from envs.core.models import StrictModel
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class BloodPressure(_Record):
+class BloodPressure(StrictModel):
     hours_ago: float = Field(description="hours before now (0 = now)")
     systolic: int
     diastolic: int
 
 
-class Vitals(_Record):
+class Vitals(StrictModel):
     blood_pressures: list[BloodPressure]
     heart_rate: int
     respiratory_rate: int
@@ -34,7 +31,7 @@ class Vitals(_Record):
     spo2: int
 
 
-class LabResult(_Record):
+class LabResult(StrictModel):
     name: str
     value: float
     unit: str
@@ -43,7 +40,7 @@ class LabResult(_Record):
     hours_ago: float = 0
 
 
-class CervicalExam(_Record):
+class CervicalExam(StrictModel):
     dilation_cm: float
     effacement_percent: float
     station: int
@@ -53,7 +50,7 @@ class CervicalExam(_Record):
     findings: str = ""
 
 
-class Ultrasound(_Record):
+class Ultrasound(StrictModel):
     scan: Literal["dating", "biophysical profile", "growth"]
     weeks_ago: float = 0
     crown_rump_length_mm: float | None = None
@@ -65,7 +62,7 @@ class Ultrasound(_Record):
     notes: str = ""
 
 
-class CTGTracing(_Record):
+class CTGTracing(StrictModel):
     tracing_id: str
     minutes: int
     sample_interval_s: int
@@ -74,7 +71,7 @@ class CTGTracing(_Record):
     recorded: str
 
 
-class NewbornObservation(_Record):
+class NewbornObservation(StrictModel):
     minute: int
     heart_rate: int
     respiratory_effort: Literal["absent", "weak", "strong"]
@@ -83,7 +80,7 @@ class NewbornObservation(_Record):
     color: Literal["blue_pale", "acrocyanosis", "pink"]
 
 
-class Symptoms(_Record):
+class Symptoms(StrictModel):
     headache: bool = False
     visual_disturbance: bool = False
     epigastric_or_ruq_pain: bool = False
@@ -94,7 +91,7 @@ class Symptoms(_Record):
     other: list[str] = Field(default_factory=list)
 
 
-class Patient(_Record):
+class Patient(StrictModel):
     patient_id: str
     name: str
     age: int
@@ -120,7 +117,7 @@ class Patient(_Record):
     provenance: dict[str, str] = Field(default_factory=dict)
 
 
-class ObstetricDrug(_Record):
+class ObstetricDrug(StrictModel):
     name: str
     routes: list[str]
     usual_dose: str
@@ -130,14 +127,14 @@ class ObstetricDrug(_Record):
     source: dict[str, str] = Field(default_factory=dict)
 
 
-class DrugInteraction(_Record):
+class DrugInteraction(StrictModel):
     drugs: list[str] = Field(min_length=2, max_length=2)
     severity: Literal["contraindicated", "major", "moderate", "minor"]
     effect: str
     management: str
 
 
-class MedicationOrder(_Record):
+class MedicationOrder(StrictModel):
     patient_id: str
     drug: str
     dose_mg: float
@@ -146,19 +143,19 @@ class MedicationOrder(_Record):
     warnings: list[str] = Field(default_factory=list)
 
 
-class LabOrder(_Record):
+class LabOrder(StrictModel):
     patient_id: str
     test: str
     status: Literal["resulted", "not available"]
 
 
-class Escalation(_Record):
+class Escalation(StrictModel):
     patient_id: str
     level: str
     reason: str
 
 
-class ClinicalNote(_Record):
+class ClinicalNote(StrictModel):
     patient_id: str
     assessment: str
     plan: str

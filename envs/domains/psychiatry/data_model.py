@@ -10,27 +10,24 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import ForkableDB
+from envs.core.models import StrictModel
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class Utterance(_Record):
+class Utterance(StrictModel):
     speaker: Literal["clinician", "patient", "collateral"]
     text: str
 
 
-class Medication(_Record):
+class Medication(StrictModel):
     name: str
     dose_mg: float
     frequency: str
 
 
-class LabResult(_Record):
+class LabResult(StrictModel):
     name: str
     value: float
     unit: str
@@ -39,13 +36,13 @@ class LabResult(_Record):
     collected: str = Field(description="relative time, e.g. 'today 08:10' or '3 months ago'")
 
 
-class SuicideAttempt(_Record):
+class SuicideAttempt(StrictModel):
     when: str
     method: str
     medical_care_needed: bool
 
 
-class PsychHistory(_Record):
+class PsychHistory(StrictModel):
     diagnoses: list[str] = Field(default_factory=list)
     hospitalizations: int = 0
     last_hospitalization: str | None = None
@@ -56,7 +53,7 @@ class PsychHistory(_Record):
     trauma: str | None = None
 
 
-class SocialHistory(_Record):
+class SocialHistory(StrictModel):
     living: str
     supports: list[str] = Field(default_factory=list)
     employment: str
@@ -64,7 +61,7 @@ class SocialHistory(_Record):
     recent_stressors: list[str] = Field(default_factory=list)
 
 
-class CSSRSAnswers(_Record):
+class CSSRSAnswers(StrictModel):
     wish_to_be_dead: bool
     suicidal_thoughts: bool
     thoughts_with_method: bool = False
@@ -73,20 +70,20 @@ class CSSRSAnswers(_Record):
     suicidal_behavior: Literal["never", "over_3_months_ago", "past_3_months"] = "never"
 
 
-class MDQAnswers(_Record):
+class MDQAnswers(StrictModel):
     items: list[bool] = Field(min_length=13, max_length=13)
     same_period: bool
     problem_level: Literal["no problem", "minor problem", "moderate problem", "serious problem"]
 
 
-class CAGEAnswers(_Record):
+class CAGEAnswers(StrictModel):
     cut_down: bool
     annoyed: bool
     guilty: bool
     eye_opener: bool
 
 
-class CIWAObservation(_Record):
+class CIWAObservation(StrictModel):
     nausea_vomiting: int
     tremor: int
     paroxysmal_sweats: int
@@ -99,7 +96,7 @@ class CIWAObservation(_Record):
     orientation: int
 
 
-class SymptomReports(_Record):
+class SymptomReports(StrictModel):
     """Completed forms on file (self-report or clinician-administered). An instrument asked only
     in the interview is in the transcript, not here."""
 
@@ -113,7 +110,7 @@ class SymptomReports(_Record):
     ciwa: CIWAObservation | None = None
 
 
-class Patient(_Record):
+class Patient(StrictModel):
     patient_id: str
     name: str
     age: int
@@ -136,7 +133,7 @@ class Patient(_Record):
     provenance: dict[str, str] = Field(default_factory=dict)
 
 
-class FormularyDrug(_Record):
+class FormularyDrug(StrictModel):
     name: str
     brands: list[str] = Field(default_factory=list)
     fda_classes: list[str] = Field(default_factory=list)
@@ -144,7 +141,7 @@ class FormularyDrug(_Record):
     provenance: dict[str, str] = Field(default_factory=dict)
 
 
-class InteractionRule(_Record):
+class InteractionRule(StrictModel):
     id: str
     name: str
     severity: Literal["contraindicated", "major", "moderate", "minor"]
@@ -155,7 +152,7 @@ class InteractionRule(_Record):
     reference: str
 
 
-class MSERecord(_Record):
+class MSERecord(StrictModel):
     patient_id: str
     appearance: str
     behavior: str
@@ -173,7 +170,7 @@ class MSERecord(_Record):
     risk_flags: list[str] = Field(default_factory=list)
 
 
-class SafetyPlan(_Record):
+class SafetyPlan(StrictModel):
     patient_id: str
     warning_signs: list[str]
     coping_strategies: list[str]
@@ -184,25 +181,25 @@ class SafetyPlan(_Record):
     reasons_for_living: list[str] = Field(default_factory=list)
 
 
-class Escalation(_Record):
+class Escalation(StrictModel):
     patient_id: str
     level: str
     reason: str
 
 
-class DiagnosisRecord(_Record):
+class DiagnosisRecord(StrictModel):
     patient_id: str
     icd10_code: str
     description: str
 
 
-class LabOrder(_Record):
+class LabOrder(StrictModel):
     patient_id: str
     test: str
     status: Literal["resulted", "not available"]
 
 
-class FollowUp(_Record):
+class FollowUp(StrictModel):
     patient_id: str
     within_days: int
     with_whom: str

@@ -13,26 +13,15 @@ import hashlib
 import json
 from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import ForkableDB
+from envs.core.models import StrictModel
+from envs.domains.imaging_guidelines import (KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE,  # noqa: F401  re-exported
+                                             KNOWN_MALIGNANCY_MANAGEMENT)
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-# Management of a nodule in a patient with a known primary cancer: Fleischner 2017 (MacMahon et al.,
-# Radiology 2017) excludes these patients; the nodule is followed within the cancer's staging and
-# surveillance imaging (e.g. NCCN Colon Cancer: chest CT at staging and surveillance).
-KNOWN_MALIGNANCY_MANAGEMENT = "oncologic staging follow-up"
-KNOWN_MALIGNANCY_ALIASES = ["Fleischner not applicable (known malignancy)", "follow-up within the oncologic staging and surveillance protocol",
-                            "Fleischner guidelines do not apply"]
-KNOWN_MALIGNANCY_GUIDELINE = ("Fleischner Society 2017 (MacMahon et al., Radiology 2017;284:228-243), scope: excludes patients with "
-                              "known malignancy; NCCN Guidelines Colon Cancer (staging and surveillance chest CT)")
-
-
-class PatientInfo(_Record):
+class PatientInfo(StrictModel):
     age: int
     sex: Literal["female", "male"]
     history: str
@@ -43,7 +32,7 @@ class PatientInfo(_Record):
     known_malignancy: str | None = None
 
 
-class Finding(_Record):
+class Finding(StrictModel):
     finding_id: str
     kind: Literal["thyroid_nodule", "breast_mass", "breast_calcifications", "breast_distortion", "lung_nodule", "other"]
     location: str
@@ -71,7 +60,7 @@ class Finding(_Record):
     suspicious_features: list[str] = Field(default_factory=list)
 
 
-class PriorStudy(_Record):
+class PriorStudy(StrictModel):
     study_id: str
     months_ago: float
     report: str
@@ -79,7 +68,7 @@ class PriorStudy(_Record):
     findings: list[Finding] = Field(default_factory=list)
 
 
-class Study(_Record):
+class Study(StrictModel):
     study_id: str
     modality: Literal["US", "MG", "CT", "LDCT"]
     region: Literal["thyroid", "breast", "chest"]
@@ -95,7 +84,7 @@ class Study(_Record):
     provenance: dict[str, str] = Field(default_factory=dict)
 
 
-class ReportTemplate(_Record):
+class ReportTemplate(StrictModel):
     key: str
     modality: str
     region: str
@@ -108,7 +97,7 @@ class ReportTemplate(_Record):
     reference: str
 
 
-class Report(_Record):
+class Report(StrictModel):
     study_id: str
     status: Literal["draft", "final"]
     category: str
@@ -118,7 +107,7 @@ class Report(_Record):
     revisions: int = 0
 
 
-class CriticalCommunication(_Record):
+class CriticalCommunication(StrictModel):
     study_id: str
     recipient: str
     method: Literal["phone", "in person", "secure message"]

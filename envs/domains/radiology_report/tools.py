@@ -10,7 +10,8 @@ from typing import Literal
 from envs.calculators import CALCULATORS
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
-from envs.domains.radiology_report.data_model import KNOWN_MALIGNANCY_MANAGEMENT, CriticalCommunication, Finding, RadiologyDB, Report, Study
+from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_MANAGEMENT
+from envs.domains.radiology_report.data_model import CriticalCommunication, Finding, RadiologyDB, Report, Study
 
 SYSTEM_OF = {"thyroid": "ACR TI-RADS", "breast": "BI-RADS", "CT": "Fleischner 2017", "LDCT": "Lung-RADS v2022"}
 

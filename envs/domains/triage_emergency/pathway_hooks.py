@@ -10,10 +10,9 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from pydantic import ValidationError
-
-from envs.core.db import DataFileError, format_validation_error
+from envs.core.db import DataFileError
 from envs.core.domain import DomainEnvironment
+from envs.core.pathway import episode_database, record_label, validate_pathway_patient
 
 from .data_model import EDPatient, TriageDB
 
@@ -33,20 +32,9 @@ def encounter_clock(value: Any, domain: str, patient_id: str) -> str:
 
 def add_patient(domain_env: DomainEnvironment, record: dict) -> str:
     """Validate `record` against the triage patient model and insert it; returns the patient id."""
-    if not isinstance(record, dict):
-        raise DataFileError(f"{DOMAIN} patient record: expected an object, got {type(record).__name__}")
-    fields = dict(record)
-    clock = fields.pop("encounter_time", None)
-    label = str(fields.get("patient_id") or "<no patient_id>")
-    try:
-        patient = EDPatient.model_validate(fields)
-    except ValidationError as exc:
-        raise DataFileError(
-            format_validation_error(exc, source=f"{DOMAIN} patient record", item=label)
-        ) from None
-    db = domain_env.toolkit.db
-    if not isinstance(db, TriageDB):
-        raise DataFileError(f"{DOMAIN}: the environment's database is {type(db).__name__}, not TriageDB")
+    patient, clock, _ = validate_pathway_patient(DOMAIN, record, EDPatient)
+    label, _ = record_label(DOMAIN, record)
+    db = episode_database(DOMAIN, domain_env, TriageDB)
     if patient.patient_id in db.patients:
         raise DataFileError(f"{DOMAIN} patient record {label!r} field 'patient_id': already in the database")
     if clock is not None:

@@ -15,7 +15,8 @@ from envs.calculators import CALCULATORS
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import generate as G
 from envs.domains.visual_diagnosis import render as R
-from envs.domains.visual_diagnosis.data_model import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_MANAGEMENT, PatientInfo, Study
+from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_MANAGEMENT
+from envs.domains.visual_diagnosis.data_model import PatientInfo, Study
 from envs.domains.visual_diagnosis.png import write_png
 
 PROV = {"source": "authored", "license": "project (ours)"}

@@ -9,26 +9,13 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from envs.core.db import ForkableDB
+from envs.core.models import StrictModel
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-# Management of a nodule in a patient with a known primary cancer: Fleischner 2017 (MacMahon et al.,
-# Radiology 2017) excludes these patients; the nodule is followed within the cancer's staging and
-# surveillance imaging (e.g. NCCN Colon Cancer: chest CT at staging and surveillance).
-KNOWN_MALIGNANCY_MANAGEMENT = "oncologic staging follow-up"
-KNOWN_MALIGNANCY_ALIASES = ["Fleischner not applicable (known malignancy)", "follow-up within the oncologic staging and surveillance protocol",
-                            "Fleischner guidelines do not apply"]
-KNOWN_MALIGNANCY_GUIDELINE = ("Fleischner Society 2017 (MacMahon et al., Radiology 2017;284:228-243), scope: excludes patients with "
-                              "known malignancy; NCCN Guidelines Colon Cancer (staging and surveillance chest CT)")
-
-
-class PatientInfo(_Record):
+class PatientInfo(StrictModel):
     age: int
     sex: Literal["female", "male"]
     history: str
@@ -39,7 +26,7 @@ class PatientInfo(_Record):
     known_malignancy: str | None = None
 
 
-class Study(_Record):
+class Study(StrictModel):
     study_id: str
     modality: Literal["CR", "CT"]
     body_part: str
@@ -56,7 +43,7 @@ class Study(_Record):
     provenance: dict[str, str] = Field(default_factory=dict)
 
 
-class ArchivedCase(_Record):
+class ArchivedCase(StrictModel):
     """A reference case with a confirmed diagnosis and its structured findings."""
 
     case_id: str
@@ -74,14 +61,14 @@ class ArchivedCase(_Record):
     summary: str
 
 
-class ImagingSign(_Record):
+class ImagingSign(StrictModel):
     term: str
     definition: str
     significance: str
     synonyms: list[str] = Field(default_factory=list)
 
 
-class RecordedFinding(_Record):
+class RecordedFinding(StrictModel):
     study_id: str
     finding: str
     side: str
@@ -89,7 +76,7 @@ class RecordedFinding(_Record):
     size_mm: float | None = None
 
 
-class CriticalEscalation(_Record):
+class CriticalEscalation(StrictModel):
     study_id: str
     finding: str
     recipient: str

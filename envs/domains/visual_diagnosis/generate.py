@@ -20,8 +20,8 @@ from scipy import ndimage
 from envs.calculators import CALCULATORS
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import render as R
-from envs.domains.visual_diagnosis.data_model import (KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT,
-                                                     ArchivedCase, PatientInfo, Study)
+from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT
+from envs.domains.visual_diagnosis.data_model import ArchivedCase, PatientInfo, Study
 from envs.domains.visual_diagnosis.png import write_png
 
 PROVENANCE = {"source": "authored", "generator": "envs.domains.visual_diagnosis.generate", "license": "project (ours)"}

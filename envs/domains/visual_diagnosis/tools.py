@@ -16,7 +16,8 @@ from envs.calculators import CALCULATORS
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 from envs.domains.visual_diagnosis import analysis as A
-from envs.domains.visual_diagnosis.data_model import KNOWN_MALIGNANCY_MANAGEMENT, CriticalEscalation, RecordedFinding, Study, VisualDB
+from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_MANAGEMENT
+from envs.domains.visual_diagnosis.data_model import CriticalEscalation, RecordedFinding, Study, VisualDB
 from envs.domains.visual_diagnosis.png import read_png
 
 FINDINGS = ("nodule", "mass", "consolidation", "pleural effusion", "pneumothorax", "cardiomegaly", "normal")
