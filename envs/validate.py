@@ -4,7 +4,9 @@ A task ships only if it
   1. names only tools that exist in its domain, with arguments valid for their signatures;
   2. has a gradeable gold answer (or a rubric for long-form tasks);
   3. replays: in a fresh environment its expected actions run without error, then the gold answer
-     is submitted, and the episode earns full action coverage and full accuracy.
+     is submitted, and the episode earns full action coverage and full accuracy;
+  4. is about a coherent patient: every rule of `envs.coherence` that applies to its domain holds for
+     the task and its record (sex and name, age and occupation, gestation and history, ...).
 The reference implementation shipped hundreds of tasks naming tools that did not exist and half
 its rows without a gradeable answer; this is the check that prevents it.
 """
@@ -141,9 +143,17 @@ def validate_domain(domain: str, *, replay: bool = True, limit: int | None = Non
     # Domains whose tools depend on the task (pathways build their phase toolkits at reset) say
     # which tools each task may use.
     per_task = getattr(registry.domain_module(domain), "task_tool_definitions", None)
+    from envs.coherence import check_tasks
+
+    chosen = tasks[:limit] if limit else tasks
+    incoherent: dict[str, list[str]] = {}
+    for violation in check_tasks(domain, chosen):
+        incoherent.setdefault(violation.task_id, []).append(str(violation))
     reports = []
-    for task in tasks[:limit] if limit else tasks:
-        reports.append(validate_task(task, domain, per_task(task) if per_task else definitions, replay=replay))
+    for task in chosen:
+        report = validate_task(task, domain, per_task(task) if per_task else definitions, replay=replay)
+        report.problems.extend(incoherent.get(task.id, []))
+        reports.append(report)
     return reports
 
 

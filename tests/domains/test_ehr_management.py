@@ -68,6 +68,13 @@ def test_apache_and_news2_from_record(env):
     assert news["on_supplemental_oxygen"] is True
 
 
+def test_news2_refused_on_invasive_ventilation(env):
+    # EHR-001 is intubated from ICU admission (2025-02-26T15:00) to 2025-03-01T03:00
+    out = env.toolkit.call("calculate_news2", {"patient_id": "EHR-001", "at_time": "2025-02-27T12:00"})
+    assert not out.ok and "invasive ventilation" in out.error
+    assert call(env, "calculate_news2", patient_id="EHR-001", at_time="2025-03-01T11:00")["charted_at"] == "2025-03-01T11:00"
+
+
 def test_orders_write_and_are_read_back(env):
     before = env.db.content_hash()
     call(env, "discontinue_order", patient_id="EHR-010", order_id="EHR-010-MED-1", reason="hyperkalaemia")

@@ -173,7 +173,7 @@ def test_authored_radiology_staging_ct_is_not_given_a_fleischner_category():
                 checked += 1
                 assert history["known_malignancy"], sid
                 assert t.correct_answer not in FLEISCHNER_CATEGORIES, t.id
-    assert checked >= 14  # 13 generated staging CTs and the authored colon-cancer case
+    assert checked >= 8  # the 7 staging CTs the seeded generator draws and the authored colon-cancer case
 
 
 # -- triage_emergency: vital signs the complaint implies ------------------------------------------------

@@ -443,7 +443,9 @@ class Generator:
                 answer=lambda r: f"{r[0]['creatinine_clearance_ml_min']:.1f}", answer_type="numeric",
                 tolerance=1.0, unit="mL/min", source="generated:authored-patients",
                 provenance={"package": "authored", "version": "1", "license": "project", "records": pid},
-                category="renal function", difficulty="easy", challenges=["Female sex factor 0.85."],
+                category="renal function", difficulty="easy",
+                # Cockcroft & Gault (Nephron 1976;16:31-41): the 0.85 factor is for women only
+                challenges=["Female sex factor 0.85." if db.patients[pid].sex == "female" else "No sex factor for a man."],
             ))
 
     def hepatic_tasks(self) -> None:

@@ -152,8 +152,11 @@ def generated_tasks(db: EHRDB, scenarios: dict[str, dict], seed: int = 53) -> di
             f"Compute patient {pid}'s APACHE II score from the first 24 hours of the ICU stay (worst values). "
             f"Answer with the total.", str(ap["score"]), "numeric",
             [_act("apache", "calculate_apache2", {"patient_id": pid}, ["patient_id"])], pid, tol=0, unit="points"))
-        times = [v.time for v in adm.vital_events]
-        for at in rng.sample(times, 3):
+        # NEWS2 scores spontaneous breathing and ACVPU consciousness (RCP 2017): not a score for a patient on
+        # invasive ventilation, so only vital sets charted off the ventilator are asked about (envs.coherence).
+        times = [v.time for v in adm.vital_events
+                 if not any(w.start <= v.time and (w.end is None or v.time < w.end) for w in adm.ventilation if w.mode == "invasive")]
+        for at in rng.sample(times, min(3, len(times))):
             news = kit.calculate_news2(pid, at_time=at)
             groups["news2"].append(_task(f"ehr_news2_{pid}_{at.replace(':', '').replace('-', '')}", "news2_from_record",
                 f"What was patient {pid}'s NEWS2 score from the vital signs charted at {at}?", str(news["score"]),

@@ -380,6 +380,7 @@ class EHRTools(BaseDomainTools):
     def calculate_news2(self, patient_id: str, at_time: str | None = None, hadm_id: str | None = None) -> dict:
         """NEWS2 from the charted vital-sign set at (or last before) a time (default: the latest set);
         consciousness is taken as alert for GCS 15, new confusion for GCS 13-14, voice for 9-12, pain for 4-8, unresponsive below.
+        A set charted on invasive ventilation is refused: NEWS2 does not apply to a ventilated patient (use calculate_sofa).
 
         Args:
             patient_id: The patient identifier.
@@ -394,6 +395,11 @@ class EHRTools(BaseDomainTools):
         if not rows:
             raise ToolError("no charted vital signs at or before that time")
         v = rows[-1]
+        # NEWS2 (RCP 2017) scores spontaneous breathing, SpO2 on air or oxygen and ACVPU; on a ventilator the
+        # rate is the machine's and the verbal response is not testable, so there is no NEWS2 to give.
+        if any(w.mode == "invasive" and w.start <= v.time and (w.end is None or v.time < w.end) for w in adm.ventilation):
+            raise ToolError(f"the vital-sign set at {v.time} was charted on invasive ventilation; NEWS2 does not apply to a "
+                            "ventilated patient (use calculate_sofa)")
         if None in (v.respiratory_rate, v.spo2, v.temperature_c, v.systolic_bp, v.heart_rate, v.gcs):
             raise ToolError(f"the vital-sign set at {v.time} is incomplete")
         g = v.gcs

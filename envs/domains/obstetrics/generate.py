@@ -14,6 +14,7 @@ from datetime import date, timedelta
 from typing import Any
 
 from envs.calculators import CALCULATORS
+from envs.coherence import SYMPTOM_WORDS
 from envs.domains.obstetrics import ctg as CTG
 from envs.domains.obstetrics import rules
 from envs.domains.obstetrics.data_model import (
@@ -61,7 +62,10 @@ def _patient(pid: str, rng: random.Random, ga_days: int, setting: str, complaint
                    vitals=Vitals(blood_pressures=[BloodPressure(hours_ago=0, systolic=rng.randint(104, 128), diastolic=rng.randint(62, 82))],
                                  heart_rate=rng.randint(72, 98), respiratory_rate=rng.randint(14, 18),
                                  temperature_c=round(rng.uniform(36.5, 37.3), 1), spo2=rng.randint(97, 100)),
-                   allergies=rng.choice([[], [], [], ["penicillin"], ["latex"]]), provenance=PROVENANCE)
+                   allergies=rng.choice([[], [], [], ["penicillin"], ["latex"]]), provenance=PROVENANCE,
+                   # the structured symptoms say what the complaint and history say (envs.coherence)
+                   symptoms=Symptoms(**{flag: True for flag, words in SYMPTOM_WORDS.items()
+                                        if words.search(f"{complaint} {history}")}))
 
 
 def _intro(p: Patient) -> str:
@@ -199,9 +203,16 @@ def ctg_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict]]
 
 
 # -- Bishop, Apgar, BPP ------------------------------------------------------------------------
+LATE_TERM_INDUCTION = "Late-term pregnancy (41 weeks): induction of labour."
+LATE_TERM_SURVEILLANCE = "Late-term pregnancy (41 weeks): antenatal fetal surveillance."
+
+
 def bishop_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict]]:
-    p = _patient(pid, rng, rng.randint(39 * 7, 41 * 7 + 4), "antenatal day unit", "booked for induction of labour",
-                 rng.choice(["Post-dates induction.", "Induction for gestational diabetes.", "Induction for reduced fetal movements with normal CTG."]))
+    # The indication and the gestation are drawn together: induction for a late-term pregnancy from 41 0/7 weeks
+    # (ACOG Practice Bulletin 146, 2014), the other indications before 41 weeks.
+    history = rng.choice([LATE_TERM_INDUCTION, "Induction for gestational diabetes.", "Induction for reduced fetal movements with normal CTG."])
+    ga = rng.randint(41 * 7, 41 * 7 + 4) if history == LATE_TERM_INDUCTION else rng.randint(39 * 7, 40 * 7 + 6)
+    p = _patient(pid, rng, ga, "antenatal day unit", "booked for induction of labour", history)
     exam = CervicalExam(dilation_cm=rng.choice([0, 1, 1.5, 2, 3, 3.5, 4, 5]), effacement_percent=rng.choice([20, 30, 40, 50, 60, 70, 80]),
                         station=rng.choice([-3, -2, -1, 0, 1]), consistency=rng.choice(["firm", "medium", "soft"]),
                         position=rng.choice(["posterior", "mid", "anterior"]))
@@ -236,8 +247,11 @@ def apgar_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict
 
 
 def bpp_task(pid: str, rng: random.Random, i: int) -> tuple[Patient, list[dict]]:
-    p = _patient(pid, rng, rng.randint(32 * 7, 41 * 7), "antenatal day unit", "reduced fetal movements",
-                 rng.choice(["Pregnancy complicated by gestational hypertension.", "Post-dates surveillance.", "Type 1 diabetes in pregnancy."]))
+    # Surveillance of a late-term pregnancy starts at 41 0/7 weeks (ACOG Practice Bulletin 146, 2014): that history
+    # comes with a late-term gestation, the others with 32-40 weeks.
+    history = rng.choice(["Pregnancy complicated by gestational hypertension.", LATE_TERM_SURVEILLANCE, "Type 1 diabetes in pregnancy."])
+    ga = rng.randint(41 * 7, 41 * 7 + 6) if history == LATE_TERM_SURVEILLANCE else rng.randint(32 * 7, 40 * 7 + 6)
+    p = _patient(pid, rng, ga, "antenatal day unit", "reduced fetal movements", history)
     scan = Ultrasound(scan="biophysical profile", fetal_breathing=rng.random() < 0.7, body_movements_count=rng.choice([0, 1, 2, 3, 4, 6]),
                       fetal_tone=rng.random() < 0.75, deepest_vertical_pocket_cm=rng.choice([1.5, 1.9, 2.5, 3.4, 4.8, 6.0]),
                       nst_reactive=rng.choice([True, True, False]), notes="30-minute observation")

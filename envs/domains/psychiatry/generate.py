@@ -13,6 +13,7 @@ import random
 from typing import Any
 
 from envs.calculators import CALCULATORS
+from envs.coherence import SEX_SPECIFIC_DRUGS, occupation_fits_age, stressor_fits_occupation
 from envs.domains.psychiatry import instruments as I
 from envs.domains.psychiatry.data_model import (
     CAGEAnswers, CIWAObservation, CSSRSAnswers, LabResult, Medication, MDQAnswers, Patient, PsychHistory,
@@ -53,11 +54,21 @@ def _name(rng: random.Random, sex: str) -> str:
     return f"{rng.choice(FIRST_F if sex == 'female' else FIRST_M)} {rng.choice(LAST)}"
 
 
+OCCUPATIONS = ["works in retail", "nurse", "software developer", "unemployed", "student", "retired teacher",
+               "warehouse worker", "accountant"]
+STRESSORS = ["relationship breakup", "job loss", "bereavement", "financial strain", "exams", "none reported"]
+
+
 def _base_patient(pid: str, rng: random.Random, *, sex: str | None = None, age: tuple[int, int] = (19, 78),
                   setting: str | None = None, complaint: str, history: str) -> Patient:
     sex = sex or rng.choice(["female", "male"])
+    name, years = _name(rng, sex), rng.randint(*age)
+    # Occupation and life events are drawn with the age they need (envs.coherence: a retired teacher is
+    # not 24, exams come with study, a job loss with a job).
+    employment = rng.choice([o for o in OCCUPATIONS if occupation_fits_age(o, years)])
+    stressors = [s for s in STRESSORS if stressor_fits_occupation(s, employment)]
     return Patient(
-        patient_id=pid, name=_name(rng, sex), age=rng.randint(*age), sex=sex, setting=setting or rng.choice(SETTINGS),
+        patient_id=pid, name=name, age=years, sex=sex, setting=setting or rng.choice(SETTINGS),
         chief_complaint=complaint, presenting_history=history,
         history=PsychHistory(diagnoses=rng.sample(["major depressive disorder", "generalized anxiety disorder",
                                                    "post-traumatic stress disorder", "alcohol use disorder",
@@ -70,11 +81,9 @@ def _base_patient(pid: str, rng: random.Random, *, sex: str | None = None, age: 
         social=SocialHistory(living=rng.choice(["lives alone", "lives with partner", "lives with parents",
                                                 "lives with partner and two children", "shared flat"]),
                              supports=rng.sample(["sister", "partner", "close friend", "church group", "parents"], 2),
-                             employment=rng.choice(["works in retail", "nurse", "software developer", "unemployed",
-                                                    "student", "retired teacher", "warehouse worker", "accountant"]),
+                             employment=employment,
                              firearms_access=rng.random() < 0.15,
-                             recent_stressors=rng.sample(["relationship breakup", "job loss", "bereavement",
-                                                          "financial strain", "exams", "none reported"], 1)),
+                             recent_stressors=rng.sample(stressors, 1)),
         allergies=rng.choice([[], [], ["penicillin"], ["sulfa drugs"]]),
         provenance=PROVENANCE,
     )
@@ -381,7 +390,11 @@ INTERACTION_SCENARIOS = [
 
 def med_interaction(pid: str, rng: random.Random, scenario: tuple[list[str], str], rules: list, formulary: dict) -> tuple[Patient, list[dict]]:
     current, proposed = scenario
-    p = _base_patient(pid, rng, complaint="medication review", history=(
+    # A drug labelled for one sex (a combined hormonal contraceptive) comes with a patient of that sex and, for a
+    # contraceptive, of reproductive age (envs.coherence.SEX_SPECIFIC_DRUGS).
+    only = {SEX_SPECIFIC_DRUGS[d][0] for d in [*current, proposed] if d in SEX_SPECIFIC_DRUGS}
+    sex = only.pop() if only else None
+    p = _base_patient(pid, rng, sex=sex, age=(19, 45) if sex == "female" else (19, 78), complaint="medication review", history=(
         f"Stable on {', '.join(current)}. A new prescription of {proposed} is being considered by another clinician."))
     p.medications = [Medication(name=d, dose_mg=rng.choice([10, 20, 50, 100, 300]), frequency="daily") for d in current]
     worst = "none"

@@ -175,19 +175,42 @@ def tirads_management_task(sid: str, rng: random.Random, i: int) -> tuple[Study,
 
 
 # -- breast ------------------------------------------------------------------------------------------
+# Each finding comes with the indications it can be imaged for (ACR BI-RADS Atlas, 5th ed., 2013): a screening
+# examination is assessed 0, 1 or 2 only, so suspicious findings are worked up after a screening recall or for a
+# symptom; category 3 is for a non-palpable finding at diagnostic work-up of a baseline screening recall (a
+# palpable mass at >= 40 years gets diagnostic mammography and ultrasound: ACR Appropriateness Criteria,
+# Palpable Breast Masses, 2022); a finding unchanged for years has prior films; category 6 is a biopsy-proven
+# cancer imaged before surgery. Screening indications get a screening exam (`breast_exam`).
+SCREENING = "routine screening"
+CALC_RECALL = "screening recall for calcifications"
 BREAST_PLAN = [
-    {"mass": ("oval", "circumscribed", True, False, "simple cyst")},
-    {"mass": ("oval", "circumscribed", False, False, "solid oval circumscribed mass, no prior films")},
-    {"mass": ("oval", "circumscribed", False, True, "circumscribed mass unchanged for 3 years")},
-    {"mass": ("irregular", "spiculated", False, False, "irregular spiculated mass")},
-    {"mass": ("irregular", "indistinct", False, False, "irregular mass with indistinct margins")},
-    {"mass": ("round", "microlobulated", False, False, "round microlobulated mass")},
-    {"calc": "amorphous"}, {"calc": "fine_pleomorphic"}, {"calc": "fine_linear_branching"}, {"calc": "typically_benign"},
-    {"calc": "coarse_heterogeneous"}, {"distortion": True}, {"mass": ("oval", "obscured", False, False, "partially obscured mass")},
-    {"incomplete": True, "mass": ("oval", "circumscribed", False, False, "possible mass seen on one view only")},
-    {"malignant": True, "mass": ("irregular", "spiculated", False, False, "biopsy-proven carcinoma before surgery")},
-    {"none": True},
+    {"mass": ("oval", "circumscribed", True, False, "simple cyst"), "indications": ["palpable lump", "screening recall"]},
+    {"mass": ("oval", "circumscribed", False, False, "solid oval circumscribed mass, no prior films"),
+     "indications": ["baseline screening recall"]},
+    {"mass": ("oval", "circumscribed", False, True, "circumscribed mass unchanged for 3 years"),
+     "indications": [SCREENING, "follow-up of a prior finding"]},
+    {"mass": ("irregular", "spiculated", False, False, "irregular spiculated mass"), "indications": ["palpable lump", "screening recall"]},
+    {"mass": ("irregular", "indistinct", False, False, "irregular mass with indistinct margins"),
+     "indications": ["palpable lump", "screening recall"]},
+    {"mass": ("round", "microlobulated", False, False, "round microlobulated mass"), "indications": ["palpable lump", "screening recall"]},
+    {"calc": "amorphous", "indications": [CALC_RECALL]}, {"calc": "fine_pleomorphic", "indications": [CALC_RECALL, "nipple discharge"]},
+    {"calc": "fine_linear_branching", "indications": [CALC_RECALL, "nipple discharge"]},
+    {"calc": "typically_benign", "indications": [SCREENING, CALC_RECALL]},
+    {"calc": "coarse_heterogeneous", "indications": [CALC_RECALL]}, {"distortion": True, "indications": ["screening recall"]},
+    {"mass": ("oval", "obscured", False, False, "partially obscured mass"), "indications": [SCREENING]},
+    {"incomplete": True, "mass": ("oval", "circumscribed", False, False, "possible mass seen on one view only"),
+     "indications": [SCREENING]},
+    {"malignant": True, "mass": ("irregular", "spiculated", False, False, "biopsy-proven carcinoma before surgery"),
+     "indications": ["pre-operative staging of biopsy-proven carcinoma"]},
+    {"none": True, "indications": [SCREENING, "nipple discharge"]},
 ]
+
+
+def breast_exam(indication: str) -> tuple[str, str]:
+    """The examination (and its technique) an indication calls for: a screening or a diagnostic mammogram."""
+    if indication == SCREENING:
+        return "MG bilateral screening mammogram", "Bilateral CC and MLO views."
+    return "MG bilateral diagnostic mammogram", "Bilateral CC and MLO views with spot compression as needed."
 
 
 def breast_study(sid: str, rng: random.Random, plan: dict) -> tuple[Study, Any]:
@@ -213,11 +236,14 @@ def breast_study(sid: str, rng: random.Random, plan: dict) -> tuple[Study, Any]:
                                 description="architectural distortion, no prior surgery at this site"))
         args.update(architectural_distortion=True)
     res = CALCULATORS["calculate_birads"](**args)
-    s = Study(study_id=sid, modality="MG", region="breast", exam="MG bilateral diagnostic mammogram",
-              indication=rng.choice(["screening recall", "palpable lump", "routine screening", "nipple discharge", "follow-up of a prior finding"]),
-              technique="Bilateral CC and MLO views with spot compression as needed.", exam_complete=args["exam_complete"],
+    indication = rng.choice(plan["indications"])
+    exam, technique = breast_exam(indication)
+    s = Study(study_id=sid, modality="MG", region="breast", exam=exam, indication=indication,
+              technique=technique, exam_complete=args["exam_complete"],
               known_biopsy_proven_malignancy=args["known_biopsy_proven_malignancy"],
-              patient=_patient(rng, "female", smoker=False, age=(38, 79)), findings=findings, provenance=PROVENANCE)
+              # screening (and a screening recall) from 40 years (ACR 2023; USPSTF 2024), as is diagnostic
+              # mammography for a palpable mass (ACR Appropriateness Criteria 2022)
+              patient=_patient(rng, "female", smoker=False, age=(40, 79)), findings=findings, provenance=PROVENANCE)
     return s, res
 
 

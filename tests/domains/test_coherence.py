@@ -1,0 +1,146 @@
+"""Coherent patients: each rule of `envs.coherence` fires on a contradicting task shaped like what the
+generators used to write, stays quiet on its coherent counterpart, and no built task breaks any rule."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from envs import registry
+from envs.coherence import RULES, Subject, check_subject, check_tasks, rules_for
+from envs.core.task import Task
+
+ROOT = Path(__file__).resolve().parents[2]
+ICU_CLOCK = {"clock": "2025-03-05T08:00"}
+OB_TODAY = {"today": "2026-03-02"}
+
+
+def _task(**kw) -> Task:
+    base = {"id": "t1", "ticket": "A task.", "correct_answer": "1", "answer_type": "exact"}
+    return Task.model_validate({**base, **kw})
+
+
+def _icu(gcs: int, *, status: str = "completed", stop: str = "2025-03-01T15:00") -> dict:
+    return {"name": "Abel Singh", "sex": "male", "age": 54, "admissions": [{
+        "ventilation": [{"start": "2025-02-26T15:00", "end": "2025-03-01T03:00", "mode": "invasive"}],
+        "vital_events": [{"time": "2025-02-26T15:00", "gcs": gcs}, {"time": "2025-03-01T11:00", "gcs": 15}],
+        "medication_orders": [{"order_id": "VP-6", "drug": "norepinephrine", "start": "2025-03-01T03:00", "stop": stop,
+                               "status": status}]}]}
+
+
+def _breast(indication: str, exam: str, description: str, shape: str = "oval", margin: str = "circumscribed",
+            stable: bool = False) -> dict:
+    return {"region": "breast", "indication": indication, "exam": exam, "exam_complete": True, "prior": None,
+            "known_biopsy_proven_malignancy": False,
+            "findings": [{"kind": "breast_mass", "mass_shape": shape, "mass_margin": margin, "stable_2_years": stable,
+                          "mass_typically_benign": False, "description": description}]}
+
+
+def _news2_task(at: str) -> Task:
+    return _task(evaluation_criteria={"actions": [{"name": "calculate_news2", "arguments": {"patient_id": "EHR-001",
+                                                                                           "at_time": at}}]})
+
+
+# rule -> (domain, the contradicting subject as the old generators wrote it, its coherent counterpart)
+CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] = {
+    "name_matches_sex": ("ehr_management", (_task(), {"name": "Olga Novak", "sex": "male"}, {}),
+                         (_task(), {"name": "Abel Novak", "sex": "male"}, {})),
+    "sex_specific_drug": ("psychiatry",
+                          (_task(metadata={"current": ["carbamazepine"], "proposed": "ethinyl estradiol"}),
+                           {"sex": "male", "medications": [{"name": "carbamazepine"}]}, {}),
+                          (_task(metadata={"current": ["carbamazepine"], "proposed": "ethinyl estradiol"}),
+                           {"sex": "female", "medications": [{"name": "carbamazepine"}]}, {})),
+    "sex_specific_condition": ("clinical_diagnosis", (_task(), {"sex": "male", "past_medical_history": ["Ovarian cyst"]}, {}),
+                               (_task(), {"sex": "female", "past_medical_history": ["Ovarian cyst"]}, {})),
+    "occupation_matches_age": ("psychiatry",
+                               (_task(), {"age": 21, "social": {"employment": "retired teacher", "recent_stressors": ["exams"]}}, {}),
+                               (_task(), {"age": 66, "social": {"employment": "retired teacher",
+                                                                "recent_stressors": ["bereavement"]}}, {})),
+    "post_dates_gestation": ("obstetrics",
+                             (_task(), {"lmp_date": "2025-06-01", "history": "Post-dates induction.",
+                                        "presenting_complaint": "booked for induction of labour"}, OB_TODAY),
+                             (_task(), {"lmp_date": "2025-05-18", "history": "Late-term pregnancy (41 weeks): induction of labour.",
+                                        "presenting_complaint": "booked for induction of labour"}, OB_TODAY)),
+    "complaint_matches_symptom_flags": ("obstetrics",
+                                        (_task(), {"presenting_complaint": "reduced fetal movements", "history": "",
+                                                   "symptoms": {"reduced_fetal_movements": False}}, OB_TODAY),
+                                        (_task(), {"presenting_complaint": "reduced fetal movements", "history": "",
+                                                   "symptoms": {"reduced_fetal_movements": True}}, OB_TODAY)),
+    "breast_indication_matches_finding": (
+        "radiology_report",
+        (_task(), _breast("palpable lump", "MG bilateral diagnostic mammogram",
+                          "solid oval circumscribed mass, no prior films"), {}),
+        (_task(), _breast("baseline screening recall", "MG bilateral diagnostic mammogram",
+                          "solid oval circumscribed mass, no prior films"), {})),
+    "intubated_gcs_verbal": ("ehr_management", (_task(), _icu(14), ICU_CLOCK), (_task(), _icu(10), ICU_CLOCK)),
+    "news2_not_on_ventilator": ("ehr_management", (_news2_task("2025-02-26T15:00"), _icu(10), ICU_CLOCK),
+                                (_news2_task("2025-03-01T11:00"), _icu(10), ICU_CLOCK)),
+    "order_status_matches_clock": ("ehr_management", (_task(), _icu(10, status="active"), ICU_CLOCK),
+                                   (_task(), _icu(10, status="completed"), ICU_CLOCK)),
+    "sex_factor_matches_sex": ("drug_interaction",
+                               (_task(description={"key_challenges": ["Female sex factor 0.85."]}), {"sex": "male"}, {}),
+                               (_task(description={"key_challenges": ["No sex factor for a man."]}), {"sex": "male"}, {})),
+    "vignette_matches_arguments": (
+        "medical_qa",
+        (_task(ticket="A 62-year-old man weighing 70 kg has a creatinine of 1.2 mg/dL.",
+               evaluation_criteria={"actions": [{"name": "calculate_creatinine_clearance",
+                                                 "arguments": {"age": 62, "sex": "female"}}]}), {}, {}),
+        (_task(ticket="A 62-year-old man weighing 70 kg has a creatinine of 1.2 mg/dL.",
+               evaluation_criteria={"actions": [{"name": "calculate_creatinine_clearance",
+                                                 "arguments": {"age": 62, "sex": "male"}}]}), {}, {})),
+}
+
+
+def test_every_rule_has_a_contradicting_case():
+    assert sorted(CASES) == sorted(RULES), "add a contradicting and a coherent case for each coherence rule"
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_rule_fires_on_the_contradiction_only(name):
+    domain, bad, good = CASES[name]
+    assert RULES[name] in rules_for(domain)
+    found = check_subject(Subject(domain, *bad), [RULES[name]])
+    assert found and all(v.rule == name and v.fields and v.task_id == "t1" for v in found)
+    assert check_subject(Subject(domain, *good), [RULES[name]]) == []
+
+
+def test_a_first_name_in_neither_list_is_reported():
+    found = check_subject(Subject("psychiatry", _task(), {"name": "Xqz Doe", "sex": "female"}), [RULES["name_matches_sex"]])
+    assert "neither list" in found[0].message
+
+
+@pytest.fixture(scope="module")
+def built_violations() -> dict[str, list[str]]:
+    return {d: [f"[{v.task_id}] {v}" for v in check_tasks(d, registry.get_tasks(d))] for d in registry.list_domains()}
+
+
+def test_built_tasks_break_no_rule(built_violations):
+    broken = {d: v[:5] for d, v in built_violations.items() if v}
+    assert not broken, broken
+
+
+def test_readmes_list_their_rules():
+    contract = (ROOT / "envs" / "domains" / "README.md").read_text(encoding="utf-8")
+    missing = [r for r in RULES if f"`{r}`" not in contract]
+    for domain in registry.list_domains():
+        readme = ROOT / "envs" / "domains" / domain / "README.md"
+        if not readme.exists():
+            continue
+        text = readme.read_text(encoding="utf-8")
+        missing += [f"{domain}: {r.name}" for r in rules_for(domain) if r.domains and f"`{r.name}`" not in text]
+    assert not missing, f"coherence rules not listed in the domain READMEs: {missing}"
+
+
+def test_validate_fails_a_contradicting_task_naming_task_rule_and_fields(monkeypatch):
+    """`hcgym tasks validate` (validate_domain) reports the contradiction as a problem of the task."""
+    from envs.validate import validate_domain
+
+    task = _task(id="psy_coherence_probe", patient_id="PSY-002", metadata={"proposed": "ethinyl estradiol"},
+                 evaluation_criteria={"actions": [{"name": "check_psych_med_interactions",
+                                                   "arguments": {"patient_id": "PSY-002", "proposed_drug": "ethinyl estradiol"}}]})
+    monkeypatch.setattr(registry, "get_tasks", lambda domain, split=None: [task])
+    (report,) = validate_domain("psychiatry", replay=False)
+    assert not report.ok and report.task_id == "psy_coherence_probe"
+    assert any(p.startswith("coherence rule 'sex_specific_drug' (sex, medications)") for p in report.problems), report.problems
