@@ -289,7 +289,7 @@ def _attach_doses(drugs: dict[str, dict], archive: Archive) -> None:
     """Add the drugdose package's per-route dose ranges and notes to matching drugs."""
     data = json.loads(archive.read_text("drugdose/data/drugs.json"))
     for item in data:
-        key = item["name"].lower()
+        key = item["name"].lower().replace("_", " ")  # drugdose writes "magnesium_sulfate"
         target = drugs.get(key)
         if target is None:
             continue

@@ -87,7 +87,7 @@ BRANDS: dict[str, str] = {
     "nitrostat": "nitroglycerin", "imdur": "isosorbide-mononitrate", "glucophage": "metformin",
     "lasix": "furosemide", "xanax": "alprazolam", "ativan": "lorazepam", "valium": "diazepam",
     "klonopin": "clonazepam", "toradol": "ketorolac", "zofran": "ondansetron", "depakote": "valproate",
-    "valproic-acid": "valproate", "dilantin": "phenytoin", "tegretol": "carbamazepine", "keppra": "levetiracetam",
+    "valproic-acid": "valproate", "divalproex": "valproate", "divalproex sodium": "valproate", "depakene": "valproate", "dilantin": "phenytoin", "tegretol": "carbamazepine", "keppra": "levetiracetam",
     "accutane": "isotretinoin", "lanoxin": "digoxin", "cordarone": "amiodarone", "zestril": "lisinopril",
     "prinivil": "lisinopril", "cozaar": "losartan", "aldactone": "spironolactone", "lovenox": "enoxaparin",
     "ultram": "tramadol", "percocet": "oxycodone", "vicodin": "hydrocodone", "dilaudid": "hydromorphone",
@@ -128,12 +128,16 @@ INTERACTION_RULES: list[tuple[str, str, str, str]] = [
     ("lithium", "ace inhibitors", "major", "lithium toxicity"),
     ("methotrexate", "trimethoprim-sulfamethoxazole", "major", "bone-marrow suppression"),
     ("digoxin", "amiodarone", "major", "digoxin toxicity"),
-    ("ssris", "tramadol", "major", "serotonin syndrome, seizures"),
+    # Ultram label 5 and 7: with serotonergic drugs observe closely (moderate); its boxed warning covers
+    # CYP2D6 inhibitors (fluoxetine, paroxetine: major) - the drug-interaction overlay's US-006, US-019/020
+    ("ssris", "tramadol", "moderate", "serotonin syndrome, seizures (observe closely)"),
+    ("fluoxetine", "tramadol", "major", "CYP2D6 inhibition (tramadol up, M1 down) and serotonin syndrome"),
+    ("paroxetine", "tramadol", "major", "CYP2D6 inhibition (tramadol up, M1 down) and serotonin syndrome"),
     ("opioids", "benzodiazepines", "major", "respiratory depression"),
     # Plavix label 5.1 and 7.1: avoid omeprazole or esomeprazole (the drug-interaction overlay's US-012/013)
     ("clopidogrel", "omeprazole", "major", "reduced antiplatelet effect (CYP2C19 inhibition)"),
     ("clopidogrel", "esomeprazole", "major", "reduced antiplatelet effect (CYP2C19 inhibition)"),
-    ("warfarin", "metronidazole", "major", "raised INR, bleeding (Flagyl label 7)"),
+    ("warfarin", "metronidazole", "major", "raised INR, bleeding (Flagyl label PRECAUTIONS, drug interactions)"),
     ("theophylline", "ciprofloxacin", "major", "theophylline toxicity (Cipro label 5 and 7)"),
     ("ciprofloxacin", "warfarin", "moderate", "raised INR"),
     ("metformin", "furosemide", "minor", "altered metformin levels"),
@@ -162,7 +166,6 @@ PREGNANCY_CONTRAINDICATED: dict[str, str] = {
     "ace inhibitors": "ACE-inhibitor labels (e.g. Zestril): boxed warning FETAL TOXICITY (discontinue when pregnancy is detected); ACOG Practice Bulletin 203",
     "arbs": "ARB labels (e.g. Cozaar): boxed warning FETAL TOXICITY (discontinue when pregnancy is detected); ACOG Practice Bulletin 203",
     "methotrexate": "methotrexate labels: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS (pregnancy, non-neoplastic diseases)",
-    "valproate": "Depakote label: boxed warning FETAL RISK and 4 CONTRAINDICATIONS (pregnancy, migraine prophylaxis)",
     "misoprostol": "Cytotec label: boxed warning and 4 CONTRAINDICATIONS (pregnancy, NSAID-ulcer prevention)",
     "thalidomide": "Thalomid label: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS; REMS",
     "lenalidomide": "Revlimid label: boxed warning EMBRYO-FETAL TOXICITY and 4 CONTRAINDICATIONS; REMS",
@@ -171,6 +174,16 @@ PREGNANCY_CONTRAINDICATED: dict[str, str] = {
     "finasteride": "Proscar label: 4 CONTRAINDICATIONS (pregnancy)",
     "dutasteride": "Avodart label: 4 CONTRAINDICATIONS (pregnancy)",
     "endothelin receptor antagonists": "bosentan, ambrisentan, macitentan labels: boxed warning EMBRYO-FETAL TOXICITY, 4 CONTRAINDICATIONS; REMS",
+}
+
+#: Pregnancy contraindications a label limits to one indication: drug -> (regex over the episode's
+#: text naming that indication, the label section). Outside that indication the drug is not
+#: contraindicated in pregnancy (its boxed warning states a risk to weigh, not a contraindication).
+PREGNANCY_CONTRAINDICATED_FOR: dict[str, tuple[str, str]] = {
+    # Depakote label 4: contraindicated in pregnant women for migraine prophylaxis; for epilepsy and
+    # bipolar disorder the boxed warning FETAL RISK and 8.1: only if other medications failed
+    "valproate": (r"\bmigraine", "Depakote label: 4 CONTRAINDICATIONS (pregnant women, prophylaxis of migraine "
+                                 "headaches); boxed warning FETAL RISK and 8.1 for other indications"),
 }
 
 #: Label-stated exceptions to a pregnancy contraindication: drug -> regex over the task text.
@@ -187,7 +200,7 @@ PREGNANCY_EXCEPTIONS: dict[str, str] = {
 
 #: Conditions (lower case) in which a drug or class is contraindicated.
 CONTRAINDICATED_CONDITIONS: dict[str, list[str]] = {
-    **{drug: ["pregnancy"] for drug in PREGNANCY_CONTRAINDICATED},
+    **{drug: ["pregnancy"] for drug in (*PREGNANCY_CONTRAINDICATED, *PREGNANCY_CONTRAINDICATED_FOR)},
     "nsaids": ["active gi bleeding"], "metformin": ["severe renal impairment"],
 }
 

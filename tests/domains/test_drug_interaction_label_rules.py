@@ -21,7 +21,8 @@ LABEL_CONTRAINDICATED = {
     ("drug:lovastatin", "class:strong-cyp3a4-inhibitors"): "Mevacor/Altoprev labels, 4 CONTRAINDICATIONS (strong CYP3A4 inhibitors)",
 }
 # a label section: "4 CONTRAINDICATIONS", "7.3", "5.1", "boxed warning", or a named guideline
-SECTION = re.compile(r"\b(\d{1,2}(\.\d+)?\s+[A-Z]|\d\.\d|boxed warning|guideline|PRECAUTIONS|Drug Safety Communication|ACR Manual)", re.I)
+SECTION = re.compile(r"\b(\d{1,2}(\.\d+)?\s+[A-Z]|\d\.\d|boxed warning|guideline|PRECAUTIONS|WARNINGS|CONTRAINDICATIONS|"
+                     r"Drug Safety Communication|ACR Manual)", re.I)
 
 
 def _key(side: dict) -> str:
@@ -104,14 +105,115 @@ def test_hepatic_recommendation_follows_the_drugs_label(env, drug, child_pugh, e
 def test_hepatic_default_convention_is_named(env):
     from envs.domains.drug_interaction import logic as L
 
-    out = env.toolkit.call("check_hepatic_adjustment", {"drug": "morphine", "patient_id": "P035"}).result
+    out = env.toolkit.call("check_hepatic_adjustment", {"drug": "haloperidol", "patient_id": "P035"}).result
     assert out["recommendation"] == "avoid_or_specialist_review" and out["basis"] == L.HEPATIC_DEFAULT_BASIS
+    assert "no dosing by hepatic function" in out["label_checked"]
     # insulin in Child-Pugh C (the insulin task's patient) is not an avoid and not a contraindicated condition
     assert env.toolkit.call("check_hepatic_adjustment", {"drug": "insulin human", "patient_id": "P035"}).result[
         "recommendation"] == "reduce_dose_and_monitor"
-    assert "child-pugh c" not in env.safety_context.contraindicated_conditions("insulin human")
-    assert "child-pugh c" not in env.safety_context.contraindicated_conditions("metformin")
-    assert "child-pugh c" in env.safety_context.contraindicated_conditions("morphine")
+    # no flagged drug's label contraindicates it by hepatic function for every route and indication, and
+    # the convention is no label: a Child-Pugh class is never a contraindicating condition (severity 5)
+    for drug in sorted(_flagged(env)):
+        assert not any(c.startswith("child-pugh") for c in env.safety_context.contraindicated_conditions(drug)), drug
+
+
+def _flagged(env) -> set[str]:
+    flagged = {d for d, p in env.db.dose_profiles.items() if p.hepatic_caution}
+    return flagged | {d for d, p in env.db.renal_profiles.items() if p.hepatic_flag}
+
+
+def test_every_hepatic_flagged_drug_has_its_label_rule_or_a_checked_label(env):
+    """The default convention answers only for drugs whose label states no hepatic dosing, and each
+    label rule names its section."""
+    from envs.domains.drug_interaction import logic as L
+
+    flagged = _flagged(env)
+    assert len(flagged) == 22
+    missing = sorted(flagged - set(L.HEPATIC_LABEL_RULES) - set(L.HEPATIC_CONVENTION_ONLY))
+    assert not missing, f"hepatic-flagged drugs on the default convention without a checked label: {missing}"
+    assert not set(L.HEPATIC_LABEL_RULES) & set(L.HEPATIC_CONVENTION_ONLY)
+    for drug, rule in L.HEPATIC_LABEL_RULES.items():
+        assert SECTION.search(rule.label), drug
+        assert set(rule.by_class) == {"A", "B", "C"} and set(rule.by_class.values()) <= set(L.HEPATIC_RECOMMENDATIONS)
+    on_convention = [d for d in sorted(flagged) if env.toolkit.call(
+        "check_hepatic_adjustment", {"drug": d, "child_pugh_class": "C"}).result["basis"] == L.HEPATIC_DEFAULT_BASIS]
+    assert on_convention == sorted(L.HEPATIC_CONVENTION_ONLY)
+
+
+@pytest.mark.parametrize("drug, child_pugh, expected, cited", [
+    ("acetaminophen", "C", "reduce_dose_and_monitor", "4 CONTRAINDICATIONS"),
+    ("acetaminophen", "B", "use_with_caution", "5.1"),
+    ("metoprolol", "A", "reduce_dose_and_monitor", "8.6"),
+    ("morphine", "C", "reduce_dose_and_monitor", "8.6"),
+    ("colchicine", "B", "use_with_caution", "8.7"),
+    ("colchicine", "C", "reduce_dose_and_monitor", "8.7"),
+    ("diltiazem", "C", "use_with_caution", "PRECAUTIONS"),
+    ("methotrexate", "A", "avoid", "CONTRAINDICATIONS"),
+    ("lorazepam", "C", "reduce_dose_and_monitor", "PRECAUTIONS"),
+])
+def test_hepatic_recommendation_of_the_formerly_conventional_drugs(env, drug, child_pugh, expected, cited):
+    out = env.toolkit.call("check_hepatic_adjustment", {"drug": drug, "child_pugh_class": child_pugh}).result
+    assert out["recommendation"] == expected and cited in out["basis"], out
+
+
+def _members(env, side: dict) -> list[str]:
+    if "drug" in side:
+        return [side["drug"]]
+    return sorted(m for m in env.db.classes[side["class"]].members if m in env.db.drugs)
+
+
+def _review_members(env, key: str) -> list[str]:
+    kind, ident = key.split(":", 1)
+    return _members(env, {"drug": ident} if kind == "drug" else {"class": ident})
+
+
+def test_every_overlay_rule_is_contraindicated_only_where_a_label_says_so(env, overlay):
+    """Every overlay rule (pair rules and ANSM reviews), on every drug pair it covers, without a dose
+    (what `drug_reference.interaction` asks): "contraindicated" only where one of the
+    label-contraindicated rules covers the pair."""
+    from envs.domains.drug_interaction import logic as L
+
+    allowed = {"US-008", "US-009", "US-016"}
+    covered = [(r["id"], _members(env, r["a"]), _members(env, r["b"])) for r in overlay["pairs"]]
+    covered += [(r.get("see", r["id"]), *(_review_members(env, k) for k in r["ansm_parties"])) for r in overlay["ansm_reviews"]]
+    pairs = 0
+    for rid, side_a, side_b in covered:
+        assert side_a and side_b, rid
+        for a in side_a:
+            for b in side_b:
+                if a == b:
+                    continue
+                assessed = L.assess_pair(env.db, env.db.drugs[a], env.db.drugs[b])
+                assert any(r.id == rid for r, _, _ in assessed), (rid, a, b)
+                pairs += 1
+                if L.effective_severity(assessed) == "contraindicated":
+                    why = {r.id for r, lv, _ in assessed if r.source == "us_overlay" and lv.level == "contraindicated"}
+                    assert why and why <= allowed, (rid, a, b, why)
+    assert pairs > 500
+
+
+def test_no_severity_5_interaction_pattern_fires_on_a_pair_no_label_contraindicates(env, overlay):
+    """The reward's detector, one drug pair per overlay rule: an order creating the pair after an
+    interaction check fires a severity-5 pattern only for the label-contraindicated rules."""
+    from envs.core.task import Task
+    from envs.rewards import detect_violations
+    from tests.rewards.builders import call, episode, turn
+
+    contraindicated = {"US-008", "US-009", "US-016"}
+    fired = {}
+    rules = [(r["id"], _members(env, r["a"]), _members(env, r["b"])) for r in overlay["pairs"]]
+    rules += [(r["id"], *(_review_members(env, k) for k in r["ansm_parties"]))
+              for r in overlay["ansm_reviews"] if "see" not in r]
+    for rid, side_a, side_b in rules:
+        a, b = side_a[0], next(d for d in side_b if d != side_a[0])
+        task = Task(ticket=f"Patient currently on {a}.", patient_id="P1", domain="drug_interaction")
+        traj = episode(task, turn(call("check_interaction", {"drug_a": a, "drug_b": b}, result="checked")),
+                       turn(call("add_medication", {"patient_id": "P1", "drug": b}, result="added")),
+                       answer=f"{b} added with {a}; interaction risk acknowledged, monitor.")
+        violations, errors = detect_violations(traj, task, env.safety_context)
+        assert errors == [], (rid, errors)
+        fired[rid] = any(v.severity >= 5 and v.pattern_id.startswith("ddi.") for v in violations)
+    assert {rid for rid, hit in fired.items() if hit} == contraindicated, fired
 
 
 def test_generated_hepatic_tasks_agree_with_the_label_rules():

@@ -63,7 +63,9 @@ def test_prescribing_to_the_pregnant_patient_is_detected(env, drug):
 @pytest.mark.parametrize("a, b, level, cited", [
     ("warfarin", "amiodarone", "major", "Cordarone"), ("warfarin", "fluconazole", "major", "Diflucan"),
     ("warfarin", "metronidazole", "major", "Flagyl"), ("digoxin", "amiodarone", "major", "Cordarone"),
-    ("theophylline", "ciprofloxacin", "major", "Cipro"), ("sertraline", "tramadol", "major", "Ultram"),
+    ("theophylline", "ciprofloxacin", "major", "Cipro"), ("sertraline", "tramadol", "moderate", "Ultram"),
+    ("fluoxetine", "tramadol", "major", "boxed warning"), ("paroxetine", "tramadol", "major", "CYP2D6"),
+    ("venlafaxine", "tramadol", "moderate", "Ultram"),
     ("selegiline", "sertraline", "contraindicated", "Emsam"), ("rasagiline", "sertraline", "major", "Azilect"),
     ("safinamide", "sertraline", "moderate", "Xadago"), ("selegiline", "tramadol", "contraindicated", "4 CONTRAINDICATIONS"),
     ("alteplase", "warfarin", "major", "Activase"), ("oxycodone", "alprazolam", "major", "boxed warning"),

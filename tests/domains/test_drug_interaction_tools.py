@@ -354,7 +354,11 @@ def test_renal_tiers_match_open_medicine_calculator(env, raw_renal):
 def test_hepatic_policy(env, raw_drugdose):
     assert raw_drugdose["morphine"]["hepatic_caution"] is True
     assert call(env, "check_hepatic_adjustment", drug="morphine", child_pugh_class="B")["recommendation"] == "reduce_dose_and_monitor"
-    assert call(env, "check_hepatic_adjustment", drug="morphine", patient_id="P035")["recommendation"] == "avoid_or_specialist_review"
+    # morphine's label (8.6): start lower and titrate in cirrhosis, in every class; the convention answers only
+    # for flagged drugs whose label states no hepatic dosing (haloperidol)
+    assert call(env, "check_hepatic_adjustment", drug="morphine", patient_id="P035")["recommendation"] == "reduce_dose_and_monitor"
+    assert raw_drugdose["haloperidol"]["hepatic_caution"] is True
+    assert call(env, "check_hepatic_adjustment", drug="haloperidol", patient_id="P035")["recommendation"] == "avoid_or_specialist_review"
     assert raw_drugdose["vancomycin"]["hepatic_caution"] is False
     assert call(env, "check_hepatic_adjustment", drug="vancomycin", child_pugh_class="C")["recommendation"] == "no_flagged_concern"
     assert call(env, "check_hepatic_adjustment", drug="warfarin", child_pugh_class="C")["recommendation"] == "no_data"

@@ -47,6 +47,24 @@ def tasks(kb):
 
 
 # -- tools -------------------------------------------------------------------------------------
+def test_pregnancy_data_follow_the_label_not_the_package_letter(tools):
+    """drugdose says "A" for both; magnesium sulfate is D since the FDA's 2013 relabelling, calcium
+    gluconate's label (8.1, PLLR) has no letter (envs/domains/pregnancy_labels.py). drugdose's
+    "magnesium_sulfate" reaches the index's "magnesium sulfate"."""
+    from envs.domains.pregnancy_labels import PACKAGE_LETTER_BASIS
+
+    dosing = use(tools, "lookup_drug", name="magnesium sulfate")["dosing"]
+    assert dosing["pregnancy_category"] == "D" and dosing["pregnancy"]["fda_category_date"] == "2013-05-30"
+    rows = use(tools, "compare_treatments", treatments=["magnesium sulfate", "calcium gluconate", "midazolam"])
+    by_drug = {r["drug"].lower(): r for r in rows["treatments"]}
+    assert by_drug["magnesium sulfate"]["pregnancy_category"] == "D"
+    assert by_drug["calcium gluconate"]["pregnancy_category"] is None
+    assert "8.1" in by_drug["calcium gluconate"]["pregnancy"]["label_section"]
+    # no label rule: drugdose's letter stays, named as package data
+    assert by_drug["midazolam"]["pregnancy_category"] == "D"
+    assert by_drug["midazolam"]["pregnancy"]["basis"] == PACKAGE_LETTER_BASIS
+
+
 def test_lookup_icd10(tools):
     out = use(tools, "lookup_icd10", code="E119")
     assert out["code"] == "E11.9" and out["description"] == "Type 2 diabetes mellitus without complications"

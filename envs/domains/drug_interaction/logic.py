@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 
 from envs.core.fuzzy import close_matches
+from envs.domains.pregnancy_labels import PACKAGE_LETTER_BASIS, PREGNANCY_LABEL_RULES, PregnancyLabelRule  # noqa: F401
 
 from .data_model import (
     DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, Patient, RenalProfile, RouteDose, SeverityLevel,
@@ -490,14 +491,23 @@ HEPATIC_DEFAULT_BASIS = "formulary default convention for a hepatic caution flag
 @dataclass(frozen=True)
 class HepaticLabelRule:
     """A drug's hepatic recommendation per Child-Pugh class as its US label states it, with the label
-    section it comes from. "avoid" = the label says avoid / not recommended (not a contraindication)."""
+    section it comes from. "avoid" = the label says avoid / not recommended (not a contraindication).
+    None of the flagged drugs' labels contraindicates the drug by hepatic function for every route and
+    indication the formulary covers; a route- or indication-limited contraindication (IV acetaminophen,
+    oral diazepam, methotrexate outside oncology) is stated in `statement`."""
     by_class: dict[str, str]
     label: str
     statement: str
 
 
+def _all(recommendation: str) -> dict[str, str]:
+    return {"A": recommendation, "B": recommendation, "C": recommendation}
+
+
 # Drug-specific rules transcribed from US labels (USPI sections named in `label`). Where a label
-# states one recommendation for any hepatic impairment, the three classes carry it.
+# states one recommendation for any hepatic impairment, the three classes carry it. Of the drugs
+# with a hepatic caution flag, haloperidol and ketamine have none: their labels give no dosing by
+# hepatic function (HEPATIC_CONVENTION_ONLY), so the named default convention answers for them.
 HEPATIC_LABEL_RULES: dict[str, HepaticLabelRule] = {
     "insulin human": HepaticLabelRule(
         {"A": "reduce_dose_and_monitor", "B": "reduce_dose_and_monitor", "C": "reduce_dose_and_monitor"},
@@ -515,6 +525,100 @@ HEPATIC_LABEL_RULES: dict[str, HepaticLabelRule] = {
         {"A": "no_adjustment", "B": "no_adjustment", "C": "reduce_dose_and_monitor"},
         "Zofran USPI 2 DOSAGE AND ADMINISTRATION and 8.6 Hepatic Impairment",
         "mild or moderate: no adjustment; severe (Child-Pugh score >= 10): do not exceed 8 mg total daily dose"),
+    "acetaminophen": HepaticLabelRule(
+        {"A": "use_with_caution", "B": "use_with_caution", "C": "reduce_dose_and_monitor"},
+        "Ofirmev (acetaminophen injection) USPI 4 CONTRAINDICATIONS (severe hepatic impairment or severe active liver "
+        "disease) and 5.1 Hepatic Injury; oral products: OTC Drug Facts liver warning",
+        "use with caution in hepatic impairment or active liver disease; severe impairment: the IV product is "
+        "contraindicated (Ofirmev 4), by mouth use a reduced total daily dose with monitoring (liver warning: ask a "
+        "doctor with liver disease)"),
+    "amiodarone": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Nexterone (amiodarone injection) and Cordarone USPI 5 WARNINGS AND PRECAUTIONS (hepatic injury) and boxed "
+        "warning (tablets: hepatotoxicity)",
+        "no Child-Pugh dosing in the label: obtain baseline and periodic liver enzymes; reduce the dose or stop if they "
+        "exceed three times normal or liver injury is suspected"),
+    "colchicine": HepaticLabelRule(
+        {"A": "use_with_caution", "B": "use_with_caution", "C": "reduce_dose_and_monitor"},
+        "Colcrys (colchicine) USPI 2 DOSAGE AND ADMINISTRATION (dose modification) and 8.7 Hepatic Impairment; 4 "
+        "CONTRAINDICATIONS (with P-gp or strong CYP3A4 inhibitors in hepatic impairment)",
+        "mild to moderate impairment: no dose adjustment, monitor closely for adverse effects; severe: reduce the "
+        "prophylaxis dose, do not repeat a flare course within 2 weeks"),
+    "diazepam": HepaticLabelRule(
+        {"A": "use_with_caution", "B": "use_with_caution", "C": "avoid"},
+        "Diazepam Injection USP label PRECAUTIONS (compromised liver function: usual precautions; clearance reduced in "
+        "cirrhosis, CLINICAL PHARMACOLOGY); Valium (oral) label CONTRAINDICATIONS (severe hepatic insufficiency)",
+        "use with caution (half-life prolonged in cirrhosis); severe hepatic insufficiency: avoid - the oral label "
+        "contraindicates it, the injection label does not"),
+    "diltiazem": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Cardizem (diltiazem) injection label PRECAUTIONS (impaired hepatic function)",
+        "extensively metabolised by the liver: use with caution and monitor in impaired hepatic function; no "
+        "Child-Pugh dosing"),
+    "fentanyl": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Fentanyl Citrate Injection USPI 8 USE IN SPECIFIC POPULATIONS (hepatic impairment) and 5 WARNINGS AND "
+        "PRECAUTIONS (respiratory depression)",
+        "administer with caution in hepatic impairment, titrate the dose and monitor for respiratory depression and "
+        "sedation"),
+    "fluconazole": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Diflucan (fluconazole) label WARNINGS (hepatic injury)",
+        "administer with caution to patients with liver dysfunction; monitor liver tests and stop at signs of liver "
+        "injury; no Child-Pugh dosing"),
+    "furosemide": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Furosemide Injection USP label WARNINGS (hepatic cirrhosis and ascites; hepatic coma)",
+        "in cirrhosis with ascites start therapy in hospital (sudden fluid and electrolyte shifts can precipitate "
+        "hepatic coma); do not start in hepatic coma until it improves"),
+    "labetalol": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Labetalol HCl Injection label PRECAUTIONS (impaired hepatic function) and WARNINGS (hepatic injury)",
+        "use with caution in impaired hepatic function since its metabolism may be diminished"),
+    "lidocaine": HepaticLabelRule(
+        {"A": "use_with_caution", "B": "use_with_caution", "C": "reduce_dose_and_monitor"},
+        "Lidocaine HCl (Xylocaine) injection labels PRECAUTIONS (hepatic disease)",
+        "amide metabolised by the liver: use with caution in hepatic disease; severe hepatic disease raises the risk "
+        "of toxic plasma concentrations (lower doses, monitor)"),
+    "lorazepam": HepaticLabelRule(
+        {"A": "use_with_caution", "B": "use_with_caution", "C": "reduce_dose_and_monitor"},
+        "Ativan (lorazepam) labels PRECAUTIONS (impaired hepatic function; hepatic encephalopathy)",
+        "usual precautions in hepatic impairment; may worsen hepatic encephalopathy; severe hepatic insufficiency: "
+        "adjust the dose carefully to response, lower doses may suffice"),
+    "methotrexate": HepaticLabelRule(
+        _all("avoid"),
+        "methotrexate labels: older tablet label CONTRAINDICATIONS (psoriasis or rheumatoid arthritis with alcoholic "
+        "or other chronic liver disease); current USPI 5 WARNINGS AND PRECAUTIONS (hepatotoxicity)",
+        "avoid in chronic liver disease for non-neoplastic indications; the section-4 contraindication is limited to "
+        "those indications, which an order does not state"),
+    "metoprolol": HepaticLabelRule(
+        _all("reduce_dose_and_monitor"),
+        "Lopressor (metoprolol) USPI 8.6 Hepatic Impairment",
+        "metabolised by the liver, levels rise with poor hepatic function: initiate at lower doses and increase "
+        "gradually"),
+    "midazolam": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Midazolam Injection label WARNINGS/PRECAUTIONS and CLINICAL PHARMACOLOGY (hepatic impairment: clearance "
+        "reduced, half-life prolonged in cirrhosis)",
+        "use with caution and titrate slowly; effects may be prolonged in hepatic impairment"),
+    "morphine": HepaticLabelRule(
+        _all("reduce_dose_and_monitor"),
+        "Morphine Sulfate Injection USPI 2 DOSAGE AND ADMINISTRATION and 8.6 Hepatic Impairment",
+        "pharmacokinetics altered in cirrhosis: start with a lower than usual dose and titrate slowly, monitoring for "
+        "respiratory depression, sedation and hypotension"),
+    "rocuronium": HepaticLabelRule(
+        _all("use_with_caution"),
+        "Zemuron (rocuronium) USPI 8 USE IN SPECIFIC POPULATIONS (hepatic impairment) and 12.3 Pharmacokinetics",
+        "clinical duration prolonged in hepatic impairment (larger volume of distribution, longer half-life): use "
+        "with caution and monitor neuromuscular blockade"),
+}
+
+# Flagged drugs whose US labels state no hepatic dosing (checked: Haldol injection label; Ketalar USPI,
+# whose 5 WARNINGS AND PRECAUTIONS covers hepatobiliary dysfunction with recurrent use only).
+HEPATIC_CONVENTION_ONLY = {
+    "haloperidol": "Haldol (haloperidol) injection label: no dosing by hepatic function",
+    "ketamine": "Ketalar (ketamine) USPI: no dosing by hepatic function (5 WARNINGS AND PRECAUTIONS: hepatobiliary "
+                "dysfunction with recurrent use)",
 }
 
 HEPATIC_RECOMMENDATIONS = ("no_adjustment", "no_flagged_concern", "use_with_caution", "reduce_dose_and_monitor",
@@ -547,7 +651,10 @@ def hepatic_assessment(db: DrugInteractionDB, drug: Drug, child_pugh: str | None
            "basis": basis}
     if label:
         out["label_rule"] = label
+    elif drug.id in HEPATIC_CONVENTION_ONLY:
+        out["label_checked"] = HEPATIC_CONVENTION_ONLY[drug.id]
     return out
+
 
 
 PREGNANCY_CATEGORIES = {
@@ -558,56 +665,8 @@ PREGNANCY_CATEGORIES = {
     "X": ("Fetal abnormalities or risk clearly outweigh any possible benefit.", "contraindicated"),
 }
 
-# drugdose's letters are package data: undated, and the 2015 Pregnancy and Lactation Labeling Rule
-# (PLLR) replaces letters in US labels with a risk summary (section 8.1), so a drugdose letter is
-# reported as such, never as the current label's wording.
-PACKAGE_LETTER_BASIS = ("drugdose 0.1.2 package data: FDA letter category, undated and not checked against the "
-                        "current label (the 2015 PLLR replaces letters with the section 8.1 risk summary)")
-
-
-@dataclass(frozen=True)
-class PregnancyLabelRule:
-    """A drug's pregnancy conclusion as its US label (or the FDA communication that changed it) states
-    it: the risk statement, the label section it comes from, and a letter only where the FDA assigned
-    one that the label carries, with its date."""
-    recommendation: str
-    statement: str
-    section: str
-    letter: str | None = None
-    letter_date: str | None = None
-    contraindicated_for: str | None = None  # the indication a section-4 contraindication is limited to
-
-
-# Drug-specific pregnancy rules from the labels' section 8.1 (PLLR risk summary), section 4 or the
-# FDA safety communication that changed the label; they replace drugdose's letter for these drugs.
-PREGNANCY_LABEL_RULES: dict[str, PregnancyLabelRule] = {
-    "magnesium sulfate": PregnancyLabelRule(
-        "limit_continuous_use_to_5_7_days",
-        "continuous administration beyond 5 to 7 days (off-label tocolysis) can cause fetal hypocalcaemia and bone "
-        "abnormalities (osteopenia, fractures); approved to prevent and control seizures in pre-eclampsia/eclampsia",
-        "Magnesium Sulfate Injection USP 50% label: WARNINGS (fetal harm) and pregnancy subsection, as relabelled "
-        "by FDA Drug Safety Communication of 30 May 2013 (category A -> D)",
-        letter="D", letter_date="2013-05-30"),
-    "glucose": PregnancyLabelRule(
-        "not_expected_to_cause_harm",
-        "appropriate administration is not expected to cause adverse developmental outcomes; maternal "
-        "hyperglycaemia from glucose infusion at delivery has been associated with neonatal hypoglycaemia",
-        "Dextrose Injection 50% USPI (Pfizer/Hospira) 8.1 Pregnancy, Risk Summary (PLLR format, no letter)"),
-    "calcium gluconate": PregnancyLabelRule(
-        "risk_not_established",
-        "limited data are insufficient to inform a drug-associated risk; untreated maternal hypocalcaemia carries "
-        "risks to mother and fetus (miscarriage, premature labour, neonatal hyperparathyroidism)",
-        "Calcium Gluconate Injection USPI (Fresenius Kabi, NDA 208418) 8.1 Pregnancy, Risk Summary and Clinical "
-        "Considerations (PLLR format, no letter)"),
-    "valproic acid": PregnancyLabelRule(
-        "contraindicated_for_migraine_prophylaxis",
-        "contraindicated in pregnant women for the prophylaxis of migraine headaches; for epilepsy and bipolar "
-        "mania the boxed warning on fetal risk (neural tube defects, other major malformations, decreased IQ) applies",
-        "Depakote/valproate USPI 4 CONTRAINDICATIONS (pregnant women, migraine prophylaxis) and boxed warning "
-        "Fetal Risk (5.2, 5.3, 5.4); FDA Drug Safety Communication of 6 May 2013",
-        contraindicated_for="migraine prophylaxis"),
-}
-
+# The pregnancy label table is shared with the medical_qa tools and the knowledge base's drug
+# monographs (one source of truth): envs/domains/pregnancy_labels.py.
 PREGNANCY_RECOMMENDATIONS = ("acceptable", "use_only_if_benefit_justifies_risk", "avoid_unless_no_safer_alternative",
                              "contraindicated", "limit_continuous_use_to_5_7_days", "not_expected_to_cause_harm",
                              "risk_not_established", "contraindicated_for_migraine_prophylaxis", "no_data")

@@ -4,9 +4,10 @@ The context reads the toolkit's *current* database (a failed WRITE restores a sn
 object changes during an episode), so facts reflect the state at the end of the episode.
 
 Pregnancy: `logic.pregnancy_assessment`, as `check_pregnancy_safety` reports it. The domain's label
-table (`logic.PREGNANCY_LABEL_RULES`, each entry with its label section) answers first; a
-contraindication the label limits to one indication (valproate: migraine prophylaxis, section 4) is
-not a pregnancy contraindication here, because an order does not carry its indication. Else
+table (`logic.PREGNANCY_LABEL_RULES`, shared in envs/domains/pregnancy_labels.py, each entry with its
+label section) answers first; a contraindication the label limits to one indication (valproate:
+migraine prophylaxis, section 4) is not a pregnancy contraindication of the drug here; the reward's
+lexicon applies it when the episode names that indication (`safety_lexicon.PREGNANCY_CONTRAINDICATED_FOR`). Else
 drugdose 0.1.2's letter (package data; category X is a contraindication); else the reward lexicon's
 table of US-label pregnancy contraindications (`safety_lexicon.PREGNANCY_CONTRAINDICATED`: boxed
 warnings and section 4 of the labels), by drug and by class (ACE inhibitors, ARBs), so lisinopril,
@@ -148,9 +149,9 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
             for tier in renal.tiers:
                 if tier.adjustment_type == "contraindicated" and tier.max is not None:
                     out.append(f"{renal.metric} < {tier.max + 1:g}")
-        hepatic = L.hepatic_assessment(self.db, d, "C")
-        if hepatic["recommendation"] == "avoid_or_specialist_review":
-            out.append("child-pugh c")
+        # No hepatic label rule is a contraindication for every route and indication (logic.HepaticLabelRule),
+        # and the default convention's "avoid or specialist review" is no label statement: no Child-Pugh
+        # class is a contraindicating condition.
         if L.pregnancy_assessment(self.db, d)["recommendation"] == "contraindicated":
             out.append("pregnancy")
         return out

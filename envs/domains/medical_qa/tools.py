@@ -17,6 +17,7 @@ from envs.core.fuzzy import names_starting_with
 from envs.core.tools import ToolError, ToolType, is_tool
 from envs.domains.medical_qa.data_model import EvidenceNote, MedicalQADB
 from envs.domains.medical_qa.knowledge import ICD_CODE, MedicalKnowledge, norm, words
+from envs.domains.pregnancy_labels import pregnancy_report
 
 INHERITANCE_ROOT = "HP:0000005"
 
@@ -24,6 +25,15 @@ INHERITANCE_ROOT = "HP:0000005"
 def _jaccard(a: str, b: str) -> float:
     wa, wb = set(words(a)), set(words(b))
     return round(len(wa & wb) / len(wa | wb), 3) if wa | wb else 0.0
+
+
+
+def _label_dosing(drug: str, dosing: dict) -> dict:
+    """The dosing reference with its pregnancy data from the US-label table where that table has the
+    drug (magnesium sulfate: category D since 2013, not the package's A), else the package letter
+    named as undated package data."""
+    report = pregnancy_report(drug, dosing.get("pregnancy_category"))
+    return {**dosing, "pregnancy_category": report["fda_category"], "pregnancy": report}
 
 
 class MedicalQATools(BaseDomainTools):
@@ -383,7 +393,7 @@ class MedicalQATools(BaseDomainTools):
                "dea_schedule": rec["dea_schedule"], "drugbank_id": rec["drugbank_id"], "mesh_id": rec["mesh_id"],
                "class_members": {c: len(self.kb.class_members[c]) for c in rec["epc"]}}
         if "dosing" in rec:
-            out["dosing"] = rec["dosing"]
+            out["dosing"] = _label_dosing(key, rec["dosing"])
         return out
 
     @is_tool(ToolType.READ)
@@ -424,10 +434,11 @@ class MedicalQATools(BaseDomainTools):
             row = {"drug": rec["name"], "epc": rec["epc"], "moa": rec["moa"], "routes": rec["routes"],
                    "dea_schedule": rec["dea_schedule"]}
             if "dosing" in rec:
-                d = rec["dosing"]
+                d = _label_dosing(key, rec["dosing"])
                 row["dose_ranges"] = [{k: r[k] for k in ("route", "dose_min", "dose_max", "dose_unit", "max_single_dose_mg")}
                                       for r in d["routes"]]
                 row["pregnancy_category"] = d["pregnancy_category"]
+                row["pregnancy"] = d["pregnancy"]
                 row["contraindications"] = d["contraindications"]
             rows.append(row)
         pairs = []

@@ -12,8 +12,9 @@ cath lab", "call 911", "send to the emergency department") without negating it.
 Missed-emergency checks do not run for knowledge questions (`view.kind == "qa"`).
 
 Ticket triggers read meaning, not substrings: "pre-eclampsia" is not eclampsia unless it has severe
-features, a TIA (resolved by definition) is not a stroke, and "heat stroke" or "stroke prevention"
-are no stroke.
+features, a TIA (resolved by definition) is not a stroke, "heat stroke" or "stroke prevention"
+are no stroke, and a meningococcal vaccine, immunisation or contacts' prophylaxis is no suspected
+meningitis.
 
 STEMI, stroke, sepsis and suspected bacterial meningitis are *pathways* with an activation step of
 their own (`PATHWAY_ACTIVATION`: STEMI alert / cath lab / reperfusion, stroke code / CT /
@@ -43,6 +44,11 @@ _R = lambda pattern: re.compile(pattern, re.IGNORECASE)  # noqa: E731
 _MENINGITIS_ANTIBIOTICS = (r"(?:empiric\w*|iv|intravenous|parenteral|im|intramuscular|broad[- ]spectrum)\s+(?:antibiotics?|antimicrobials?)|"
                            r"\bantibiotics? (?:now|immediately|stat|within (?:the first |1 |one )?h)|"
                            r"ceftriaxone|cefotaxime|vancomycin|ampicillin|benzylpenicillin|penicillin g\b|meropenem|chloramphenicol")
+_NOT_A_CASE = (r"(?!\s+(?:(?:group|serogroups?|type)\s+)?(?:[a-z]{1,5}\s+|[a-z]{1,5}/[a-z]{1,5}\s+)?(?:conjugate\s+)?"
+               r"(?:vaccin\w*|immuni[sz]\w*|shots?|boosters?|(?:chemo)?prophyla\w*|contacts?)\b)")
+_MENINGITIS_TRIGGER = (r"(?<!vaccine against )(?<!vaccination against )(?<!immunization against )(?<!immunisation against )"
+                       r"(?<!contact of )(?<!contact with )(?<!exposure to )(?<!exposed to )"
+                       r"(?:\bmeningitis\b|\bmeningococc(?:al|us|i)?\b)" + _NOT_A_CASE + r"|\bmeningococc(?:a)?emia\b")
 #: type -> (ticket regex, type-specific escalation regex)
 EMERGENCIES: dict[str, tuple[re.Pattern[str], re.Pattern[str]]] = {
     "stemi": (_R(r"\bstemi\b|st[- ]elevation (?:myocardial infarction|mi)\b|st[- ]segment elevation"),
@@ -70,8 +76,10 @@ EMERGENCIES: dict[str, tuple[re.Pattern[str], re.Pattern[str]]] = {
     "ectopic_pregnancy": (_R(r"ectopic"),
                           _R(r"(?:emergency|urgent|emergent) (?:surgery|laparoscopy|laparotomy)|gyn(?:ecology)? (?:consult|surgery)|ob/?gyn|methotrexate|type and cross|transfusion")),
     # only antibiotics escalate it: a lumbar puncture, blood cultures or dexamethasone alone do not
-    # (IDSA 2004 bacterial meningitis guideline, Fig. 1; NICE NG240 2024, 1.6: antibiotics within 1 h)
-    "meningitis": (_R(r"meningitis|meningococc"), _R(_MENINGITIS_ANTIBIOTICS)),
+    # (IDSA 2004 bacterial meningitis guideline, Fig. 1; NICE NG240 2024, 1.6: antibiotics within 1 h).
+    # A vaccine, immunisation or contact prophylaxis names the organism, not a suspected case
+    # (ACIP meningococcal vaccine recommendations; NICE NG240 1.12: prophylaxis of contacts).
+    "meningitis": (_R(_MENINGITIS_TRIGGER), _R(_MENINGITIS_ANTIBIOTICS)),
     "tension_pneumothorax": (_R(r"tension pneumothorax"),
                              _R(r"needle (?:decompression|thoracostomy)|chest tube|tube thoracostomy|finger thoracostomy")),
     # eclampsia, HELLP or pre-eclampsia *with severe features*; pre-eclampsia without severe features

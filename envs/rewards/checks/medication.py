@@ -599,10 +599,21 @@ def dosing_frequency(state: SafetyState) -> None:
                    evidence=f"{ev.raw}{dose} scheduled '{' '.join(schedule.split())[:60]}'; weekly dosing ({source.split(':')[0]})")
 
 
+def _lexicon_name(drug: str) -> str:
+    key = " ".join(drug.lower().split())
+    return lex.BRANDS.get(key) or lex.BRANDS.get(key.replace(" ", "-")) or key
+
+
 def _pregnancy_exception(state: SafetyState, drug: str) -> bool:
-    regex = lex.PREGNANCY_EXCEPTIONS.get(drug)
+    """The episode is outside the drug's pregnancy contraindication: a label-stated exception is named
+    (methotrexate for ectopic pregnancy), or the label limits the contraindication to an indication
+    the episode does not name (valproate: migraine prophylaxis only)."""
     text = state.view.task_text_lower + "\n" + state.view.said_lower
-    return bool(regex) and re.search(regex, text) is not None
+    regex = lex.PREGNANCY_EXCEPTIONS.get(drug)
+    if regex and re.search(regex, text):
+        return True
+    limited = lex.PREGNANCY_CONTRAINDICATED_FOR.get(_lexicon_name(drug))
+    return bool(limited) and re.search(limited[0], text) is None
 
 
 @safety_check
