@@ -20,6 +20,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-tool-calls", type=int, default=None)
     p.add_argument("--max-tool-result-chars", type=int, default=50_000)
     p.add_argument("--max-argument-chars", type=int, default=100_000)
+    p.add_argument("--max-requests", type=int, default=128, help="HTTP requests served at once (more: 503 busy)")
+    p.add_argument("--max-connections", type=int, default=1024, help="open connections (a request on more: 503)")
+    p.add_argument("--request-timeout", type=float, default=10.0,
+                   help="seconds a request's headers, then its body, may take to arrive (slower: 408, closed)")
+    p.add_argument("--max-sessions", type=int, default=256, help="MCP legacy-protocol sessions open at once")
+    p.add_argument("--max-finished", type=int, default=1024, help="ended episodes whose score is kept")
     p.add_argument("--token", default=None, help="bearer token clients must send (default $HCGYM_SERVE_TOKEN)")
     p.add_argument("--no-warmup", action="store_true", help="skip loading graders before serving")
     p.set_defaults(func=cmd_serve)
@@ -35,6 +41,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     fields = dict(host=args.host, port=args.port, split=args.split, max_episodes=args.max_episodes,
                   idle_timeout_s=args.idle_timeout, max_turns=args.max_turns, max_tool_calls=args.max_tool_calls,
                   max_tool_result_chars=args.max_tool_result_chars, max_argument_chars=args.max_argument_chars,
+                  max_requests=args.max_requests, max_connections=args.max_connections,
+                  request_timeout_s=args.request_timeout, max_sessions=args.max_sessions,
+                  max_finished=args.max_finished,
                   token=args.token or os.environ.get("HCGYM_SERVE_TOKEN") or None)
     if args.domains:
         fields["domains"] = args.domains

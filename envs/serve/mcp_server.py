@@ -19,16 +19,19 @@ import json
 import threading
 import time
 import uuid
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
 import anyio
 import mcp_types as types
 from mcp.server.lowlevel import Server
-from pydantic import BaseModel, ConfigDict, ValidationError
+from mcp.shared.exceptions import MCPError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from envs.env import HealthcareGymEnv
 from envs.episode import END_REASONS, EpisodeEnd
+from envs.serve.guard import H11_MAX_HEAD, HTTPGuard, guarded_protocol
 # The settings and the token rule are shared with the OpenEnv server; re-exported here for callers.
 from envs.serve.settings import LOOPBACK_HOSTS, BearerToken, ServeSettings, is_loopback  # noqa: F401
 
@@ -39,26 +42,37 @@ MESSAGE_META_KEY = "hcgym/message"
 SAME_TURN_META_KEY = "hcgym/same_turn"
 SESSION_HEADER = "mcp-session-id"
 EPISODE_TOOLS = ("start_episode", "finish_episode", "episode_result")
+MAX_TOOL_NAME_CHARS = 128  # the MCP specification's bound on a tool name
+MAX_EPISODE_ID_CHARS = 64  # ids are 32 hex digits; anything much longer is not one
 
 
 class StartArgs(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    domain: str | None = None
-    task_id: str | None = None
-    split: str | None = None
-    seed: int | None = None
+    domain: str | None = Field(None, max_length=64)
+    task_id: str | None = Field(None, max_length=256)
+    split: str | None = Field(None, max_length=32)
+    seed: int | None = Field(None, ge=0, le=2**63 - 1)  # the env's generator takes a non-negative seed
 
 
 class FinishArgs(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    episode_id: str | None = None
+    episode_id: str | None = Field(None, max_length=MAX_EPISODE_ID_CHARS)
     final_text: str | None = None
-    reason: str | None = None
+    reason: str | None = Field(None, max_length=64)
 
 
 class ResultArgs(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    episode_id: str | None = None
+    episode_id: str | None = Field(None, max_length=MAX_EPISODE_ID_CHARS)
+
+
+def shown(value: Any, limit: int = 60) -> str:
+    """`value` for an error message: its repr, cut (with its length named) when long."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    size = f" ({len(value)} characters)" if isinstance(value, str) else ""
+    return f"{text[:limit]}...{size}"
 
 
 class ToolCallError(Exception):
@@ -90,19 +104,22 @@ def score_of(end: EpisodeEnd) -> dict[str, Any]:
 
 class EpisodeStore:
     """The running episodes: at most `max_episodes` running; idle ones dropped; ended ones keep only
-    their score (their env is released) until they too go idle."""
+    their score (their env is released) until they too go idle, the newest `max_finished` of them."""
 
     def __init__(self, settings: ServeSettings, clock=time.monotonic) -> None:
         self.settings = settings
         self.clock = clock
         self._episodes: dict[str, Episode] = {}
         self._by_session: dict[str, str] = {}
+        # ended episodes in the order they ended: a flood of short episodes must not keep every score
+        self._finished: OrderedDict[str, None] = OrderedDict()
         self._lock = threading.Lock()
 
     def _reap(self) -> None:
         cutoff = self.clock() - self.settings.idle_timeout_s
         for eid in [e.id for e in self._episodes.values() if e.last_used < cutoff]:
             del self._episodes[eid]
+            self._finished.pop(eid, None)
         for sid in [s for s, eid in self._by_session.items() if eid not in self._episodes]:
             del self._by_session[sid]
 
@@ -114,7 +131,7 @@ class EpisodeStore:
     def start(self, args: StartArgs, session_id: str | None) -> tuple[Episode, dict[str, Any]]:
         domain = args.domain or self.settings.domains[0]
         if domain not in self.settings.domains:
-            raise ToolCallError(f"start_episode: argument 'domain': {domain!r} is not served here "
+            raise ToolCallError(f"start_episode: argument 'domain': {shown(domain)} is not served here "
                                 f"(served: {', '.join(self.settings.domains)})")
         split = args.split if args.split is not None else self.settings.split
         with self._lock:
@@ -157,16 +174,29 @@ class EpisodeStore:
             if episode_id is None:
                 raise ToolCallError(f"no episode named: call start_episode first and pass its episode_id in the "
                                     f"request _meta ({EPISODE_META_KEY!r}) or as an 'episode_id' argument")
+            if len(episode_id) > MAX_EPISODE_ID_CHARS:
+                raise ToolCallError(f"argument 'episode_id': {shown(episode_id)} is not an episode id (at most "
+                                    f"{MAX_EPISODE_ID_CHARS} characters)")
             episode = self._episodes.get(episode_id)
             if episode is None or episode.env is None and episode.end is None:
-                raise ToolCallError(f"argument 'episode_id': unknown or expired episode {episode_id!r} "
-                                    f"(episodes idle for {self.settings.idle_timeout_s:g} s are dropped)")
+                raise ToolCallError(f"argument 'episode_id': unknown or expired episode {shown(episode_id)} "
+                                    f"(episodes idle for {self.settings.idle_timeout_s:g} s are dropped, and only "
+                                    f"the last {self.settings.max_finished} ended episodes keep their score)")
             episode.last_used = self.clock()
             return episode
 
     def ended(self, episode: Episode, end: EpisodeEnd) -> None:
         with self._lock:
             episode.end, episode.env = end, None  # release the env: an ended episode holds only its score
+            self._finished[episode.id] = None
+            while len(self._finished) > self.settings.max_finished:
+                oldest, _ = self._finished.popitem(last=False)
+                self._episodes.pop(oldest, None)
+
+    def finished(self) -> int:
+        """Ended episodes whose score is kept."""
+        with self._lock:
+            return len(self._finished)
 
 
 def _text(result: dict[str, Any], is_error: bool = False, text: str | None = None) -> types.CallToolResult:
@@ -283,11 +313,13 @@ def build_server(settings: ServeSettings, store: EpisodeStore | None = None) -> 
 
     async def on_call_tool(ctx: Any, params: types.CallToolRequestParams) -> types.CallToolResult:
         name = params.name
+        if len(name) > MAX_TOOL_NAME_CHARS:
+            return _error(f"unknown tool {shown(name)}: a tool name has at most {MAX_TOOL_NAME_CHARS} characters")
         arguments = params.arguments or {}
         try:
             size = len(json.dumps(arguments))
-        except (TypeError, ValueError):
-            return _error(f"{name}: arguments are not JSON")
+        except (TypeError, ValueError, RecursionError):
+            return _error(f"{name}: arguments are not JSON (or nested too deeply)")
         if size > settings.max_argument_chars:
             return _error(f"{name}: arguments are {size} characters as JSON, over the server's limit of "
                           f"{settings.max_argument_chars} (--max-argument-chars)")
@@ -313,7 +345,19 @@ def build_server(settings: ServeSettings, store: EpisodeStore | None = None) -> 
         f"{EPISODE_META_KEY!r} or an episode_id argument); submit_answer or finish_episode ends it and "
         "returns the score."), on_list_tools=on_list_tools, on_call_tool=on_call_tool,
         get_tool_input_schema=input_schema)
+    server.middleware.append(name_invalid_params)
     return server, store
+
+
+async def name_invalid_params(ctx: Any, call_next: Any) -> Any:
+    """Server middleware: request params that fail the SDK's validation (a tool name that is not a string,
+    arguments that are not an object) get an error naming the field; the SDK's own says only "Invalid
+    request parameters"."""
+    try:
+        return await call_next(ctx)
+    except ValidationError as exc:
+        problems = "; ".join(f"params.{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()[:3])
+        raise MCPError(code=types.INVALID_PARAMS, message=f"Invalid request parameters: {problems}") from None
 
 
 def _parse(model: type[BaseModel], tool: str, arguments: dict[str, Any]) -> Any:
@@ -326,20 +370,35 @@ def _parse(model: type[BaseModel], tool: str, arguments: dict[str, Any]) -> Any:
 
 
 def build_app(settings: ServeSettings) -> tuple[Any, EpisodeStore]:
-    """The ASGI app (MCP at /mcp) and its episode store."""
+    """The ASGI app (MCP at /mcp, behind the HTTP guard) and its episode store."""
     server, store = build_server(settings)
     app = server.streamable_http_app(host=settings.host, max_request_body_size=settings.max_request_bytes,
-                                     session_idle_timeout=settings.idle_timeout_s)
-    return (BearerToken(app, settings.token) if settings.token else app), store
+                                     session_idle_timeout=settings.idle_timeout_s, max_sessions=settings.max_sessions)
+    if settings.token:
+        app = BearerToken(app, settings.token)
+    return HTTPGuard(app, max_requests=settings.max_requests, request_timeout_s=settings.request_timeout_s,
+                     max_body_bytes=settings.max_request_bytes, busy_wait_s=settings.busy_wait_s), store
+
+
+def uvicorn_server(settings: ServeSettings, app: Any) -> Any:
+    """uvicorn serving `app` with the settings' connection bound and first-request deadline."""
+    import uvicorn
+
+    return uvicorn.Server(uvicorn.Config(
+        app, host=settings.host, port=settings.port, http=guarded_protocol(settings.request_timeout_s),
+        limit_concurrency=settings.max_connections, backlog=2048, timeout_keep_alive=5,
+        h11_max_incomplete_event_size=H11_MAX_HEAD, log_level="warning"))
 
 
 def serve(settings: ServeSettings, warmup: bool = True) -> None:
-    import uvicorn
-
     if warmup:  # the first score of a process loads graders; pay that before the first client
         for domain in settings.domains:
             HealthcareGymEnv(domain=domain, split=settings.split).warmup()
     app, _ = build_app(settings)
-    print(f"hcgym serve: MCP (streamable HTTP) at http://{settings.host}:{settings.port}/mcp "
+    server = uvicorn_server(settings, app)
+    sock = server.config.bind_socket()  # bound here so --port 0 prints the port it got
+    sock.listen(server.config.backlog)  # clients that read the line below may connect before uvicorn starts
+    host = f"[{settings.host}]" if ":" in settings.host else settings.host
+    print(f"hcgym serve: MCP (streamable HTTP) at http://{host}:{sock.getsockname()[1]}/mcp "
           f"domains={','.join(settings.domains)}", flush=True)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
+    server.run(sockets=[sock])

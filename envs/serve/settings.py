@@ -37,7 +37,9 @@ class ServeSettings(BaseModel):
     max_argument_chars: int = Field(100_000, ge=1, description="a call's arguments as JSON, at most")
     max_request_bytes: int = Field(1_000_000, ge=1024, description="an HTTP request body (or WebSocket message), at most")
     token: str | None = Field(None, description="bearer token the server requires (required off loopback)")
-    max_requests: int = Field(128, ge=1, description="HTTP requests served at once; one more is answered 503 busy")
+    max_requests: int = Field(128, ge=1, description="HTTP requests served at once; one more waits busy_wait_s "
+                              "for a slot, then is answered 503 busy")
+    busy_wait_s: float = Field(2.0, ge=0, description="how long a request waits for a slot before it is answered busy")
     max_connections: int = Field(1024, ge=1, description="open connections; a request on one more is answered 503")
     request_timeout_s: float = Field(10.0, gt=0, description="a request's headers, then its body, must arrive "
                                      "within this; a slower client is answered 408 and closed")
