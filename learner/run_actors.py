@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from typing import Any, Callable
 
-from actors.generator import generator_actor_class
+from actors.generator import start_generator_actors
 from learner.config import RunConfig
 from learner.placement import check_cluster_fits, learner_world_size, rank_placement, run_demands, wait_all_ready
 
@@ -50,14 +50,11 @@ def check_run_fits(cfg: RunConfig) -> None:
 
 def start_generators(cfg: RunConfig, policy_dir: str, stop_ids: list[int]) -> list:
     g = cfg.generator
-    gen_cls = generator_actor_class().options(num_cpus=g.num_cpus, num_gpus=g.num_gpus, max_restarts=g.max_restarts,
-                                              resources=dict(cfg.ray.generator_resources) or None,
-                                              max_task_retries=0, max_concurrency=1000,
-                                              # vLLM's CPU build runs in its own interpreter (actors/README.md)
-                                              runtime_env=g.runtime_env())
-    return [gen_cls.remote(g.backend, policy_dir, g.sampling.model_dump(), stop_ids, 0, g.options,
-                           g.max_batch_size, g.batch_wait_s)
-            for _ in range(g.num_generators)]
+    return start_generator_actors(g.backend, policy_dir, g.sampling, stop_ids, g.num_generators, options=g.options,
+                                  python_executable=g.python_executable, max_batch_size=g.max_batch_size,
+                                  batch_wait_s=g.batch_wait_s, num_cpus=g.num_cpus, num_gpus=g.num_gpus,
+                                  max_restarts=g.max_restarts, resources=dict(cfg.ray.generator_resources) or None,
+                                  max_task_retries=0, max_concurrency=1000)
 
 
 def start_learner(cfg: RunConfig, policy_dir: str):

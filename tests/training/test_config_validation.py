@@ -123,7 +123,7 @@ def test_cosine_reward_needs_r_min_below_r_max():
 
 def test_unknown_domain_is_named_with_its_index():
     text = _problems(["data.domains=[triage_emergency, cardiology]"])
-    assert "data.domains[1]: unknown domain 'cardiology'; registered domains: drug_interaction" in text
+    assert "data.domains[1]: unknown domain 'cardiology'; registered domains: clinical_diagnosis, cross_domain" in text
 
 
 def test_missing_domain_module_is_named():

@@ -1,4 +1,4 @@
-"""actors/generator.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache),
+"""actors/generator_hf.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache),
 and tokens are drawn by the inverse CDF at per-request uniforms.
 
 Turn t+1 of an episode is turn t's context plus the sampled turn and the tool result; with reuse the
@@ -11,7 +11,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from actors.generator import GenerationRequest, HFGenerator, SamplingConfig
+from actors.generator import GenerationRequest, SamplingConfig
+from actors.generator_hf import HFGenerator
 from modeling.model import ENDOFTEXT, IM_END, load_tokenizer, tool_turn_text
 from tests.training.learner_fixtures import tiny_model_dir
 

@@ -280,9 +280,9 @@ def test_vllm_runs_a_sharded_tied_twin_and_takes_its_published_names(ray_cluster
 def test_generator_interpreter_resolution(tmp_path):
     """`generator.python_executable`: auto picks .venv-vllm for vllm (this venv has no vllm) and the
     driver's interpreter for hf; a path that is not an executable is refused, naming the field."""
-    from actors.generator_vllm import VLLM_CPU_VENV
+    from actors.generator import REPO_ROOT
 
-    assert GeneratorConfig(backend="vllm").runtime_env() == {"py_executable": str(VLLM_CPU_VENV / "bin" / "python")}
+    assert GeneratorConfig(backend="vllm").runtime_env() == {"py_executable": str(REPO_ROOT / ".venv-vllm" / "bin" / "python")}
     assert GeneratorConfig(backend="hf").runtime_env() is None
     assert GeneratorConfig(backend="vllm", python_executable=None).runtime_env() is None
     with pytest.raises(ValueError, match="generator.python_executable: .*not an executable file"):

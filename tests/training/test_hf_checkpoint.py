@@ -276,7 +276,8 @@ def _learner_cfg(backend: str, **extra):
 
 def assert_components_agree(model_dir: Path, learner, family: str):
     """Generator, learner and teacher agree before and after one learner step."""
-    from actors.generator import HFGenerator, SamplingConfig
+    from actors.generator import SamplingConfig
+    from actors.generator_hf import HFGenerator
     from actors.teacher import Teacher
     from modeling.config_models import TeacherConfig
     from modeling.model import IM_END, load_tokenizer
@@ -369,7 +370,8 @@ def test_vision_tower_trains_only_when_configured(twin_root):
 
 
 def test_receivers_accept_a_subset_and_name_unknown_weights(twin_root):
-    from actors.generator import HFGenerator, SamplingConfig
+    from actors.generator import SamplingConfig
+    from actors.generator_hf import HFGenerator
 
     generator = HFGenerator(str(twin_root / "qwen3_5"), SamplingConfig(), [0])
     state = generator.model.state_dict()

@@ -10,8 +10,8 @@ import torch
 
 from actors.agent_loop import (AgentLoop, EpisodeSpec, GoldReplayPolicy, LocalEnv, PromptTooLongError, RolloutLimits,
                                gold_turn_actions)
-from actors.generator import (GenerationRequest, GeneratorService, HFGenerator, SamplingConfig, make_generator,
-                              processed_logprobs)
+from actors.generator import GenerationRequest, GeneratorService, SamplingConfig, make_generator, processed_logprobs
+from actors.generator_hf import HFGenerator
 
 
 def run(coro):
