@@ -1,7 +1,8 @@
 """`hcgym serve --mcp` under hostile input and load: every request answered (a tool error naming what
 was wrong, a JSON-RPC error, or an HTTP status with a JSON-RPC error body), never a dropped
 connection; a burst of 1,000 connections served or refused with 503; slow clients answered 408 and
-closed; memory and the server's records bounded under floods of episodes and sessions.
+closed; memory and the server's records bounded under floods of episodes and sessions; kept-alive
+calls not held for a delayed ACK.
 
 The server is `hcgym serve --mcp` in its own process (so the burst does not share file descriptors
 with pytest and its memory is its own, from /proc/PID/status), with small limits so the bounds are
@@ -187,6 +188,26 @@ def calls(url: str, sequence: list[tuple[str, dict, dict | None]]) -> list:
 
 BIG = 10**30
 LONG = 50_000  # under the 100,000-character arguments limit, so the check named is the one met
+
+
+def test_kept_alive_calls_are_not_held_for_a_delayed_ack(server):
+    """The SDK client keeps its connection alive: without TCP_NODELAY on the server's sockets each
+    response's body waited for the client's delayed ACK (40 ms minimum on Linux) behind its headers."""
+    _, url, _ = server
+
+    async def go() -> list[float]:
+        async with Client(url) as client:
+            started = await client.call_tool("start_episode", {})
+            meta = {EPISODE_META_KEY: started.structured_content["episode_id"]}
+            seconds = []
+            for _ in range(21):
+                t0 = time.perf_counter()
+                assert not (await client.call_tool("think", {"thought": "t"}, meta=meta)).is_error
+                seconds.append(time.perf_counter() - t0)
+            await client.call_tool("finish_episode", {"reason": "token_limit"}, meta=meta)
+            return sorted(seconds)
+    seconds = asyncio.run(go())
+    assert seconds[10] < 0.025, f"median call {seconds[10] * 1e3:.1f} ms"
 
 
 @pytest.mark.parametrize(("name", "arguments", "meta", "named"), [
