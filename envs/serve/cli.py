@@ -7,8 +7,11 @@ import os
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("serve", help="serve the environment (--mcp: MCP over streamable HTTP)")
+    p = sub.add_parser("serve", help="serve the environment (--mcp: MCP over streamable HTTP; --openenv: OpenEnv)")
     p.add_argument("--mcp", action="store_true", help="serve MCP (streamable HTTP at /mcp)")
+    p.add_argument("--openenv", action="store_true",
+                   help="serve OpenEnv (WebSocket sessions at /ws, MCP tools at /mcp, the task API); runs in the "
+                        "venv `make openenv` builds (.venv-openenv) or $HCGYM_OPENENV_PYTHON")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default loopback; others need --token)")
     p.add_argument("--port", type=int, default=8765)
     p.add_argument("--domain", action="append", dest="domains", metavar="DOMAIN",
@@ -32,11 +35,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    if not args.mcp:
-        raise ValueError("choose a protocol: --mcp (MCP over streamable HTTP)")
+    if args.mcp == args.openenv:
+        raise ValueError("choose one protocol: --mcp (MCP over streamable HTTP) or --openenv (OpenEnv: WebSocket "
+                         "sessions at /ws, MCP tools at /mcp)")
     from pydantic import ValidationError
 
-    from envs.serve.mcp_server import ServeSettings, serve
+    from envs.serve.settings import ServeSettings
 
     fields = dict(host=args.host, port=args.port, split=args.split, max_episodes=args.max_episodes,
                   idle_timeout_s=args.idle_timeout, max_turns=args.max_turns, max_tool_calls=args.max_tool_calls,
@@ -52,5 +56,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     except ValidationError as exc:
         raise ValueError("; ".join(f"{'.'.join(map(str, e['loc'])) or 'settings'}: {e['msg']}"
                                    for e in exc.errors())) from None
+    if args.openenv:
+        from envs.serve.openenv_launch import launch
+
+        launch(settings, warmup=not args.no_warmup)  # this process becomes the server
+        return 0
+    from envs.serve.mcp_server import serve
+
     serve(settings, warmup=not args.no_warmup)
     return 0
