@@ -97,7 +97,8 @@ def test_the_wheel_holds_the_shipped_files_and_nothing_else(installed):
     payload = {n for n in names if ".dist-info/" not in n}
     expected = {p for p in files if p.split("/", 1)[0] in SHIPPED}
     assert payload - expected == set(), f"in the wheel but not in the tree: {sorted(payload - expected)}"
-    assert expected - payload == set(), f"in a shipped package but left out of the wheel: {sorted(expected - payload)}"
+    assert expected - payload == set(), (f"in a shipped package but left out of the wheel: {sorted(expected - payload)}; "
+                                         "add their pattern to [tool.setuptools.package-data] in pyproject.toml")
     assert not [n for n in names if n.startswith(("tests/", "build/", "configs/", "bench/")) or "__pycache__" in n]
     entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
     with zipfile.ZipFile(wheel) as zf:
