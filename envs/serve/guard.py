@@ -78,6 +78,12 @@ def guarded_protocol(request_timeout_s: float) -> type[H11Protocol]:
                 self.transport.write(late)
                 self.transport.close()
 
+        def handle_websocket_upgrade(self, event: Any) -> None:
+            # The connection becomes a WebSocket with no `cycle`: without this the deadline would close it
+            # (writing an HTTP 408 into the socket) request_timeout_s after it opened.
+            self._first_request_timer.cancel()
+            super().handle_websocket_upgrade(event)
+
         def connection_lost(self, exc: Exception | None) -> None:
             self._first_request_timer.cancel()
             super().connection_lost(exc)
