@@ -6,9 +6,10 @@ limits every `hcgym serve` server has (`envs.serve.settings.ServeSettings`).
   one more is refused with an error starting "busy:" (code CAPACITY_REACHED);
 - a session idle for `idle_timeout_s` is closed by OpenEnv's reaper (checked every
   max(timeout / 4, 5) s); its next message answers that it was closed;
-- an HTTP body over `max_request_bytes` is a 413 and a WebSocket message over it closes the socket
-  (1009); a call's arguments over `max_argument_chars` and results over `max_tool_result_chars` are
-  the environment's limits;
+- HTTP requests pass the MCP server's guard (`envs.serve.guard.HTTPGuard`: `max_requests` in flight,
+  a body over `max_request_bytes` is a 413, a slow one a 408); a WebSocket message over
+  `max_request_bytes` closes the socket (1009); a call's arguments over `max_argument_chars` and
+  results over `max_tool_result_chars` are the environment's limits;
 - loopback by default; off loopback a token is required (`Authorization: Bearer`), for HTTP and the
   WebSocket handshake alike. Without a token, a connection that reached the server over an address
   that is not loopback is refused, however the app was started (`uvicorn --host 0.0.0.0`, a Docker
@@ -28,68 +29,10 @@ import json
 import os
 from typing import Any
 
+from envs.serve.guard import H11_MAX_HEAD, HTTPGuard, guarded_protocol
 from envs.serve.settings import TOKEN_ENV, ServeSettings, access_guard
 
 BUSY = "busy: {max} sessions are open (the server's --max-episodes); close one or retry later"
-
-
-class BodyLimit:
-    """ASGI wrapper: an HTTP request body over `max_bytes` (declared or as it arrives) is answered 413
-    before the app sees it. The refused body is read and dropped first, up to `DRAIN_BYTES`: closing a
-    socket with unread data resets it, and the client would never read the answer."""
-
-    DRAIN_BYTES = 16 * 1024 * 1024
-
-    def __init__(self, app: Any, max_bytes: int) -> None:
-        self.app, self.max_bytes = app, max_bytes
-
-    async def _refuse(self, receive: Any, send: Any, status: int, message: str, read: int, more: bool) -> None:
-        while more and read <= self.DRAIN_BYTES:
-            event = await receive()
-            if event["type"] == "http.disconnect":
-                return
-            read += len(event.get("body", b""))
-            more = event.get("more_body", False)
-        await send({"type": "http.response.start", "status": status,
-                    "headers": [(b"content-type", b"application/json"), (b"connection", b"close")]})
-        await send({"type": "http.response.body", "body": json.dumps({"error": message}).encode()})
-
-    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        declared = dict(scope.get("headers") or []).get(b"content-length")
-        too_big = f"request body over the server's limit of {self.max_bytes} bytes"
-        if declared is not None:
-            if not declared.isdigit():
-                await self._refuse(receive, send, 400, f"bad Content-Length {declared[:40].decode('latin-1')!r}",
-                                   0, False)
-                return
-            if int(declared) > self.max_bytes:
-                await self._refuse(receive, send, 413, too_big, 0, True)
-                return
-        chunks, size, more = [], 0, True
-        while more:
-            message = await receive()
-            if message["type"] == "http.disconnect":
-                return
-            chunk = message.get("body", b"")
-            size += len(chunk)
-            more = message.get("more_body", False)
-            if size > self.max_bytes:
-                await self._refuse(receive, send, 413, too_big, size, more)
-                return
-            chunks.append(chunk)
-        body, replayed = b"".join(chunks), False
-
-        async def replay() -> dict[str, Any]:
-            nonlocal replayed
-            if not replayed:
-                replayed = True
-                return {"type": "http.request", "body": body, "more_body": False}
-            return await receive()
-
-        await self.app(scope, replay, send)
 
 
 def build_app(settings: ServeSettings) -> Any:
@@ -120,9 +63,9 @@ def build_app(settings: ServeSettings) -> Any:
                                                          session_timeout=settings.idle_timeout_s),
                     env_name=ENV_NAME, state_cls=HealthcareGymState, reset_observation_cls=HealthcareGymObservation)
     server.register_routes(app, mode=os.environ.get("OPENENV_MODE", "simulation"))
-    guarded = access_guard(BodyLimit(app, settings.max_request_bytes), settings.token)
+    guarded = access_guard(app, settings.token)
 
-    async def asgi(scope: Any, receive: Any, send: Any) -> None:
+    async def routed(scope: Any, receive: Any, send: Any) -> None:
         # Liveness answers without the token: container health checks and Spaces probe it bare, and
         # it tells nothing but "healthy".
         if scope["type"] == "http" and scope.get("path") == "/health" and scope.get("method") in ("GET", "HEAD"):
@@ -130,8 +73,12 @@ def build_app(settings: ServeSettings) -> Any:
         else:
             await guarded(scope, receive, send)
 
-    asgi.openenv_server = server  # type: ignore[attr-defined]
-    return asgi
+    # The MCP server's HTTP guard: requests in flight, head and body limits, body deadline, a 500 for
+    # an exception no handler caught (WebSockets pass through it).
+    outer = HTTPGuard(routed, max_requests=settings.max_requests, request_timeout_s=settings.request_timeout_s,
+                      max_body_bytes=settings.max_request_bytes, busy_wait_s=settings.busy_wait_s)
+    outer.openenv_server = server  # type: ignore[attr-defined]
+    return outer
 
 
 DOMAINS_ENV = "HCGYM_SERVE_DOMAINS"
@@ -169,10 +116,18 @@ def serve(settings: ServeSettings, warmup: bool = True) -> None:
         for domain in settings.domains:
             HealthcareGymEnv(domain=domain, split=None).warmup()
     app = build_app(settings)
-    print(f"hcgym serve: OpenEnv at http://{settings.host}:{settings.port} (WebSocket /ws, MCP /mcp) "
+    # uvicorn as the MCP server runs it: a first-request deadline and TCP_NODELAY (guarded_protocol),
+    # the connection bound; WebSocket frames up to the body limit.
+    server = uvicorn.Server(uvicorn.Config(
+        app, host=settings.host, port=settings.port, http=guarded_protocol(settings.request_timeout_s),
+        limit_concurrency=settings.max_connections, backlog=2048, timeout_keep_alive=5,
+        h11_max_incomplete_event_size=H11_MAX_HEAD, ws_max_size=settings.max_request_bytes, log_level="warning"))
+    sock = server.config.bind_socket()  # bound here so --port 0 prints the port it got
+    sock.listen(server.config.backlog)
+    host = f"[{settings.host}]" if ":" in settings.host else settings.host
+    print(f"hcgym serve: OpenEnv at http://{host}:{sock.getsockname()[1]} (WebSocket /ws, MCP /mcp) "
           f"domains={','.join(settings.domains)}", flush=True)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning",
-                ws_max_size=settings.max_request_bytes)
+    server.run(sockets=[sock])
 
 
 def main(argv: list[str] | None = None) -> int:
