@@ -7,8 +7,8 @@ Installing every dependency from the registry into the fresh venv takes minutes 
 deepspeed ...), so the wheel goes in with `--no-deps` and a .pth file then puts this checkout's .venv
 site-packages behind the venv's own (docs/integrations.md, "Installing the wheel"). That directory
 holds the checkout's editable-install hook, but a path named in a .pth file is not a site directory:
-its .pth files (the hook) are never run, so the repo itself stays off sys.path, which the first test
-proves before anything else runs."""
+its .pth files (the hook) are never run, so the repo itself stays off sys.path, which
+`test_the_venv_imports_the_installed_packages_not_the_repo` checks."""
 
 from __future__ import annotations
 
@@ -115,6 +115,7 @@ def test_the_venv_imports_the_installed_packages_not_the_repo(installed):
              "  'dist': str(dist.locate_file('')), 'direct_url': json.loads(dist.read_text('direct_url.json'))}))")
     got = json.loads(_run([env_dir / "bin" / "python", "-c", probe], env=env, cwd=work).stdout)
     assert Path(got["prefix"]) == env_dir
+    assert (env_dir / "bin" / "hcgym").read_text().splitlines()[0] == f"#!{env_dir / 'bin' / 'python'}"
     for pkg, origin in got["origins"].items():
         assert Path(origin) == purelib / pkg / "__init__.py", f"{pkg} imported from {origin}"
     assert Path(got["dist"]) == purelib
