@@ -32,16 +32,16 @@ from envs.core.task import Task
 # pool is added here (with its sex) rather than drawn unchecked.
 FIRST_NAMES: dict[str, frozenset[str]] = {
     "female": frozenset("""
-        Ada Adaeze Agnes Aisha Amara Amelia Angela Anya Ayesha Beatrice Beatriz Camila Carla Chloe Clara Dorothy
-        Edith Eleanor Elena Eva Evelyn Fatima Fatou Freya Grace Greta Hana Hannah Imani Ines Ingrid Irene Isabel
-        Jasmine Julia Keira Kira Laura Leah Leila Linda Lucia Margaret Maria Marta Martha Maya Mei Mia Mira Mona
-        Nadia Naomi Nina Nora Olga Olivia Priya Priyanka Rachel Rosa Ruth Sana Sofia Susan Tara Teresa Thandi Vera
-        Yasmin Yuki Zara""".split()),
+        Ada Adaeze Agnes Aisha Amara Amelia Angela Anya Ayesha Beatrice Beatriz Brenda Camila Carla Chloe
+        Clara Dorothy Edith Eleanor Elena Eva Evelyn Fatima Fatou Freya Gloria Grace Greta Hana Hannah Imani
+        Ines Ingrid Irene Isabel Janet Jasmine Julia Keira Kira Laura Leah Leila Linda Lorraine Lucia Margaret
+        Maria Marta Martha Maya Mei Mia Mira Mona Nadia Naomi Nina Nora Olga Olivia Priya Priyanka Rachel Rosa
+        Ruth Sana Sofia Susan Tara Teresa Thandi Vera Yasmin Yuki Zara""".split()),
     "male": frozenset("""
-        Abel Ahmed Arjun Arthur Ben Cyrus Daniel David Derek Emil Ethan Farid Felix Frank George Gordon Harold
-        Hassan Hugh Hugo Ivan James Javier Jonah Kenji Kevin Kofi Kwame Leonard Liam Lucas Luis Malik Marcus Mateo
-        Nathan Noah Oliver Omar Patrick Pavel Rafael Raymond Robert Samir Samuel Stanley Tobias Tomas Tomasz Victor
-        Walter Wes William""".split()),
+        Abel Ahmed Arjun Arthur Ben Cyrus Daniel David Dennis Derek Emil Ethan Farid Felix Frank George Gordon
+        Harold Hassan Hugh Hugo Ivan James Javier Jonah Kenji Kevin Kofi Kwame Leonard Liam Lucas Luis Malik
+        Marcus Mateo Nathan Noah Oliver Omar Oscar Patrick Pavel Peter Rafael Rashid Raymond Robert Samir
+        Samuel Stanley Tobias Tomas Tomasz Victor Walter Wes William""".split()),
 }
 
 # Drugs labelled for one sex only, with the label section that says so.
@@ -105,7 +105,7 @@ SYMPTOM_WORDS: dict[str, re.Pattern[str]] = {
     "vaginal_bleeding": re.compile(r"vaginal bleeding", re.I),
     "headache": re.compile(r"\bheadache\b", re.I),
     "visual_disturbance": re.compile(r"visual disturbance|blurred vision", re.I),
-    "seizure": re.compile(r"\bseizure|\bfit\b", re.I),
+    "seizure": re.compile(r"\bseizure", re.I),
 }
 
 # Highest GCS total with the verbal response not testable: E4 + V"T" (charted as 1, the EHR
@@ -490,7 +490,17 @@ def subjects(domain: str, tasks: Iterable[Task], db: dict[str, Any]) -> Iterable
 
 
 def check_tasks(domain: str, tasks: Iterable[Task], db: dict[str, Any] | None = None) -> list[Violation]:
-    """Every rule that applies to the domain over its tasks and their records."""
+    """Every rule that applies to the domain over its tasks and their records. A domain whose tasks carry
+    records of other domains (cross_domain's pathways) exposes `coherence_records(task) -> {domain: record}`
+    in its environment module; each record is checked against the rules of its own domain."""
+    from envs import registry
+
+    tasks = list(tasks)
     db = load_database(domain) if db is None else db
     rules = rules_for(domain)
-    return [v for subject in subjects(domain, tasks, db) for v in check_subject(subject, rules)]
+    out = [v for subject in subjects(domain, tasks, db) for v in check_subject(subject, rules)]
+    carried = getattr(registry.domain_module(domain), "coherence_records", None)
+    for task in tasks if carried else []:
+        for inner, record in carried(task).items():
+            out += check_subject(Subject(inner, task, record), rules_for(inner))
+    return out

@@ -144,3 +144,15 @@ def test_validate_fails_a_contradicting_task_naming_task_rule_and_fields(monkeyp
     (report,) = validate_domain("psychiatry", replay=False)
     assert not report.ok and report.task_id == "psy_coherence_probe"
     assert any(p.startswith("coherence rule 'sex_specific_drug' (sex, medications)") for p in report.problems), report.problems
+
+
+def test_pathway_patients_are_checked_by_their_own_domains_rules():
+    """cross_domain has no db.json: its pathways hand each touched domain a record (coherence_records)."""
+    records = registry.domain_module("cross_domain").coherence_records
+    pathway_tasks = [t for t in registry.get_tasks("cross_domain") if "pathway_id" in t.metadata]
+    assert pathway_tasks and all(records(t) for t in pathway_tasks)
+    task = pathway_tasks[0]
+    inner, record = next((d, r) for d, r in records(task).items() if r.get("name") and r.get("sex"))
+    swapped = {**record, "sex": "female" if record["sex"] == "male" else "male"}
+    assert [v.rule for v in check_subject(Subject(inner, task, swapped))] == ["name_matches_sex"]
+    assert check_subject(Subject(inner, task, record)) == []

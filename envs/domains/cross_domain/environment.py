@@ -166,6 +166,13 @@ def task_tool_definitions(task: Task) -> dict[str, Any]:
     return definitions
 
 
+def coherence_records(task: Task) -> dict[str, dict[str, Any]]:
+    """The patient record a pathway task puts into each domain it touches ({domain: record}): what
+    `envs.coherence.check_tasks` checks against those domains' rules (a pathway has no `db.json`)."""
+    pathway = load_pathways().get(str((task.metadata or {}).get("pathway_id")))
+    return dict(pathway.patients) if pathway else {}
+
+
 def get_environment() -> DomainEnvironment:
     from envs.domains.cross_domain.pathway import PathwayControlTools
 

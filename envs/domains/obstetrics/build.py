@@ -15,6 +15,7 @@ import json
 from collections import Counter
 from pathlib import Path
 
+from envs import coherence
 from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
@@ -35,6 +36,7 @@ def _fingerprint() -> str:
     for name in ("build.py", "generate.py", "ctg.py", "rules.py", "data_model.py", "formulary.json", "patients_authored.json"):
         h.update((HERE / name).read_bytes())
     h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
+    h.update(Path(coherence.__file__).read_bytes())  # the shared tables the generator draws from (symptom words)
     for p in PACKAGES:
         h.update(f"{p}=={SOURCES[p].version}".encode())
     return h.hexdigest()

@@ -16,6 +16,7 @@ import json
 from collections import Counter
 from pathlib import Path
 
+from envs import coherence
 from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
 from envs.core.domain import write_split
@@ -37,7 +38,7 @@ def _fingerprint() -> str:
     for name in ("build.py", "generate.py", "instruments.py", "data_model.py", "formulary.json", "interaction_rules.json",
                  "patients_authored.json"):
         h.update((HERE / name).read_bytes())
-    for shared in (R, split_helpers):  # the shared build helpers this build runs
+    for shared in (R, split_helpers, coherence):  # the shared build helpers and tables this build uses
         h.update(Path(shared.__file__).read_bytes())
     for p in PACKAGES:
         h.update(f"{p}=={SOURCES[p].version}".encode())
