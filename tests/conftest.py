@@ -1,6 +1,13 @@
-"""Test-wide fixtures: the ward test domain is registered for every test session."""
+"""Test-wide fixtures: the ward test domain is registered for every test session; the session's
+local Ray cluster and tiny ward policy are defined here once, so every package that uses them
+(training, evals, viewer, cluster) shares one instance. A fixture imported into another conftest or
+test module would be a second definition, built again for that module."""
 
 from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -18,3 +25,43 @@ def ward_env():
     env = HealthcareGymEnv(domain="ward", max_turns=6, render_mode="ansi")
     yield env
     env.close()
+
+
+@pytest.fixture(scope="session")
+def ray_cluster():
+    """A local 2-CPU cluster on loopback once per test session (about 5 s), shut down at the end."""
+    import ray
+
+    from envs._runtime import init_ray
+    from tests.training.conftest import SESSION_RAY_INIT
+
+    started = False
+    if not ray.is_initialized():
+        init_ray(**SESSION_RAY_INIT)
+        started = True
+    yield ray
+    if started:
+        ray.shutdown()
+
+
+@pytest.fixture(scope="session")
+def ward_policy_dir() -> str:
+    """A tiny ChatML policy whose tokenizer was trained on the ward domain's corpus (built once)."""
+    from modeling.model import build_tiny_model, train_tokenizer
+    from learner.sft import task_corpus
+
+    root = Path(tempfile.mkdtemp(prefix="t2_ward_policy_"))
+    # Gold replays grade free text; token overlap is enough here (no sentence-embedding model load).
+    previous = os.environ.get("HCGYM_EMBEDDINGS")
+    os.environ["HCGYM_EMBEDDINGS"] = "0"
+    try:
+        corpus = task_corpus(["ward"], None) * 20
+    finally:
+        if previous is None:
+            os.environ.pop("HCGYM_EMBEDDINGS")
+        else:
+            os.environ["HCGYM_EMBEDDINGS"] = previous
+    tok = train_tokenizer(corpus, 1024, root / "tok", max_stdlib_files=40)
+    out = build_tiny_model(root / "model", tok, seed=0, hidden_size=64, intermediate_size=128, num_hidden_layers=2,
+                           num_attention_heads=4, num_key_value_heads=2, head_dim=16)
+    return str(out)

@@ -23,7 +23,6 @@ from pathlib import Path
 import pytest
 
 from envs._runtime import LOOPBACK_SWITCH_ENV
-from tests.training.conftest import ward_policy_dir  # noqa: F401  (fixture reused by the job test)
 
 VENV_BIN = Path(sys.executable).parent  # not resolved: a venv's bin/python is a symlink
 RAY_CLI = VENV_BIN / "ray"

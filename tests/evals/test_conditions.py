@@ -25,7 +25,6 @@ from evals.conditions import (
 )
 from evals.policies import LocalModelPolicy, ScriptedPolicy
 from evals.types import PolicyReply
-from tests.training.conftest import ward_policy_dir  # noqa: F401  (session fixture: the tiny ward policy)
 
 pytestmark = pytest.mark.usefixtures("ward_domain")
 
@@ -141,7 +140,7 @@ def independent_letter_logprobs(model_dir: str, ticket: str, letters: list[str])
     return {letter: float(logprobs[tokenizer.convert_tokens_to_ids(letter)]) for letter in letters}
 
 
-def test_logprob_condition_matches_an_independent_forward_pass(ward_policy_dir):  # noqa: F811
+def test_logprob_condition_matches_an_independent_forward_pass(ward_policy_dir):
     task = ward_task("ward_choice")
     policy = LocalModelPolicy(ward_policy_dir)
     out = run(run_logprob(policy, LocalEnv(3), task, "ward", None, 0, ConditionSettings()))

@@ -22,7 +22,6 @@ from evals.policies import (
     run_policy,
 )
 from tests.evals.conftest import WARD
-from tests.training.conftest import ward_policy_dir  # noqa: F401  (session fixture)
 
 pytestmark = pytest.mark.usefixtures("ward_domain")
 
@@ -61,7 +60,7 @@ def make_run_dir(root: Path, policy_dir: str, *, checkpoint: bool) -> Path:
     return run
 
 
-def test_run_folder_resolves_to_its_latest_checkpoint_else_its_warm_start(tmp_path, ward_policy_dir):  # noqa: F811
+def test_run_folder_resolves_to_its_latest_checkpoint_else_its_warm_start(tmp_path, ward_policy_dir):
     run = make_run_dir(tmp_path / "a", ward_policy_dir, checkpoint=False)
     found = run_policy(run)
     assert found.model_dir == Path(ward_policy_dir) and found.source.startswith("warm start")
@@ -78,7 +77,7 @@ def test_run_folder_resolves_to_its_latest_checkpoint_else_its_warm_start(tmp_pa
         run_policy(empty)
 
 
-def test_rendered_messages_are_what_the_training_agent_loop_sees(ward_policy_dir):  # noqa: F811
+def test_rendered_messages_are_what_the_training_agent_loop_sees(ward_policy_dir):
     """The agent condition re-renders the chat; the text must equal the TITO layout of training."""
     policy = LocalModelPolicy(ward_policy_dir)
     tok = policy.tokenizer
@@ -97,7 +96,7 @@ def test_rendered_messages_are_what_the_training_agent_loop_sees(ward_policy_dir
     assert rendered == tito_text
 
 
-def test_local_model_reply_is_deterministic_and_counts_tokens(ward_policy_dir):  # noqa: F811
+def test_local_model_reply_is_deterministic_and_counts_tokens(ward_policy_dir):
     policy = LocalModelPolicy(ward_policy_dir)
     messages = [{"role": "system", "content": "You are a ward assistant."}, {"role": "user", "content": "Hello"}]
 

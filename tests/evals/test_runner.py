@@ -16,7 +16,7 @@ from evals.runner import EvalOptions, run_eval
 from evals.types import RESULTS_FILE, TRAJECTORIES_FILE, EvalItem, read_results, row_to_record
 from tests.evals.conftest import WARD
 from tests.evals.test_policies import make_run_dir
-from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT, ward_policy_dir  # noqa: F401
+from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT
 
 ITEMS = [EvalItem(benchmark="ward", domain="ward", task_id=t) for t in ("ward_choice", "ward_dose", "ward_record")]
 
@@ -116,7 +116,7 @@ def test_ray_pool_gives_the_plain_loop_results(tmp_path, ray_session):
     assert comparable(read_results(tmp_path / "plain")) == comparable(read_results(tmp_path / "ray"))
 
 
-def test_hcgym_eval_on_a_run_folder_end_to_end(tmp_path, ray_session, ward_policy_dir, capsys):  # noqa: F811
+def test_hcgym_eval_on_a_run_folder_end_to_end(tmp_path, ray_session, ward_policy_dir, capsys):
     run = make_run_dir(tmp_path, ward_policy_dir, checkpoint=True)
     out = tmp_path / "eval"
     argv = ["eval", "--policy", str(run), "--suite", "gym-train:ward", "--condition", "agent", "--output", str(out),

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from tests.evals.conftest import WARD
-from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT, ward_policy_dir  # noqa: F401
+from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -39,7 +39,7 @@ def ward_registered():
 
 
 @pytest.fixture(scope="package")
-def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F811
+def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):
     import ray
 
     from envs._runtime import init_ray
@@ -67,7 +67,7 @@ def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F8
 
 
 @pytest.fixture(scope="package")
-def gold_run(tmp_path_factory, ward_policy_dir, ward_registered):  # noqa: F811
+def gold_run(tmp_path_factory, ward_policy_dir, ward_registered):
     from actors.agent_loop import (
         AgentLoop,
         EpisodeSpec,
