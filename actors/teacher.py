@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict
 from actors.types import RolloutSample, TeacherBatch, TeacherOutput
 from modeling.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
 from modeling.config_models import TeacherConfig, teacher_update_action
-from modeling.model import IM_START, load_policy, pad_batch, token_stats
+from modeling.model import IM_START, load_policy, pad_batch, packing_unsupported, split_by_budget, token_stats
 
 GENERATION_PROMPT = f"{IM_START}assistant\n"
 
@@ -68,6 +68,11 @@ class Teacher:
         self.model, self.tokenizer = load_policy(model_dir, dtype=dtype)
         self.model.to(self.config.device).requires_grad_(False)
         self.pad_id = self.tokenizer.pad_token_id if self.tokenizer.pad_token_id is not None else 0
+        # Forwards on real tokens only where the model's layers allow it (modeling.model.packing_unsupported).
+        unsupported = packing_unsupported(self.model) if self.config.pack_sequences else None
+        self.packed = self.config.pack_sequences and unsupported is None
+        if unsupported:
+            print(f"[teacher] teacher.pack_sequences: {unsupported}", flush=True)
         # EMA in fp32: alpha = 0.995 moves bf16 weights by less than their rounding step. The shadow
         # lives on the teacher's device or in host memory (ema_shadow_device); EMA and hard copies act on
         # it where it is and copy the result into the model's weights.
@@ -139,15 +144,17 @@ class Teacher:
     # -- computing -------------------------------------------------------------------------------
     def compute(self, samples: list[RolloutSample]) -> list[TeacherOutput]:
         """Teacher log-probs for `samples` now (batched), aligned to each student's positions."""
+        contexts = [self.build_context(s) for s in samples]
+        lengths = [len(c.input_ids) for c in contexts]
         results: list[TeacherOutput] = []
-        bs = self.config.batch_size
-        for lo in range(0, len(samples), bs):
-            results.extend(self._compute_batch(samples[lo:lo + bs]))
+        for group in split_by_budget(list(range(len(samples))), lengths, self.config.batch_size,
+                                     self.config.max_tokens_per_batch):
+            results.extend(self._compute_batch([samples[i] for i in group], [contexts[i] for i in group]))
         return results
 
-    def _compute_batch(self, samples: list[RolloutSample]) -> list[TeacherOutput]:
+    def _compute_batch(self, samples: list[RolloutSample], contexts: list | None = None) -> list[TeacherOutput]:
         t0 = time.perf_counter()
-        contexts = [self.build_context(s) for s in samples]
+        contexts = contexts if contexts is not None else [self.build_context(s) for s in samples]
         ids, mask = pad_batch([c.input_ids for c in contexts], self.pad_id, side="right")
         # Only the student's trained tokens are served (below): the LM head runs on those alone, at
         # their positions in the teacher's context (shifted by the hint).
@@ -161,7 +168,8 @@ class Teacher:
         with self._weights_lock, torch.no_grad():
             version = self._version
             stats = token_stats(self.model, ids.to(dev), mask.to(dev), temperature=self.config.temperature,
-                                topk=k, chunk_size=self.config.logprob_chunk_size, positions=wanted.to(dev))
+                                topk=k, chunk_size=self.config.logprob_chunk_size, positions=wanted.to(dev),
+                                packed=self.packed)
         lp = stats.logprobs.cpu()
         tk_lp = stats.topk_logprobs.cpu() if k else None
         tk_id = stats.topk_ids.cpu() if k else None
@@ -190,10 +198,13 @@ class Teacher:
                     for p, ir, lr in zip(positions, ids_rows, lp_rows):
                         topk_ids[p] = ir
                         topk_lp[p] = lr
+            length = len(c.input_ids)
+            computed = length if self.packed else int(mask.shape[1])
             outs.append(TeacherOutput(sample_id=s.sample_id, teacher_version=version, hint=c.hint,
                                       hint_tokens=c.hint_tokens, input_length=n, logprobs=row,
                                       topk_ids=topk_ids, topk_logprobs=topk_lp,
-                                      compute_s=elapsed / len(samples)))
+                                      compute_s=elapsed / len(samples), computed_positions=computed,
+                                      padded_positions=computed - length))
         return outs
 
     def score(self, samples: list[RolloutSample]) -> list[TeacherOutput]:
@@ -257,10 +268,14 @@ class Teacher:
         return TeacherBatch(outputs=outputs, wait_s=wait)
 
     def _take_batch(self) -> list[RolloutSample]:
-        """Up to batch_size pending samples, the ones a caller is waiting for first (call under the lock)."""
+        """Up to batch_size pending samples (and max_tokens_per_batch of their tokens), the ones a caller is
+        waiting for first (call under the lock)."""
         first = [i for i in self._pending if i in self._wanted]
         rest = [i for i in self._pending if i not in self._wanted]
-        chosen = (first + rest)[: self.config.batch_size]
+        order = first + rest
+        lengths = [len(self._pending[i].input_ids) for i in order]
+        chosen = [order[k] for k in split_by_budget(list(range(len(order))), lengths, self.config.batch_size,
+                                                     self.config.max_tokens_per_batch)[0]]
         batch = [self._pending.pop(i) for i in chosen]
         self._in_flight.update(chosen)
         return batch

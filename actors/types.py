@@ -97,6 +97,8 @@ class TeacherOutput(BaseModel):
     topk_ids: list[list[int]] | None = None
     topk_logprobs: list[list[float]] | None = None
     compute_s: float = 0.0                 # teacher forward time for this sample's batch share
+    computed_positions: int = 0            # decoder positions its teacher forward computed for this sample
+    padded_positions: int = 0              # of which padding (0 when the teacher packs sequences)
 
     @model_validator(mode="after")
     def _aligned(self) -> "TeacherOutput":

@@ -106,7 +106,12 @@ class OptimConfig(ConfigModel):
     betas: tuple[Annotated[float, Field(ge=0, lt=1)], Annotated[float, Field(ge=0, lt=1)]] = (0.9, 0.999)
     eps: float = Field(default=1e-8, gt=0, le=1)
     max_grad_norm: float = Field(default=1.0, gt=0)
-    micro_batch_size: int = Field(default=1, ge=1, description="samples per forward/backward")
+    micro_batch_size: int = Field(default=1, ge=1, description="samples per forward/backward (at most, with "
+                                                                  "max_tokens_per_micro_batch)")
+    max_tokens_per_micro_batch: int | None = Field(
+        default=None, ge=1, description="split each rank's samples into micro-batches of at most this many tokens "
+                                        "(a longer sample is a micro-batch alone), up to micro_batch_size samples each; "
+                                        "null: micro_batch_size samples. The loss normalisation is the whole batch's")
     updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
 
 
@@ -133,6 +138,10 @@ class LearnerConfig(ConfigModel):
     temperature: float = Field(default=1.0, gt=0, description="the generator's sampling temperature")
     gradient_checkpointing: bool = False
     logprob_chunk_size: int = Field(default=1024, ge=1)
+    pack_sequences: bool = Field(
+        default=True, description="run the policy, reference and pi_old forwards on each micro-batch's real tokens "
+                                  "only (sequences packed into one row, position ids restarting per sequence); a model "
+                                  "with recurrent layers (Qwen3.5's linear attention) runs padded")
     loss: LossConfig = Field(default_factory=LossConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
     deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)
@@ -186,11 +195,16 @@ class TeacherConfig(ConfigModel):
     hard_copy_interval: int = Field(default=30, ge=0, description="theta_T <- theta_S every M steps; 0 = never")
     hints: HintConfig = Field(default_factory=HintConfig)
     serve_topk: int = Field(default=0, ge=0, description="also return the teacher's top-k per position (0 = off)")
-    batch_size: int = Field(default=4, ge=1, description="samples per teacher forward")
+    batch_size: int = Field(default=4, ge=1, description="samples per teacher forward (at most, with "
+                                                          "max_tokens_per_batch)")
+    max_tokens_per_batch: int | None = Field(default=None, ge=1, description="teacher forwards of at most this many "
+                                                                             "sample tokens (a longer sample alone)")
     temperature: float = Field(default=1.0, gt=0)
     dtype: Literal["float32", "bfloat16"] = "float32"
     device: Literal["cpu", "cuda"] = "cpu"
     logprob_chunk_size: int = Field(default=1024, ge=1)
+    pack_sequences: bool = Field(default=True, description="the teacher's forwards on real tokens only (as "
+                                                           "learner.pack_sequences)")
     # Where the fp32 EMA master lives when the teacher computes in bf16 (4 bytes per parameter: 38 GB
     # for a 9B model beside its 19 GB of bf16 weights): "model" = the teacher's device, "cpu" = host
     # memory, leaving the GPU to the scoring forward; `hcgym plan` says which one fits.

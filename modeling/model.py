@@ -488,6 +488,51 @@ def _decoder_and_head(model):
     return decoder, head
 
 
+#: Layer kinds whose attention is masked per token pair, so a block-diagonal mask (or a varlen
+#: kernel) keeps packed sequences apart. Recurrent layers (Qwen3.5's Gated DeltaNet
+#: "linear_attention") carry a state along the row: transformers' CPU kernels ignore sequence
+#: boundaries, so a packed row would leak one sequence's state into the next.
+PACKABLE_LAYER_TYPES = frozenset({"full_attention", "sliding_attention"})
+
+
+def packing_unsupported(model) -> str | None:
+    """Why `model` cannot run packed sequences (`token_stats(packed=True)`), or None when it can."""
+    config = model.config.get_text_config() if hasattr(model.config, "get_text_config") else model.config
+    recurrent = sorted(set(getattr(config, "layer_types", None) or ()) - PACKABLE_LAYER_TYPES)
+    if recurrent:
+        return (f"{type(model).__name__} has {'/'.join(recurrent)} layers, whose state would cross from one "
+                f"packed sequence into the next; run it padded")
+    if _decoder_and_head(model)[0] is None:
+        return f"{type(model).__name__} has no separate decoder to run on the packed tokens"
+    return None
+
+
+def _decoder_hidden(decoder, input_ids: torch.Tensor, attention_mask: torch.Tensor, position_ids: torch.Tensor,
+                    packed: bool) -> torch.Tensor:
+    """The decoder's last hidden states, [B, T, H]; `packed`: computed on the real tokens only.
+
+    Packed, the rows' real tokens run as one sequence [1, N] whose position ids restart at each
+    row and with no attention mask: transformers then masks attention block-diagonally (its
+    packed-sequence detection; a varlen kernel under flash attention), so a token attends only to
+    its own row's earlier tokens, as in the padded pass. Padding positions come back as zeros
+    (no prediction reads them).
+    """
+    if not packed:
+        return decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
+    real = attention_mask.bool()
+    flat = decoder(input_ids=input_ids[real].unsqueeze(0), attention_mask=None,
+                   position_ids=position_ids[real].unsqueeze(0), use_cache=False).last_hidden_state[0]
+    out = flat.new_zeros((*input_ids.shape, flat.shape[-1]))
+    return out.index_put(real.nonzero(as_tuple=True), flat)  # out of place: gradients reach `flat`
+
+
+def padding_fraction(attention_mask: torch.Tensor, packed: bool = False) -> tuple[int, int]:
+    """(padding positions, positions) the decoder computes on for this batch: packed, none are padding."""
+    real = int(attention_mask.sum())
+    computed = real if packed else int(attention_mask.numel())
+    return computed - real, computed
+
+
 def token_stats(
     model,
     input_ids: torch.Tensor,
@@ -500,6 +545,7 @@ def token_stats(
     chunk_size: int = 1024,
     entropy_requires_grad: bool = False,
     positions: torch.Tensor | None = None,
+    packed: bool = False,
 ) -> TokenStats:
     """One forward pass, then log-probs (and optional entropy / top-k) computed chunk by chunk.
 
@@ -524,6 +570,11 @@ def token_stats(
             sequence, so the values at these positions are the full pass's (up to float rounding).
             In a multi-turn episode most positions are prompt and tool text: skipping their
             [vocab]-wide head and softmax is most of the reference and teacher cost.
+        packed: Run the decoder on the real tokens only: the rows' tokens concatenated into one
+            sequence whose position ids restart at each row, so no layer computes on padding
+            (`packed_decoder_hidden`; `packing_unsupported` says which models cannot). The
+            statistics come back in the [B, T] layout, equal to the padded pass's within float
+            rounding.
 
     Returns:
         A `TokenStats` whose position t is the prediction of token t given tokens < t.
@@ -541,13 +592,18 @@ def token_stats(
         raise ValueError(f"positions must be [B, T]={tuple(input_ids.shape)}, got {tuple(positions.shape)}")
     position_ids = position_ids_from_mask(attention_mask)
     decoder, head = _decoder_and_head(model)
+    if packed:
+        why = packing_unsupported(model)
+        if why is not None:
+            raise ValueError(f"packed sequences: {why}")
     B, T = input_ids.shape
     if positions is not None:
         return _sliced_token_stats(model, decoder, head, input_ids, attention_mask, position_ids, positions,
                                    temperature=temperature, with_entropy=with_entropy, gather_ids=gather_ids,
-                                   topk=topk, chunk_size=chunk_size, entropy_requires_grad=entropy_requires_grad)
+                                   topk=topk, chunk_size=chunk_size, entropy_requires_grad=entropy_requires_grad,
+                                   packed=packed)
     if decoder is not None and head is not None:
-        hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
+        hidden = _decoder_hidden(decoder, input_ids, attention_mask, position_ids, packed)
         logits_of = lambda lo, hi: head(hidden[:, lo:hi])
     else:  # a model without the decoder/head split: full logits in one go
         full = model(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).logits
@@ -599,7 +655,7 @@ def _valid_predictions(attention_mask: torch.Tensor) -> torch.Tensor:
 
 def _sliced_token_stats(model, decoder, head, input_ids, attention_mask, position_ids, positions, *,
                         temperature: float, with_entropy: bool, gather_ids, topk: int, chunk_size: int,
-                        entropy_requires_grad: bool) -> TokenStats:
+                        entropy_requires_grad: bool, packed: bool = False) -> TokenStats:
     """`token_stats` at the requested positions only: the decoder's hidden states that predict them
     are gathered into one [N, hidden] block before the LM head, and the results scattered back."""
     B, T = input_ids.shape
@@ -607,7 +663,7 @@ def _sliced_token_stats(model, decoder, head, input_ids, attention_mask, positio
     selected = (positions.to(device).bool() & _valid_predictions(attention_mask).bool())
     rows, cols = selected.nonzero(as_tuple=True)      # cols >= 1: the predicted token's position
     if decoder is not None and head is not None:
-        hidden = decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
+        hidden = _decoder_hidden(decoder, input_ids, attention_mask, position_ids, packed)
         picked = hidden[rows, cols - 1]                # the hidden state that predicts token cols
         logits_of = lambda lo, hi: head(picked[lo:hi])
     else:  # a model without the decoder/head split: slice its full logits
@@ -672,6 +728,25 @@ def entropy_from_logits(logits: torch.Tensor) -> torch.Tensor:
     """Entropy over the last dimension of raw logits."""
     logp = F.log_softmax(logits.float(), dim=-1)
     return -(logp.exp() * logp).sum(-1)
+
+
+def split_by_budget(indices: list[int], lengths: list[int], max_samples: int,
+                    max_tokens: int | None = None) -> list[list[int]]:
+    """`indices` in order, cut into groups of at most `max_samples` samples and, with `max_tokens`, at
+    most that many tokens (`lengths[i]` each; a longer sample is a group alone)."""
+    groups: list[list[int]] = []
+    current: list[int] = []
+    tokens = 0
+    for i in indices:
+        full = len(current) >= max_samples or (max_tokens is not None and current and tokens + lengths[i] > max_tokens)
+        if full:
+            groups.append(current)
+            current, tokens = [], 0
+        current.append(i)
+        tokens += lengths[i]
+    if current:
+        groups.append(current)
+    return groups
 
 
 def pad_batch(sequences: list[list[int]], pad_id: int, *, side: str = "right") -> tuple[torch.Tensor, torch.Tensor]:

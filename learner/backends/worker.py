@@ -12,7 +12,6 @@ Each rank counts its optimizer steps as the policy version it holds (restored fr
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ from learner.losses import (
     group_advantages,
     turn_weights,
 )
-from modeling.model import pad_batch, token_stats
+from modeling.model import pad_batch, packing_unsupported, padding_fraction, split_by_budget, token_stats
 
 
 @dataclass
@@ -67,6 +66,16 @@ def combine_rank_metrics(results: Sequence[dict]) -> dict[str, float]:
     metrics = finalize_metrics([r["sums"] for r in results if r["sums"]])
     metrics.update(results[0]["extra"])
     metrics["learner_s"] = max(r["extra"]["learner_s"] for r in results)
+    # Each rank computed its own micro-batches (summed); the teacher's outputs cover the whole batch.
+    padded = sum(r["extra"].get("learner_padded_positions", 0.0) for r in results)
+    computed = sum(r["extra"].get("learner_computed_positions", 0.0) for r in results)
+    teacher_padded = metrics.pop("teacher_padded_positions", 0.0)
+    teacher_computed = metrics.pop("teacher_computed_positions", 0.0)
+    for key in ("learner_padded_positions", "learner_computed_positions"):
+        metrics.pop(key, None)
+    metrics["learner_padding_frac"] = padded / computed if computed else 0.0
+    if teacher_computed:
+        metrics["teacher_padding_frac"] = teacher_padded / teacher_computed
     return metrics
 
 
@@ -107,6 +116,11 @@ class RankWorker:
 
         tokenizer = load_tokenizer(model_dir)
         self.pad_id = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
+        # The policy, reference and pi_old forwards run on real tokens only where the model allows it.
+        unsupported = packing_unsupported(self.backend.policy) if self.config.pack_sequences else None
+        self.packed = self.config.pack_sequences and unsupported is None
+        if unsupported and rank == 0:
+            print(f"[learner] learner.pack_sequences: {unsupported}", flush=True)
         # The version of the weights this rank holds (batches trained so far): the same count as
         # LearnerActor's policy_version, against which the tokens' sampling versions are lagged.
         self.policy_version = 0
@@ -164,13 +178,16 @@ class RankWorker:
         prep.teacher = outputs
 
     def _micro_batches(self, prep: _Prepared) -> list[list[int]]:
-        """This rank's sample indices split into micro-batches; every rank gets the same count."""
-        mine = list(range(self.rank, len(prep.samples), self.world_size))
-        mbs = self.config.optim.micro_batch_size
-        per_rank = math.ceil(len(prep.samples) / self.world_size)
-        count = max(1, math.ceil(per_rank / mbs))
-        batches = [mine[i * mbs:(i + 1) * mbs] for i in range(count)]
-        return batches  # may contain empty lists: padding steps that keep collectives in lockstep
+        """This rank's sample indices split into micro-batches (by count, or by token budget); every
+        rank gets the same count: each works out every rank's split and pads to the longest."""
+        optim = self.config.optim
+        lengths = [len(s.input_ids) for s in prep.samples]
+        splits = [split_by_budget(list(range(rank, len(lengths), self.world_size)), lengths,
+                                  optim.micro_batch_size, optim.max_tokens_per_micro_batch)
+                  for rank in range(self.world_size)]
+        count = max(1, max(len(split) for split in splits))
+        mine = splits[self.rank]
+        return mine + [[] for _ in range(count - len(mine))]  # empty lists: padding steps that keep collectives in lockstep
 
     def _tensors(self, prep: _Prepared, idx: list[int]) -> dict[str, torch.Tensor]:
         dev = self.backend.device
@@ -253,7 +270,7 @@ class RankWorker:
                 chunk_size=self.config.logprob_chunk_size,
                 entropy_requires_grad=grad and self.config.loss.entropy_coef > 0,
                 # Every loss term reads only the trained tokens: the LM head runs on those alone.
-                positions=t["loss_mask"] > 0,
+                positions=t["loss_mask"] > 0, packed=self.packed,
             )
 
     def _reference_logprobs(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:
@@ -262,7 +279,8 @@ class RankWorker:
             return None
         with torch.no_grad(), self.backend.autocast():
             return token_stats(ref, t["input_ids"], t["attention_mask"], temperature=self.config.temperature,
-                               chunk_size=self.config.logprob_chunk_size, positions=t["loss_mask"] > 0).logprobs
+                               chunk_size=self.config.logprob_chunk_size, positions=t["loss_mask"] > 0,
+                               packed=self.packed).logprobs
 
     def _run(self, samples: list[RolloutSample], teacher, *, update: bool) -> dict[str, float]:
         t0 = time.perf_counter()
@@ -271,12 +289,15 @@ class RankWorker:
         n_updates = self.config.optim.updates_per_batch if update else 1
         cache: list[dict] = []
         ref_s = 0.0  # where the step's time goes: reference forwards vs the policy's forward/backward
+        padded = computed = 0  # decoder positions of this rank's micro-batches, and how many are padding
         for idx in batches:
             if not idx:
                 self._pad_forwards(old=n_updates > 1)
                 cache.append({})
                 continue
             t = self._tensors(prep, idx)
+            pad, total = padding_fraction(t["attention_mask"], self.packed)
+            padded, computed = padded + pad, computed + total
             t_ref = time.perf_counter()
             entry = {"t": t, "idx": idx, "ref": self._reference_logprobs(t)}
             ref_s += time.perf_counter() - t_ref
@@ -330,7 +351,14 @@ class RankWorker:
             "learner_ref_s": ref_s,
             "learner_forward_backward_s": time.perf_counter() - t_update,
             "teacher_wait_s": teacher_wait,
+            # Padding share of the decoder positions the policy (and the reference and pi_old, same
+            # layout) computed on; the teacher's, of its forwards for this batch.
+            "learner_padded_positions": float(padded),
+            "learner_computed_positions": float(computed),
         }
+        if prep.teacher and prep.teacher[0] is not None:
+            extra["teacher_padded_positions"] = float(sum(o.padded_positions for o in prep.teacher))
+            extra["teacher_computed_positions"] = float(sum(o.computed_positions for o in prep.teacher))
         if update:
             extra["grad_norm"] = float(grad_norms[-1])
             self.policy_version += 1

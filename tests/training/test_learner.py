@@ -76,6 +76,37 @@ def test_micro_batch_size_does_not_change_the_update(model_dir, batch):
             assert torch.allclose(v, other[k], atol=2e-5), k
 
 
+def test_packing_and_token_budget_micro_batches_do_not_change_the_update(model_dir, batch):
+    """The same batch through padded micro-batches of 6, packed ones of 6 and packed ones cut by a token
+    budget (so the batch is split differently) gives the same weights after two steps; packed, no
+    decoder position is padding."""
+    lengths = [len(s.input_ids) for s in batch]
+    budget = max(lengths) + min(lengths)  # every micro-batch holds one or two samples, never all six
+    results, padding = [], []
+    for pack, optim in ((False, {"micro_batch_size": 6}), (True, {"micro_batch_size": 6}),
+                        (True, {"micro_batch_size": 6, "max_tokens_per_micro_batch": budget})):
+        learner = Learner(LearnerConfig(pack_sequences=pack, optim={"lr": 1e-3, **optim}), model_dir)
+        metrics = learner.train_step(batch)
+        learner.train_step(batch)
+        results.append(learner.get_state_dict())
+        padding.append(metrics["learner_padding_frac"])
+    # padded: each of the six rows is padded to the longest (lengths differ in the fixture)
+    assert padding[0] == pytest.approx(1 - sum(lengths) / (6 * max(lengths))) and padding[0] > 0.1
+    assert padding[1] == padding[2] == 0.0
+    for other in results[1:]:
+        for k, v in results[0].items():
+            assert torch.allclose(v, other[k], atol=2e-5), k
+
+
+def test_token_budget_split_keeps_order_counts_and_a_long_sample_alone():
+    from modeling.model import split_by_budget
+
+    lengths = [10, 50, 30, 5, 5, 100]
+    assert split_by_budget(list(range(6)), lengths, 3, 60) == [[0, 1], [2, 3, 4], [5]]
+    assert split_by_budget(list(range(6)), lengths, 2) == [[0, 1], [2, 3], [4, 5]]
+    assert split_by_budget([], lengths, 2, 10) == []
+
+
 def test_multi_update_batches_use_a_fixed_old_policy_and_clip(model_dir, batch):
     learner = Learner(LearnerConfig(optim={"lr": 5e-2, "updates_per_batch": 3},
                                     loss={"grpo": {"clip_eps_low": 0.05, "clip_eps_high": 0.05}}), model_dir)

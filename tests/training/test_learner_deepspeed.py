@@ -78,9 +78,12 @@ def test_zero3_with_offload_and_gradient_checkpointing_matches_the_torch_backend
     model_dir = tiny_model_dir()
     batches = [make_batch(seed=s, groups=2, group_size=3, model_dir=model_dir) for s in range(2)]
     teacher = _teacher_outputs(model_dir, batches)
-    offloaded = _cfg("deepspeed").model_copy(update={"gradient_checkpointing": True})
+    # Both padded: this compares offload and checkpointing with the torch backend, at the float noise
+    # (amplified by Adam on near-zero gradients) its 5e-5 bound was set for; packing has its own
+    # equality tests (test_learner.py, test_hf_checkpoint.py) and the other ZeRO-3 tests here pack.
+    offloaded = _cfg("deepspeed").model_copy(update={"gradient_checkpointing": True, "pack_sequences": False})
     offloaded.deepspeed = offloaded.deepspeed.model_copy(update={"offload_param": True, "offload_optimizer": True})
-    torch_learner = Learner(_cfg("torch"), model_dir)
+    torch_learner = Learner(_cfg("torch").model_copy(update={"pack_sequences": False}), model_dir)
     ds = Learner(offloaded, model_dir)
     try:
         for step in (1, 2):

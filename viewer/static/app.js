@@ -16,6 +16,7 @@ const PANELS = [
   { title: "Reward components", prefix: "reward_component/" },
   { title: "Filtered fraction (dynamic sampling)", keys: ["filtered_groups_frac"] },
   { title: "Policy lag (versions)", keys: ["policy_lag_mean", "policy_lag_max"] },
+  { title: "Padding share of forward tokens", keys: ["learner_padding_frac", "teacher_padding_frac"] },
   { title: "Step time (s)", keys: ["time_step_s", "time_generation_s", "time_learner_s", "time_env_s",
                                    "time_weight_sync_s", "time_batch_wait_s"] },
 ];
