@@ -1,0 +1,5 @@
+"""HealthcareGym for verifiers v1 (prime-rl, `vf-eval`, the Environments Hub): see taskset.py."""
+
+from .taskset import HealthcareGymEnvironment, HealthcareGymTaskset
+
+__all__ = ["HealthcareGymTaskset", "HealthcareGymEnvironment"]
