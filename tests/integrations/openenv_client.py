@@ -37,7 +37,7 @@ async def ws_gold_episode() -> dict[str, Any]:
     """A gold episode on a typed WebSocket session."""
     async with HealthcareGymClient(base_url=URL, headers=AUTH) as env:
         first = await env.reset(task_id=SPEC["task_id"], seed=0)
-        results = [await env.call_tool(name, **args) for name, args in SPEC["calls"]]
+        results = [await env.call_tool(name, args) for name, args in SPEC["calls"]]
         state = await env.state()
         return {"task_id": first.observation.task_id, "episode_id": state.episode_id,
                 "not_done_before_last": [r.done for r in results[:-1]], "end": score(results[-1]),
@@ -68,9 +68,9 @@ async def isolation() -> dict[str, Any]:
         await writer.reset(domain="ehr_management", seed=1)
         await reader.reset(domain="ehr_management", seed=1)
         await raw.reset(domain="ehr_management", seed=1)
-        stop = await writer.call_tool("discontinue_order", patient_id="EHR-001", order_id="EHR-001-MED-1",
-                                      reason="isolation check")
-        mine = await writer.call_tool("get_medication_orders", patient_id="EHR-001")
+        stop = await writer.call_tool("discontinue_order", {"patient_id": "EHR-001", "order_id": "EHR-001-MED-1",
+                                                            "reason": "isolation check"})
+        mine = await writer.call_tool("get_medication_orders", {"patient_id": "EHR-001"})
         theirs = await reader.call_tool("get_medication_orders", patient_id="EHR-001")
         third = await raw.step({"type": "call_tool", "tool_name": "get_medication_orders",
                                 "arguments": {"patient_id": "EHR-001"}})

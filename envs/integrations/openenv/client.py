@@ -2,7 +2,7 @@
 
 One client is one server session (one environment, isolated from every other session). `reset`
 takes the task (`task_id`, or `split` and `index`, or `split` and `seed`; `domain`); `call_tool`
-runs a task tool (its `message` is the assistant text of the turn the call opens); `finish` ends
+runs a task tool (`arguments` a dict; `message` the assistant text of the turn the call opens); `finish` ends
 the episode with a text answer or a cut. The call that ends an episode has `done`, `reward` and the
 score in `observation.metadata` (`reward_components`, `score`).
 
@@ -12,7 +12,7 @@ from envs.integrations.openenv.client import HealthcareGymClient
 with HealthcareGymClient(base_url="http://127.0.0.1:8000").sync() as env:
     first = env.reset(domain="drug_interaction", split="test", seed=0)
     print(first.observation.prompt["ticket"])
-    step = env.call_tool("lookup_drug", name="warfarin", message="Let me check the drug.")
+    step = env.call_tool("lookup_drug", {"name": "warfarin"}, message="Let me check the drug.")
     print(step.observation.result)
     end = env.finish(final_text="The interaction is major.")
     print(end.reward, end.observation.metadata["reward_components"])
@@ -60,11 +60,12 @@ class HealthcareGymClient(EnvClient[Any, Any, HealthcareGymState]):
     def _parse_state(self, payload: dict[str, Any]) -> HealthcareGymState:
         return HealthcareGymState(**payload)
 
-    def call_tool(self, name: str, message: str | None = "", **arguments: Any) -> Any:
-        """Run a task tool. `message`: the assistant text of the turn the call opens ("" for none);
-        None adds the call to the open turn."""
+    def call_tool(self, tool_name: str, arguments: dict[str, Any] | None = None, *, message: str | None = "") -> Any:
+        """Run a task tool with `arguments` (a dict, so a tool argument may be called anything, `name`
+        included). `message`: the assistant text of the turn the call opens ("" for none); None adds
+        the call to the open turn."""
         metadata: dict[str, Any] = {SAME_TURN_META_KEY: True} if message is None else {MESSAGE_META_KEY: message}
-        return self.step(CallToolAction(tool_name=name, arguments=arguments, metadata=metadata))
+        return self.step(CallToolAction(tool_name=tool_name, arguments=dict(arguments or {}), metadata=metadata))
 
     def list_tools(self) -> Any:
         """The episode tools and the tools of the session's domain (before a reset: the first served domain's)."""
