@@ -295,4 +295,3 @@ def test_vf_eval_rollouts_score_as_the_env(venvs, tasks, server, tmp_path):
     reference.call_tool(THINK["name"], THINK["arguments"], message="")
     truncated = reference.finish(reason="turn_limit")
     assert truncated.truncated and cut["rewards"]["total"]["score"] == truncated.reward
-    assert answered["rewards"]["total"]["score"] > cut["rewards"]["total"]["score"]
