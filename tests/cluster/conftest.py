@@ -164,8 +164,11 @@ def start_local_head(num_cpus: int = 2, timeout_s: float = 90.0) -> LocalRayHead
     return head
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="package")
 def local_ray_head():
+    """One head for the package: the job tests submit to it, and test_loopback.py then reads the
+    sockets of every process it has (job supervisors and workers included). Starting and stopping
+    a head costs about 10 s on 2 cores."""
     head = start_local_head()
     try:
         yield head
