@@ -57,6 +57,24 @@ async def mcp_gold_episode() -> dict[str, Any]:
                 "reward": last.get("reward"), "components": (last.get("metadata") or {}).get("reward_components")}
 
 
+async def mcp_only() -> dict[str, Any]:
+    """A client that speaks only JSON-RPC to /mcp: a session, start_episode, a cut, the score."""
+    async with httpx.AsyncClient(headers=AUTH, timeout=30) as http:
+        async def rpc(method: str, params: dict[str, Any]) -> dict[str, Any]:
+            body = {"jsonrpc": "2.0", "id": 1, "method": method, "params": params}
+            return (await http.post(URL + "/mcp", json=body)).json()
+
+        session = (await rpc("openenv/session/create", {}))["result"]["session_id"]
+        call = {"session_id": session}
+        started = await rpc("tools/call", {**call, "name": "start_episode", "arguments": {"task_id": SPEC["task_id"]}})
+        finished = await rpc("tools/call", {**call, "name": "finish_episode", "arguments": {"reason": "token_limit"}})
+        result = await rpc("tools/call", {**call, "name": "episode_result", "arguments": {}})
+        closed = await rpc("openenv/session/close", {"session_id": session})
+        stateless = await rpc("tools/list", {})
+    return {"started": started["result"], "finished": finished["result"], "result": result["result"],
+            "closed": closed["result"], "stateless_tools": [t["name"] for t in stateless["result"]["tools"]]}
+
+
 async def isolation() -> dict[str, Any]:
     """A write in one session (a discontinued order over WebSocket) read from another session (over /mcp)
     and from a third (plain GenericEnvClient, raw dicts)."""
@@ -123,11 +141,15 @@ async def malformed() -> dict[str, Any]:
         out["reset_unknown_argument"] = await ask({"type": "reset", "data": {"bogus": 1}})
         out["reset_unknown_task"] = await ask({"type": "reset", "data": {"task_id": "no-such-task"}})
         out["reset_bad_index"] = await ask({"type": "reset", "data": {"split": "test", "index": 10 ** 9}})
+        out["reset_negative_seed"] = await ask({"type": "reset", "data": {"seed": -1}})
+        out["reset_long_task_id"] = await ask({"type": "reset", "data": {"task_id": "t" * 50_000}})
         out["step_before_reset"] = await ask({"type": "step", "data": {"type": "call_tool", "tool_name": "think",
                                                                          "arguments": {"thought": "x"}}})
         out["reset_ok"] = await ask({"type": "reset", "data": {"domain": "drug_interaction", "seed": 0}})
         step = {"type": "step", "data": {"type": "call_tool", "tool_name": "no_such_tool", "arguments": {}}}
         out["unknown_tool"] = await ask(step)
+        step["data"].update(tool_name="x" * 5_000)
+        out["long_tool_name"] = await ask(step)
         step["data"].update(tool_name="think", arguments={"nonsense": [1]})
         out["bad_arguments"] = await ask(step)
         step["data"].update(arguments={"thought": "x" * 200_000})
@@ -228,6 +250,7 @@ async def main() -> None:
     report: dict[str, Any] = {}
     report["ws_gold"] = await asyncio.gather(*(ws_gold_episode() for _ in range(4)))
     report["mcp_gold"] = await asyncio.gather(*(mcp_gold_episode() for _ in range(2)))
+    report["mcp_only"] = await mcp_only()
     report["isolation"] = await isolation()
     report["busy"] = await busy()
     report["malformed"] = await malformed()

@@ -133,6 +133,17 @@ def test_mcp_tool_client_lists_the_env_schemas_and_plays_to_the_same_score(run):
         assert episode["reward"] == local.reward and episode["components"] == local.reward_components
 
 
+def test_a_client_speaking_only_mcp_json_rpc_plays_an_episode(run):
+    only = run["report"]["mcp_only"]
+    assert only["started"]["result"]["task_id"] == run["task"].id and only["started"]["result"]["prompt"]["ticket"]
+    finished = only["finished"]
+    assert finished["done"] is True and finished["metadata"]["score"]["reason"] == "token_limit"
+    assert isinstance(finished["reward"], float) and finished["metadata"]["reward_components"]["total"] == finished["reward"]
+    assert only["result"]["done"] is True and only["result"]["result"]["score"] == finished["metadata"]["score"]
+    assert only["closed"]["closed"] is True
+    assert only["stateless_tools"][:3] == list(EPISODE_TOOLS) and "lookup_drug" in only["stateless_tools"]
+
+
 def test_a_write_in_one_session_is_never_seen_in_another(run):
     iso = run["report"]["isolation"]
     assert iso["stop_ok"] is True, iso["stop_result"]
@@ -158,12 +169,17 @@ def test_malformed_messages_get_clear_errors_and_the_server_keeps_serving(run):
     assert "argument 'bogus'" in bad["reset_unknown_argument"]["data"]["message"]
     assert "no-such-task" in bad["reset_unknown_task"]["data"]["message"]
     assert "argument 'index'" in bad["reset_bad_index"]["data"]["message"]
+    assert "argument 'seed'" in bad["reset_negative_seed"]["data"]["message"]
+    long_id = bad["reset_long_task_id"]["data"]["message"]
+    assert "argument 'task_id'" in long_id and len(long_id) < 500  # refused by size, not echoed
     observation = {k: bad[k]["data"]["observation"] for k in (
-        "step_before_reset", "unknown_tool", "bad_arguments", "huge_arguments", "bad_message_meta",
+        "step_before_reset", "unknown_tool", "long_tool_name", "bad_arguments", "huge_arguments", "bad_message_meta",
         "finish_bad_reason", "still_ok")}
     assert "reset first" in observation["step_before_reset"]["error"]["message"]
     assert observation["unknown_tool"]["error"]["error_type"] == "tool_not_found"
     assert "no_such_tool" in observation["unknown_tool"]["error"]["message"]
+    assert "over 128" in observation["long_tool_name"]["error"]["message"]
+    assert len(observation["long_tool_name"]["tool_name"]) < 100
     assert observation["bad_arguments"]["error"]["error_type"] == "invalid_args"
     assert "nonsense" in observation["bad_arguments"]["error"]["message"]
     assert "over the server's limit" in observation["huge_arguments"]["error"]["message"]

@@ -24,7 +24,7 @@ from pydantic import ValidationError
 
 from envs.env import HealthcareGymEnv, render_ticket
 from envs.episode import END_REASONS, EpisodeEnd, ToolResult
-from envs.integrations.openenv.models import (EPISODE_TOOLS, MESSAGE_META_KEY, SAME_TURN_META_KEY, CallToolAction,
+from envs.integrations.openenv.models import (MAX_TOOL_NAME_CHARS, MESSAGE_META_KEY, SAME_TURN_META_KEY, CallToolAction,
                                               CallToolObservation, FinishArgs, HealthcareGymObservation,
                                               HealthcareGymState, ListToolsAction, ListToolsObservation, ResetArgs,
                                               Tool, ToolError, ToolErrorType)
@@ -158,6 +158,9 @@ class HealthcareGymEnvironment(Environment[CallToolAction, CallToolObservation, 
             raise ValueError(f"step: the action must be a CallToolAction or ListToolsAction, got {type(action).__name__}")
         self._state.step_count += 1
         name, arguments = action.tool_name, action.arguments
+        if len(name) > MAX_TOOL_NAME_CHARS:
+            return self._refused(name[:40] + "...", ToolErrorType.TOOL_NOT_FOUND,
+                                 f"a tool name of {len(name)} characters, over {MAX_TOOL_NAME_CHARS}")
         size = len(json.dumps(arguments, ensure_ascii=False, default=str))
         if size > self.settings.max_argument_chars:
             return self._refused(name, ToolErrorType.INVALID_ARGS, (

@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = ["CallToolAction", "CallToolObservation", "ListToolsAction", "ListToolsObservation", "Tool", "ToolError",
            "ToolErrorType", "HealthcareGymObservation", "HealthcareGymState", "ResetArgs", "FinishArgs",
-           "EPISODE_TOOLS", "MESSAGE_META_KEY", "SAME_TURN_META_KEY", "ENV_NAME"]
+           "EPISODE_TOOLS", "MESSAGE_META_KEY", "SAME_TURN_META_KEY", "MAX_TOOL_NAME_CHARS", "ENV_NAME"]
 
 #: The name the task API routes carry (`/healthcare_gym/splits`, ...).
 ENV_NAME = "healthcare_gym"
@@ -28,6 +28,8 @@ EPISODE_TOOLS = ("start_episode", "finish_episode", "episode_result")
 MESSAGE_META_KEY = "hcgym/message"
 #: `CallToolAction.metadata` key: true adds the call to the open assistant turn instead of opening one.
 SAME_TURN_META_KEY = "hcgym/same_turn"
+#: The longest tool name a call may give (the MCP server's bound too).
+MAX_TOOL_NAME_CHARS = 128
 
 
 class HealthcareGymObservation(Observation):
@@ -64,15 +66,16 @@ class ResetArgs(BaseModel):
     `seed`. `domain` defaults to the first served domain (a task id or index names its own)."""
 
     model_config = ConfigDict(extra="forbid")
-    domain: str | None = None
-    task_id: str | None = None
-    split: str | None = None
-    index: int | None = Field(None, ge=0)
-    seed: int | None = None
-    episode_id: str | None = None
+    # Bounded so a hostile value is refused by its size, never echoed back whole.
+    domain: str | None = Field(None, max_length=64)
+    task_id: str | None = Field(None, max_length=256)
+    split: str | None = Field(None, max_length=64)
+    index: int | None = Field(None, ge=0, lt=2**63)
+    seed: int | None = Field(None, ge=0, lt=2**63)
+    episode_id: str | None = Field(None, max_length=128)
 
 
 class FinishArgs(BaseModel):
     model_config = ConfigDict(extra="forbid")
     final_text: str | None = None
-    reason: str | None = None
+    reason: str | None = Field(None, max_length=64)
