@@ -210,7 +210,8 @@ def _during(at: datetime, periods: list[tuple[datetime, datetime | None]]) -> bo
 def _name_matches_sex(s: Subject):
     rec = s.record or {}
     name, sex = rec.get("name"), s.sex
-    if not name or not sex or sex not in FIRST_NAMES or str(name).startswith("Synthea person"):
+    # a label carrying an identifier ("Synthea person 123", "MIMIC-III subject 4711") is not a person's name
+    if not name or not sex or sex not in FIRST_NAMES or any(ch.isdigit() for ch in str(name)):
         return
     first = str(name).split()[0]
     other = next((o for o in FIRST_NAMES if o != sex and first in FIRST_NAMES[o]), None)

@@ -156,3 +156,14 @@ def test_pathway_patients_are_checked_by_their_own_domains_rules():
     swapped = {**record, "sex": "female" if record["sex"] == "male" else "male"}
     assert [v.rule for v in check_subject(Subject(inner, task, swapped))] == ["name_matches_sex"]
     assert check_subject(Subject(inner, task, record)) == []
+
+
+@pytest.mark.parametrize("fmt", ["mimic3", "eicu"])
+def test_imported_icu_tasks_are_coherent(fmt):
+    """Imported MIMIC-III / eICU tasks carry their patient (named by an identifier, not a given name)."""
+    from envs.converters import ehr
+
+    convert = {"mimic3": ehr.convert_mimic3, "eicu": ehr.convert_eicu}[fmt]
+    tasks = convert(ROOT / "tests" / "fixtures" / "benchmarks" / fmt).tasks
+    assert tasks and all("ehr_patient" in t.metadata for t in tasks)
+    assert check_tasks("ehr_management", tasks, db={"clock": "2025-03-05T08:00"}) == []
