@@ -39,9 +39,13 @@ async def ws_gold_episode() -> dict[str, Any]:
         first = await env.reset(task_id=SPEC["task_id"], seed=0)
         results = [await env.call_tool(name, args) for name, args in SPEC["calls"]]
         state = await env.state()
+        after = await env.call_tool("think", {"thought": "one more"})
+        again = await env.finish(final_text="a second answer")
         return {"task_id": first.observation.task_id, "episode_id": state.episode_id,
                 "not_done_before_last": [r.done for r in results[:-1]], "end": score(results[-1]),
-                "state_reward": state.reward, "ticket": first.observation.prompt.get("ticket")}
+                "state_reward": state.reward, "ticket": first.observation.prompt.get("ticket"),
+                "after_end": [after.done, after.reward, after.observation.error.message if after.observation.error else None],
+                "finish_again": score(again)}
 
 
 async def mcp_gold_episode() -> dict[str, Any]:

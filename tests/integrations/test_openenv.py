@@ -115,6 +115,9 @@ def test_concurrent_websocket_episodes_score_as_in_process(run):
         assert s["end"] == {"done": True, "reward": local.reward, "components": local.reward_components,
                             "reason": "answer"}
         assert s["state_reward"] == local.reward
+        # nothing runs after the end, and finishing again answers the same score
+        assert s["after_end"][:2] == [True, local.reward] and "the episode is over (answer)" in s["after_end"][2]
+        assert s["finish_again"] == s["end"]
     assert set(local.reward_components) >= {"accuracy", "process", "safety", "format", "coherence", "total"}
 
 

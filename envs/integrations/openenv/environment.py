@@ -202,20 +202,21 @@ class HealthcareGymEnvironment(Environment[CallToolAction, CallToolObservation, 
                                  f"metadata {MESSAGE_META_KEY!r} must be a string, got {type(message).__name__}")
         if action.metadata.get(SAME_TURN_META_KEY) is True:
             message = None
+        if self._env.end is not None:  # nothing runs after the end; the score stays readable
+            refused = self._refused(name, ToolErrorType.EXECUTION_ERROR, (
+                f"{name}: the episode is over ({self._env.end.reason}); reset (or start_episode) for a new one"))
+            refused.metadata["score"] = score_of(self._env.end)
+            return refused
         result = self._env.call_tool(name, arguments, message=message)
         return self._tool_observation(result)
 
     def _tool_observation(self, result: ToolResult) -> CallToolObservation:
         name = result.name
         kind = _FRAMEWORK_ERRORS.get(result.error_kind or "")
-        if result.done and result.end is not None:
+        if result.done and result.end is not None:  # this call ended it (an answer or a limit)
             return self._ended(name, result.end, result=result.observation, ok=result.ok)
         if kind is not None:
-            end = self._env.end if self._env is not None else None
-            observation = self._refused(name, kind, result.error or result.observation)
-            if end is not None:  # a call after the end: the episode's score stays readable
-                observation.done, observation.reward = True, end.reward
-            return observation
+            return self._refused(name, kind, result.error or result.observation)
         return CallToolObservation(tool_name=name, result=result.observation, done=False, reward=None,
                                    metadata={**self._meta(), "ok": result.ok, "error": result.error,
                                              "error_kind": result.error_kind})
