@@ -1,6 +1,6 @@
 """The env server under load: concurrent episodes through `hcgym serve --mcp` vs the same calls in process.
 
-The server is `hcgym serve --mcp` in its own process (`--port 0`, graders warmed, `--max-episodes`
+The first server is `hcgym serve --mcp` in its own process (`--port 0`, graders warmed, `--max-episodes`
 the session count). `--sessions` clients (default 64 and, for the unloaded latency, 1), each the
 official MCP SDK client (`mcp.Client`, protocol 2026-07-28, the episode named in the request
 `_meta`), run at once in one event loop; each replays `--episodes` gold episodes (a session alone:
@@ -18,11 +18,15 @@ included: unlike steps/s it does not depend on what else the machine runs), and 
 process / server. Every episode's score over MCP must equal its score in process (exit 1 if not).
 Rounds (`--rounds`) alternate the arms.
 
-Another server (e.g. the OpenEnv one) plugs in as another entry of `SERVERS`: a function that
-starts it and returns its URL and process, and one that drives a session of episodes through it.
+The second server is `hcgym serve --openenv` (OpenEnv 0.10, `envs/integrations/openenv/`), driven by
+OpenEnv's own client (`HealthcareGymClient`, an `EnvClient`: one WebSocket session per client,
+`reset(task_id=...)` then the calls) in a process of the OpenEnv venv (`make openenv`; this script
+re-run there with `--drive-openenv`); without that venv the arm is skipped, said so. Another server
+plugs in as another entry of `SERVERS`: a function that starts it and returns its URL and process,
+and one that drives the sessions through it and returns their timings.
 
     python bench/serve.py [--domain drug_interaction] [--sessions 1 64] [--episodes 4] [--episodes-alone 32]
-                          [--rounds 2]
+                          [--rounds 2] [--servers mcp openenv]
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -187,8 +192,74 @@ def over_mcp(url: str, proc: subprocess.Popen, sessions: list[list[tuple[int, st
     return arm
 
 
+def start_openenv(domain: str, split: str, sessions: int) -> tuple[str, subprocess.Popen]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "envs.cli", "serve", "--openenv", "--port", "0", "--domain", domain,
+                             "--split", split, "--max-episodes", str(max(sessions, 1)), "--max-turns", str(MAX_TURNS)],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()
+    found = re.search(r"http://[^\s]+:\d+", line)
+    if not found:
+        proc.kill()
+        raise SystemExit(f"the OpenEnv server did not start (exit {proc.poll()}): {line!r}")
+    return found.group(0), proc
+
+
+def over_openenv(url: str, proc: subprocess.Popen, sessions: list[list[tuple[int, str, list]]]) -> Arm:
+    """The sessions on OpenEnv's own WebSocket client, in the OpenEnv venv (`drive_openenv`)."""
+    from envs.serve.openenv_launch import openenv_python
+
+    with tempfile.TemporaryDirectory() as tmp:
+        spec = Path(tmp) / "spec.json"
+        spec.write_text(json.dumps({"url": url, "sessions": sessions}))
+        server0 = cpu_s_of(proc.pid)
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        done = subprocess.run([openenv_python(), __file__, "--drive-openenv", str(spec)], cwd=ROOT, env=env,
+                              capture_output=True, text=True)
+        server_cpu = cpu_s_of(proc.pid) - server0  # the driver's imports cost the server nothing
+    if done.returncode != 0:
+        raise SystemExit(f"the OpenEnv driver failed: {done.stderr[-2000:]}")
+    report = json.loads(done.stdout.splitlines()[-1])
+    return Arm(steps=report["steps"], starts=report["starts"], episodes=report["episodes"],
+               rewards={(i, task): reward for i, task, reward in report["rewards"]}, wall_s=report["wall_s"],
+               server_cpu_s=server_cpu, client_cpu_s=report["cpu_s"])
+
+
+def drive_openenv(spec_path: str) -> int:
+    """Run in the OpenEnv venv: the sessions through `HealthcareGymClient` (OpenEnv's `EnvClient`, one
+    WebSocket session each), `reset(task_id=...)` then the calls; prints one JSON line of timings."""
+    from envs.integrations.openenv.client import HealthcareGymClient
+
+    spec = json.loads(Path(spec_path).read_text())
+    report: dict = {"steps": [], "starts": [], "rewards": [], "episodes": 0}
+
+    async def session(episodes: list) -> None:
+        async with HealthcareGymClient(base_url=spec["url"]) as env:
+            for index, task_id, calls in episodes:
+                s0 = time.perf_counter()
+                await env.reset(task_id=task_id, seed=0)
+                report["starts"].append(time.perf_counter() - s0)
+                for name, arguments in calls:
+                    s0 = time.perf_counter()
+                    result = await env.call_tool(name, arguments)
+                    report["steps"].append(time.perf_counter() - s0)
+                    if result.done:
+                        report["rewards"].append([index, task_id, result.reward])
+                        report["episodes"] += 1
+                        break
+
+    async def run_all() -> None:
+        await asyncio.gather(*(session(episodes) for episodes in spec["sessions"]))
+
+    cpu0, t0 = self_cpu_s(), time.perf_counter()
+    asyncio.run(run_all())
+    report["wall_s"], report["cpu_s"] = time.perf_counter() - t0, self_cpu_s() - cpu0
+    print(json.dumps(report))
+    return 0
+
+
 # name -> (start the server: (domain, split, sessions) -> (url, process), drive it: (url, process, sessions) -> Arm)
-SERVERS = {"mcp": (start_mcp, over_mcp)}
+SERVERS = {"mcp": (start_mcp, over_mcp), "openenv": (start_openenv, over_openenv)}
 
 
 def pct(samples: list[float], q: float) -> float:
@@ -218,6 +289,8 @@ def merge(arms: list[Arm]) -> Arm:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None and sys.argv[1:2] == ["--drive-openenv"]:
+        return drive_openenv(sys.argv[2])
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--domain", default="drug_interaction")
     parser.add_argument("--split", default="test")
@@ -225,51 +298,74 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=4, help="episodes per session")
     parser.add_argument("--episodes-alone", type=int, default=32, help="episodes of a session running alone")
     parser.add_argument("--rounds", type=int, default=2, help="rounds, the arms alternating")
-    parser.add_argument("--server", choices=sorted(SERVERS), default="mcp")
+    parser.add_argument("--servers", nargs="+", choices=sorted(SERVERS), default=["mcp", "openenv"],
+                        help="openenv needs its venv (make openenv); without it that arm is skipped, said so")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     os.environ.setdefault("HCGYM_EMBEDDINGS", "0")
 
+    servers = list(args.servers)
+    if "openenv" in servers:
+        from envs.serve.openenv_launch import openenv_python
+
+        try:
+            openenv_python()
+        except (RuntimeError, ValueError, OSError) as exc:
+            print(f"skipping the OpenEnv server: {exc}", file=sys.stderr)
+            servers.remove("openenv")
     plan = gold_plan(args.domain, args.split)
     HealthcareGymEnv(domain=args.domain, split=args.split).warmup()  # the in-process arm's graders, as the server's
-    start, drive = SERVERS[args.server]
     results: dict[str, dict] = {}
     failed = False
     for n in args.sessions:
         sessions = episodes_for(plan, n, args.episodes_alone if n == 1 else args.episodes)
-        url, proc = start(args.domain, args.split, n)
+        running = {}
         try:
-            local, served = [], []
+            for name in servers:
+                running[name] = SERVERS[name][0](args.domain, args.split, n)
+            local: list[Arm] = []
+            served: dict[str, list[Arm]] = {name: [] for name in servers}
             for _ in range(args.rounds):
                 local.append(in_process(args.domain, args.split, sessions))
-                served.append(drive(url, proc, sessions))
-            server_rss = rss_mb(proc.pid)
+                for name in servers:
+                    served[name].append(SERVERS[name][1](*running[name], sessions))
+            server_rss = {name: rss_mb(proc.pid) for name, (_, proc) in running.items()}
         finally:
-            proc.terminate()
-            proc.wait(timeout=30)
-        here, there = merge(local), merge(served)
-        differ = sorted(k for k in here.rewards if there.rewards.get(k) != here.rewards[k])
-        a, b = summary(here), summary(there)
-        results[str(n)] = {"in_process": a, args.server: b, "ratio_steps_per_s": a["steps_per_s"] / b["steps_per_s"],
-                           "scores_differ": len(differ), "episodes": len(here.rewards), "server_rss_mb": server_rss}
+            for _, proc in running.values():
+                proc.terminate()
+                proc.wait(timeout=30)
+        here = merge(local)
+        a = summary(here)
+        row: dict = {"in_process": a, "episodes": len(here.rewards)}
         print(f"{n} concurrent session(s) x {len(sessions[0])} episodes x {args.rounds} rounds "
               f"({args.domain}/{args.split}, {len(here.rewards)} distinct gold episodes, {here.episodes} run and "
               f"{a['steps']} steps per arm)")
-        for label, s in (("in process", a), (f"{args.server} server", b)):
-            print(f"  {label:<12} {s['steps_per_s']:9.1f} steps/s  p50 {s['p50_ms']:8.2f} ms  p99 {s['p99_ms']:8.2f} ms"
-                  f"  start p50 {s['start_p50_ms']:7.2f} ms  {s['episodes_per_s']:7.1f} episodes/s  "
-                  f"CPU s: server {s['server_cpu_s']:.1f}, client {s['client_cpu_s']:.1f} "
-                  f"({s['cpu_ms_per_step']:.1f} ms a step, starts included)")
-        print(f"  ratio: in process is {results[str(n)]['ratio_steps_per_s']:.1f}x the server's steps/s and "
-              f"{b['cpu_ms_per_step'] / a['cpu_ms_per_step']:.1f}x less CPU a step; scores differing: {len(differ)}; "
-              f"server RSS {server_rss:.0f} MB")
-        if differ:
-            failed = True
-            print(f"FAIL: scores differ for {differ[:5]}", file=sys.stderr)
+        print(line("in process", a))
+        for name in servers:
+            there = merge(served[name])
+            b = summary(there)
+            differ = sorted(k for k in here.rewards if there.rewards.get(k) != here.rewards[k])
+            row[name] = {**b, "ratio_steps_per_s": a["steps_per_s"] / b["steps_per_s"], "scores_differ": len(differ),
+                         "server_rss_mb": server_rss[name]}
+            print(line(f"{name} server", b))
+            print(f"    in process is {row[name]['ratio_steps_per_s']:.1f}x its steps/s and "
+                  f"{b['cpu_ms_per_step'] / a['cpu_ms_per_step']:.1f}x less CPU a step; scores differing: "
+                  f"{len(differ)}; server RSS {server_rss[name]:.0f} MB")
+            if differ:
+                failed = True
+                print(f"FAIL: {name}: scores differ for {differ[:5]}", file=sys.stderr)
+        results[str(n)] = row
     results["cpus"] = os.cpu_count()
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
     return 1 if failed else 0
+
+
+def line(label: str, s: dict[str, float]) -> str:
+    return (f"  {label:<15} {s['steps_per_s']:8.1f} steps/s  p50 {s['p50_ms']:8.2f} ms  p99 {s['p99_ms']:8.2f} ms"
+            f"  start p50 {s['start_p50_ms']:7.2f} ms  {s['episodes_per_s']:6.1f} episodes/s  CPU s: server "
+            f"{s['server_cpu_s']:.1f}, client {s['client_cpu_s']:.1f} ({s['cpu_ms_per_step']:.1f} ms a step, "
+            "starts included)")
 
 
 if __name__ == "__main__":

@@ -372,8 +372,12 @@ def _parse(model: type[BaseModel], tool: str, arguments: dict[str, Any]) -> Any:
 def build_app(settings: ServeSettings) -> tuple[Any, EpisodeStore]:
     """The ASGI app (MCP at /mcp, behind the HTTP guard) and its episode store."""
     server, store = build_server(settings)
+    # json_response: a call is answered as one JSON body, not an SSE stream. The server sends no
+    # notifications during a call, and the stream cost a task group and SSE framing on both ends of
+    # every call, more than half of a call's CPU on each side (docs/benchmarks.md, "Env server").
     app = server.streamable_http_app(host=settings.host, max_request_body_size=settings.max_request_bytes,
-                                     session_idle_timeout=settings.idle_timeout_s, max_sessions=settings.max_sessions)
+                                     session_idle_timeout=settings.idle_timeout_s, max_sessions=settings.max_sessions,
+                                     json_response=True)
     if settings.token:
         app = BearerToken(app, settings.token)
     return HTTPGuard(app, max_requests=settings.max_requests, request_timeout_s=settings.request_timeout_s,
