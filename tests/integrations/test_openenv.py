@@ -265,3 +265,23 @@ def test_without_a_token_only_loopback_connections_are_served():
     assert asyncio.run(hit(("127.0.0.1", 8000))) == (200, b"ok")
     status, body = asyncio.run(hit(("10.1.2.3", 8000)))
     assert status == 403 and b"HCGYM_SERVE_TOKEN" in body
+
+
+def test_the_servers_requirements_are_the_declared_bounds():
+    """make openenv and the image install server/requirements.txt: each line is the bound pyproject.toml
+    declares for that package (a dependency, or the openenv extra), so the venvs cannot drift apart."""
+    import re
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    declared = {}
+    for requirement in [*project["dependencies"], *project["optional-dependencies"]["openenv"]]:
+        name = re.match(r"[A-Za-z0-9_.\-]+", requirement).group(0).lower()
+        declared[name] = requirement.replace(" ", "")
+    lines = [line.split("#")[0].strip() for line in
+             (ROOT / "envs/integrations/openenv/server/requirements.txt").read_text().splitlines()]
+    wanted = [line.replace(" ", "") for line in lines if line]
+    assert wanted and "openenv==0.10.0" in wanted
+    for requirement in wanted:
+        name = re.match(r"[A-Za-z0-9_.\-]+", requirement).group(0).lower()
+        assert declared.get(name) == requirement, (requirement, declared.get(name))
