@@ -196,6 +196,13 @@ try:
     list(vf.load_taskset(type(config.taskset)(id="healthcare-gym", domain="nope")))
 except ValueError as exc:
     out["bad_domain"] = str(exc)
+from healthcare_gym.episode import EnvLimits, RecordedCall, replay_episode
+call = RecordedCall(name="think", arguments={"thought": "check"}, observation="not what the env returns")
+try:  # a recorded result the env does not reproduce fails scoring, naming the call
+    replay_episode(domain=sys.argv[1], split=sys.argv[2], task_id=tasks[0].data.id, calls=[call], limits=EnvLimits(),
+                   final_text=None, cut="turn_limit")
+except ValueError as exc:
+    out["replay_mismatch"] = str(exc)
 print(json.dumps(out))
 """
 
@@ -214,6 +221,7 @@ def test_verifiers_loader_loads_the_exported_tasks(venvs):
         assert got["system_prompt"] == row.prompt[0]["content"] and got["prompt"] == row.prompt[1]["content"]
         assert got["answer"] == row.answer
     assert "unknown domain" in loaded["bad_domain"] and "'nope'" in loaded["bad_domain"]
+    assert "replaying call 0 (think)" in loaded["replay_mismatch"] and rows[0].task_id in loaded["replay_mismatch"]
 
 
 def _vf_eval(server: str, out: Path, name: str) -> subprocess.CompletedProcess:

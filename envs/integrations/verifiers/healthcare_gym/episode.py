@@ -4,10 +4,10 @@ The env of a rollout lives in its tool server (a process of its own, one per rol
 tears down before it scores the rollout. The server therefore records every call it ran in the
 rollout's `EpisodeState` (verifiers syncs that state back to the rollout after each call), and scoring
 rebuilds the episode from it: a fresh `HealthcareGymEnv` replays the same calls through `call_tool`
-(each replayed result must equal what the server returned, or scoring fails naming the call;
-verifiers records that as the rollout's task error) and then
-ends it through `finish`: a text reply is graded as the answer; a rollout verifiers cut (its turn or
-token limit) gets the env's truncation score. An episode the submit tool ended keeps that end.
+(each replayed result must equal what the server returned, or scoring fails naming the call, which
+verifiers records as the rollout's task error) and then ends it through `finish`: a text reply is
+graded as the answer; a rollout verifiers cut (its turn or token limit) gets the env's truncation
+score. An episode the submit tool ended keeps that end.
 """
 
 from __future__ import annotations

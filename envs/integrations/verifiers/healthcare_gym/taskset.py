@@ -70,8 +70,8 @@ class HealthcareGymTask(vf.Task[HealthcareGymData, EpisodeState, HealthcareGymTa
         state: EpisodeState = trace.state
         if state.task_id not in (None, self.data.id):
             raise ValueError(f"the tool server ran task {state.task_id!r}, the rollout is task {self.data.id!r}")
-        # Synchronous on purpose: the graders load lazily into module caches on the first score of
-        # a process, which is not safe to race from threads.
+        # In the event loop, not a worker thread: the env's scorers are not written to be thread-safe
+        # (their graders load lazily into module caches on a process's first score).
         end = replay_episode(domain=self.data.domain, split=self.data.split, task_id=self.data.id,
                              calls=state.calls, limits=self.config.tools.limits,
                              final_text=trace.last_reply, cut=cut_reason(trace))
