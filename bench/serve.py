@@ -251,9 +251,17 @@ def drive_openenv(spec_path: str) -> int:
     async def run_all() -> None:
         await asyncio.gather(*(session(episodes) for episodes in spec["sessions"]))
 
-    cpu0, t0 = self_cpu_s(), time.perf_counter()
-    asyncio.run(run_all())
-    report["wall_s"], report["cpu_s"] = time.perf_counter() - t0, self_cpu_s() - cpu0
+    async def timed() -> tuple[float, float]:
+        # one untimed episode first: this process's first calls pay one-off imports and model builds
+        await session(spec["sessions"][0][:1])
+        for key in ("steps", "starts", "rewards"):
+            report[key].clear()
+        report["episodes"] = 0
+        cpu0, t0 = self_cpu_s(), time.perf_counter()
+        await run_all()
+        return time.perf_counter() - t0, self_cpu_s() - cpu0
+
+    report["wall_s"], report["cpu_s"] = asyncio.run(timed())
     print(json.dumps(report))
     return 0
 
@@ -323,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             for name in servers:
                 running[name] = SERVERS[name][0](args.domain, args.split, n)
+            for name in servers:  # untimed: the first calls of a client and a server pay one-off setup
+                SERVERS[name][1](*running[name], [sessions[0][:1]])
             local: list[Arm] = []
             served: dict[str, list[Arm]] = {name: [] for name in servers}
             for _ in range(args.rounds):
