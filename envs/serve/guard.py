@@ -8,11 +8,11 @@ Two layers, both needed because neither sees everything:
   a half-sent request holds its connection (and a file descriptor) for ever. It also sets
   TCP_NODELAY, which uvicorn's sockets lack (each kept-alive request waited ~40 ms for a delayed ACK).
 * `HTTPGuard` (ASGI middleware): a request target over 8 KiB is a 414, headers over 16 KiB a 431;
-  at most `max_requests` requests in flight (one more waits up to 2 s for a slot, then is answered
-  503 busy with Retry-After, its body not kept); a request body must arrive within `request_timeout_s` of its headers (else 408) and stay
-  within `max_body_bytes` (else 413, declared or chunked); a client that disconnects mid-request ends
-  quietly; an exception no handler caught is a 500 with a short message (logged) instead of a dropped
-  connection. A refused request's body is read and dropped (bounded) before the answer, because
+  at most `max_requests` requests in flight (one more waits up to `busy_wait_s` for a slot, then is
+  answered 503 busy with Retry-After, its body not kept); a request body must arrive within
+  `request_timeout_s` of its slot (else 408) and stay within `max_body_bytes` (else 413, declared or
+  chunked); a client that disconnects mid-request ends quietly; an exception no handler caught is a
+  500 with a short message (logged) instead of a dropped connection. A refused request's body is read and dropped (bounded) before the answer, because
   closing a socket with unread data resets it and the client would never read the refusal.
 
 Every refusal is a JSON-RPC error object (id null), so an MCP client reads it as one.
@@ -146,7 +146,8 @@ class HTTPGuard:
                     f"busy: {self.max_requests} requests are being served (the server's --max-requests) and "
                     f"none finished within {self.busy_wait_s:g} s; retry shortly")), [(b"retry-after", b"1")])
                 return
-        deadline = anyio.current_time() + self.request_timeout_s  # from here: the wait for a slot is not the client's
+        # the body's deadline runs from here: the wait for a slot is not the client's doing
+        deadline = anyio.current_time() + self.request_timeout_s
         try:
             # The whole body is read here, before the app runs (the SDK buffers it anyway), so a slow or
             # oversized body is answered by this guard and never becomes an exception inside the app.
