@@ -89,7 +89,7 @@ def _submit_gold(task) -> dict:
 
 
 @pytest.fixture(scope="module")
-def model_dir(venvs, tasks, tmp_path_factory):
+def model_dir(venvs, loader_run, tasks, tmp_path_factory):
     """A tiny Qwen3 (head_dim 64: vLLM's CPU attention refuses 16) taught its first reply to each
     task: `submit_answer` with the gold answer on the first, `think` on the second.
 
@@ -207,23 +207,6 @@ print(json.dumps(out))
 """
 
 
-def test_verifiers_loader_loads_the_exported_tasks(venvs):
-    done = subprocess.run([str(VF_VENV / "bin" / "python"), "-c", LOADER, DOMAIN, SPLIT], capture_output=True,
-                          text=True, env=_vf_environ(), cwd=str(REPO), timeout=300)
-    assert done.returncode == 0, done.stderr[-4000:]
-    loaded = json.loads(done.stdout.strip().splitlines()[-1])
-    assert (loaded["env"], loaded["taskset"]) == ("HealthcareGymEnvironment", "HealthcareGymTaskset")
-    assert (loaded["harness"], loaded["runtime"], loaded["max_turns"]) == ("null", "subprocess", 10)
-    rows = task_rows(DOMAIN, SPLIT)
-    assert [t["id"] for t in loaded["tasks"]] == [r.task_id for r in rows]
-    for got, row in zip(loaded["tasks"], rows):
-        assert got["key"] == f"{DOMAIN}/{row.task_id}" and (got["domain"], got["split"]) == (DOMAIN, SPLIT)
-        assert got["system_prompt"] == row.prompt[0]["content"] and got["prompt"] == row.prompt[1]["content"]
-        assert got["answer"] == row.answer
-    assert "unknown domain" in loaded["bad_domain"] and "'nope'" in loaded["bad_domain"]
-    assert "replaying call 0 (think)" in loaded["replay_mismatch"] and rows[0].task_id in loaded["replay_mismatch"]
-
-
 def _vf_eval(server: str, out: Path, name: str) -> subprocess.CompletedProcess:
     command = [str(VF_VENV / "bin" / "vf-eval"), "healthcare-gym", "--env.taskset.domain", DOMAIN,
                "--env.taskset.split", SPLIT, "-n", "2", "--env.agent.max-turns", "1",
@@ -303,3 +286,31 @@ def test_vf_eval_rollouts_score_as_the_env(venvs, tasks, server, tmp_path):
     reference.call_tool(THINK["name"], THINK["arguments"], message="")
     truncated = reference.finish(reason="turn_limit")
     assert truncated.truncated and cut["rewards"]["total"]["score"] == truncated.reward
+
+
+@pytest.fixture(scope="module")
+def loader_run(venvs):
+    """verifiers' loader (`LOADER`) in .venv-verifiers, started as soon as the module needs anything:
+    the model fixture asks for it too, so it runs beside the model's training."""
+    process = subprocess.Popen([str(VF_VENV / "bin" / "python"), "-c", LOADER, DOMAIN, SPLIT], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=_vf_environ(), cwd=str(REPO))
+    yield process
+    if process.poll() is None:
+        process.kill()
+        process.communicate()
+
+
+def test_verifiers_loader_loads_the_exported_tasks(loader_run):
+    stdout, stderr = loader_run.communicate(timeout=300)
+    assert loader_run.returncode == 0, stderr[-4000:]
+    loaded = json.loads(stdout.strip().splitlines()[-1])
+    assert (loaded["env"], loaded["taskset"]) == ("HealthcareGymEnvironment", "HealthcareGymTaskset")
+    assert (loaded["harness"], loaded["runtime"], loaded["max_turns"]) == ("null", "subprocess", 10)
+    rows = task_rows(DOMAIN, SPLIT)
+    assert [t["id"] for t in loaded["tasks"]] == [r.task_id for r in rows]
+    for got, row in zip(loaded["tasks"], rows):
+        assert got["key"] == f"{DOMAIN}/{row.task_id}" and (got["domain"], got["split"]) == (DOMAIN, SPLIT)
+        assert got["system_prompt"] == row.prompt[0]["content"] and got["prompt"] == row.prompt[1]["content"]
+        assert got["answer"] == row.answer
+    assert "unknown domain" in loaded["bad_domain"] and "'nope'" in loaded["bad_domain"]
+    assert "replaying call 0 (think)" in loaded["replay_mismatch"] and rows[0].task_id in loaded["replay_mismatch"]
