@@ -412,6 +412,8 @@ class EnvPool:
         domain_modules: Extra domains to register in every actor (name -> module path).
         max_restarts: Ray restarts per actor (-1 = unlimited).
         num_cpus: CPU reservation per actor (fractional is fine: tools are light).
+        resources: Custom Ray resources per actor (e.g. {"env_node": 1}), to place the actors on
+            the nodes that have them; a restarted actor goes to any node that has them too.
         kb_service: Name of a running knowledge-base service (kb_service.service) the actors' knowledge
             tools share, instead of each opening the KB.
         env_vars: Environment variables of the actor processes.
@@ -432,7 +434,8 @@ class EnvPool:
                  env_kwargs: dict[str, Any] | None = None, domain_modules: dict[str, str] | None = None,
                  max_restarts: int = -1, num_cpus: float = 0.0, kb_service: str | None = None,
                  env_vars: dict[str, str] | None = None, batch_calls: bool = True, max_batch: int = 64,
-                 max_batches_in_flight: int = 2, stream_after_s: float | None = None) -> None:
+                 max_batches_in_flight: int = 2, stream_after_s: float | None = None,
+                 resources: dict[str, float] | None = None) -> None:
         import ray
 
         if num_actors < 1 or slots_per_actor < 1:
@@ -449,6 +452,8 @@ class EnvPool:
         self.stream_after_s = stream_after_s
         self._batchers: dict[int, _ActorBatcher] = {}
         options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": num_cpus}
+        if resources:
+            options["resources"] = dict(resources)
         variables = dict(env_vars or {})
         if kb_service:
             variables["HCGYM_KB_SERVICE"] = kb_service
@@ -617,6 +622,7 @@ async def run_episode(spec: EpisodeSpec, loop: AgentLoop, pool: EnvPool, generat
 
     Raises:
         EnvActorLost: after `max_attempts` lost attempts (recorded as failed in the ledger).
+        Exception: any other error of the episode (recorded as failed in the ledger).
     """
     last: Exception | None = None
     for _ in range(max_attempts):
@@ -629,8 +635,14 @@ async def run_episode(spec: EpisodeSpec, loop: AgentLoop, pool: EnvPool, generat
             await pool.give_back(env, lost=True)
             last = exc
             continue
-        except BaseException:
-            await pool.give_back(env)  # not the actor's fault: free the slot and its env
+        except Exception as exc:
+            # Not the env actor's fault (e.g. the generator stayed unreachable): the episode ends
+            # here, so the ledger counts it failed rather than in flight for ever.
+            ledger.fail(spec.sample_id, f"{type(exc).__name__}: {exc}")
+            await pool.give_back(env)  # free the slot and its env
+            raise
+        except BaseException:  # cancelled (the run is stopping): neither completed nor failed
+            await pool.give_back(env)
             raise
         await pool.give_back(env)
         sample.metadata["env_actor"] = env.actor_index

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from envs.core.files import replace_atomic, write_text_atomic
+from envs.core.files import DiskFullError, read_parquet, replace_atomic, write_text_atomic
 from evals.conditions import CONDITION_RUNNERS, ConditionSettings, EpisodeOutcome, is_multiple_choice
 from evals.types import (
     CONDITIONS,
@@ -105,14 +105,13 @@ class ResultsStore:
         self.keys = {row.key() for row in self.rows}
         self.flush_every_s = flush_every_s
         self._dirty = bool(retried) or self.dropped_trajectories > 0
+        self.saved_rows = len(self.rows)  # rows results.parquet holds now
         self._flushes = 0
         self._last_flush = time.monotonic()
 
     def _read_trajectories(self) -> list[dict[str, Any]]:
-        import pyarrow.parquet as pq
-
         path = self.dir / TRAJECTORIES_FILE
-        return pq.read_table(path).to_pylist() if path.exists() else []
+        return read_parquet(path).to_pylist() if path.exists() else []  # a damaged file: named
 
     def add(self, row: ResultRow, trajectory: dict[str, Any]) -> None:
         if row.key() in self.keys:
@@ -137,6 +136,7 @@ class ResultsStore:
             table = pa.Table.from_pylist(records, schema=schema)
             replace_atomic(self.dir / name, lambda tmp, table=table: pq.write_table(table, tmp))
             fault_point(point, self._flushes)
+        self.saved_rows = len(self.rows)
         self._dirty = False
         self._last_flush = time.monotonic()
 
@@ -313,11 +313,18 @@ async def run_episodes(policy, items: list[EvalItem], output_dir: str | os.PathL
     try:
         await asyncio.gather(*[one(item, seed) for item, seed in todo])
     finally:
-        store.flush()  # what finished is kept, even on an interruption or an error
         if bar is not None:
-            bar.close()
-        if source is not None:
-            source.close()
+            bar.close()  # first: an error below is printed on its own line, not after the bar
+        try:
+            store.flush()  # what finished is kept, even on an interruption or an error
+        except DiskFullError as exc:
+            raise exc.with_hint(
+                f"{output_dir} keeps the {store.saved_rows} results written before the disk filled (this run "
+                f"finished {len(store.rows) - store.saved_rows} more that are not saved); free space and run the "
+                f"same command again: it skips the saved results and runs the rest") from None
+        finally:
+            if source is not None:
+                source.close()
     elapsed = time.perf_counter() - started
     return {"episodes_run": len(todo), "episodes_skipped_done": total - len(todo),
             "skipped_not_multiple_choice": skipped_not_mc, "seconds": elapsed,

@@ -159,11 +159,11 @@ def read_results(path) -> list[ResultRow]:
     """The rows of a results folder (or of a `results.parquet` path); [] when there are none yet.
 
     Raises:
-        ValueError: naming the file and the row when a record does not validate.
+        ValueError: naming the file (and the row) when the file is damaged or a record does not validate.
     """
     from pathlib import Path
 
-    import pyarrow.parquet as pq
+    from envs.core.files import read_parquet
 
     path = Path(path)
     if path.is_dir():
@@ -171,7 +171,7 @@ def read_results(path) -> list[ResultRow]:
     if not path.exists():
         return []
     rows = []
-    for index, record in enumerate(pq.read_table(path).to_pylist()):
+    for index, record in enumerate(read_parquet(path).to_pylist()):  # a damaged file: named
         try:
             rows.append(record_to_row(record))
         except Exception as exc:

@@ -34,6 +34,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
+from envs.core.files import as_disk_full
 from kb_service.kb import FORMAT, FORMAT_VERSION
 
 REFERENCE_TABLE = "passages_fts"
@@ -253,7 +254,42 @@ def build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] 
              article_iter: Callable[[], Iterable[dict]] | None = None, resume: bool = True,
              progress: bool = True, batch_size: int = 2000, manifest_extra: dict | None = None,
              echo: Callable[[str], None] = print) -> dict:
-    """Build (or resume building) a knowledge base at `out`; returns the summary dict."""
+    """Build (or resume building) a knowledge base at `out`; returns the summary dict.
+
+    The build runs in `OUT.building/` and replaces `out` only when complete.
+
+    Raises:
+        DiskFullError: naming the staging folder when the disk fills; the passages committed so far
+            stay there and a rerun (resume=True) continues after them.
+    """
+    staging = Path(out).parent / (Path(out).name + ".building")
+    try:
+        return _build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=resume,
+                         progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo)
+    except Exception as exc:
+        full = as_disk_full(exc, staging)
+        if full is None or (full is exc and full.hint):
+            raise
+        raise full.with_hint(f"The knowledge base at {out} is unchanged; {staging} keeps the "
+                             f"{_committed_passages(staging)} passages committed so far. Free space and run the "
+                             f"build again (without forcing a fresh start): it resumes after them") from exc
+
+
+def _committed_passages(staging: Path) -> int:
+    """Passages the staging store holds (its committed transactions); 0 when it cannot be read."""
+    try:
+        conn = sqlite3.connect(f"file:{staging / 'passages.sqlite'}?mode=ro", uri=True)
+        try:
+            return int(conn.execute("SELECT count(*) FROM passages").fetchone()[0])
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return 0
+
+
+def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] | None, article_iter,
+              resume: bool, progress: bool, batch_size: int, manifest_extra: dict | None,
+              echo: Callable[[str], None]) -> dict:
     out = Path(out)
     staging = out.parent / (out.name + ".building")
     t0 = time.perf_counter()

@@ -345,6 +345,7 @@ class RayConfig(ConfigModel):
     learner_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per learner rank (the learner actor at world size 1)")
     generator_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per generator")
     teacher_resources: dict[str, float] = Field(default_factory=dict, description="custom resources of the teacher")
+    env_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per env actor")
     learner_placement_strategy: Literal["PACK", "SPREAD", "STRICT_PACK", "STRICT_SPREAD"] = Field(
         default="PACK", description="placement group of the DeepSpeed ranks (one bundle per rank)")
     placement_timeout_s: float = Field(default=60.0, gt=0, description="wait for the ranks' placement group")

@@ -6,7 +6,9 @@ makes the driver SIGKILL itself right after it appended step 2's row to metrics.
 test hits an exact point of the sequence instead of relying on the luck of timing. The value is
 `POINT` (the first time the point is reached) or `POINT:STEP` (only at that learner step; for an
 evaluation, the Nth flush). Unset (the default), `fault_point` only records the point in `REACHED`,
-so a test can check the order in which a run passed them.
+so a test can check the order in which a run passed them. A test running the driver in its own
+process can also make something happen at a point (`at`: e.g. fill the disk right after step 1's
+checkpoint became `latest`).
 
 The driver's points at each learner step, in order (learner/train.py):
 
@@ -28,9 +30,21 @@ from __future__ import annotations
 
 import os
 import signal
+from typing import Callable
 
 FAULT_ENV = "HCGYM_FAULT_AT"
 REACHED: list[str] = []  # "point:step" in the order this process reached them
+_ACTIONS: dict[str, Callable[[], None]] = {}
+
+
+def at(where: str, action: Callable[[], None]) -> None:
+    """Run `action()` once, in the thread that reaches `where` (`POINT` or `POINT:STEP`), right there."""
+    _ACTIONS[where] = action
+
+
+def clear_actions() -> None:
+    """Forget the actions `at` registered that no point has run yet."""
+    _ACTIONS.clear()
 
 
 def fault_point(name: str, step: int | None = None) -> None:
@@ -39,6 +53,10 @@ def fault_point(name: str, step: int | None = None) -> None:
     REACHED.append(where)
     if len(REACHED) > 10_000:  # a long run or evaluation passes these points without end
         del REACHED[:5_000]
+    if _ACTIONS:
+        action = _ACTIONS.pop(where, None) or _ACTIONS.pop(name, None)
+        if action is not None:
+            action()
     wanted = os.environ.get(FAULT_ENV)
     if wanted and wanted in (name, where):
         os.kill(os.getpid(), signal.SIGKILL)

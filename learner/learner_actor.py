@@ -166,10 +166,12 @@ class Learner:
         return ray.get(self._remote[0].address.remote())
 
     def placement_report(self) -> dict[str, list]:
-        """Where the ranks run: `rank_nodes` (Ray node id per rank, as each rank reported it) and
-        `bundle_nodes` (the node of each placement-group bundle; empty without a group)."""
+        """Where the ranks run: `rank_nodes` (Ray node id per rank, as each rank reported it),
+        `bundle_nodes` (the node of each placement-group bundle; empty without a group) and
+        `learner_node` (this actor's node: with several ranks it only fans calls out, but losing it
+        stops the run too)."""
         bundles = bundle_nodes(self._placement_group) if self._placement_group is not None else []
-        return {"rank_nodes": list(self.rank_nodes), "bundle_nodes": bundles}
+        return {"rank_nodes": list(self.rank_nodes), "bundle_nodes": bundles, "learner_node": current_node_id()}
 
     def _all(self, method: str, *args) -> list[Any]:
         """Call `method` on every rank at once (collectives need all ranks), return their results."""

@@ -16,13 +16,12 @@ from __future__ import annotations
 import json
 import math
 import numbers
-import os
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from actors.types import RolloutSample, TeacherOutput
-from envs.core.files import replace_atomic, write_text_atomic
+from envs.core.files import append_durable, read_parquet, replace_atomic, write_text_atomic
 
 VALIDATION_FILE = "validation.jsonl"  # one line per validation pass (learner/rollouts.py)
 
@@ -150,12 +149,11 @@ class MetricsSink:
 
     def write(self, record: dict[str, Any]) -> None:
         step = int(record["step"])
-        with self.path.open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(json_record(record), sort_keys=False, allow_nan=False) + "\n")
-            # On disk before the step's checkpoint becomes `latest` (learner/train.py): a node that
-            # loses power after that must not come back with the row missing.
-            handle.flush()
-            os.fsync(handle.fileno())
+        # fsynced: on disk before the step's checkpoint becomes `latest` (learner/train.py), so a node
+        # that loses power after that does not come back with the row missing. A full disk raises
+        # DiskFullError naming the file and leaves no half row behind.
+        line = json.dumps(json_record(record), sort_keys=False, allow_nan=False) + "\n"
+        append_durable(self.path, line.encode("utf-8"))
         for key, value in record.items():
             if key == "step" or not isinstance(value, (int, float)) or isinstance(value, bool):
                 continue
@@ -325,8 +323,9 @@ def write_samples(samples: Sequence[RolloutSample], path: str | Path, *, step: i
     ])
     table = pa.table({f.name: pa.array(rows[f.name], type=f.type) for f in schema}, schema=schema)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(table, str(path))
+    # Through a temporary file: a full disk or a crash mid-write leaves no half file under the
+    # step's name (DiskFullError names the file).
+    replace_atomic(path, lambda tmp: pq.write_table(table, str(tmp)))
     return path
 
 
@@ -336,14 +335,16 @@ def read_samples(path: str | Path) -> tuple[list[RolloutSample], dict[str, dict[
     Returns:
         (samples, extras) where extras[sample_id] has `step`, `accepted` and, for TT-OPD runs,
         `teacher_logprobs`, `teacher_version`, `teacher_hint`.
-    """
-    import pyarrow.parquet as pq
 
+    Raises:
+        FileNotFoundError: the file is missing.
+        ValueError: naming the file, when it is damaged (not readable as Parquet).
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such trajectory file")
     samples, extras = [], {}
-    for row in pq.read_table(str(path)).to_pylist():
+    for row in read_parquet(path).to_pylist():
         extra = {k: row.pop(k) for k in ("step", "accepted", "teacher_logprobs", "teacher_version", "teacher_hint")}
         for name in INDEX_COLUMNS:
             row.pop(name, None)

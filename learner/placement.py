@@ -117,8 +117,8 @@ def run_demands(cfg: RunConfig) -> list[ActorDemand]:
     demands = [
         ActorDemand(name="generator", count=g.num_generators,
                     resources=actor_resources(g.num_cpus, g.num_gpus, rc.generator_resources)),
-        # Env actors are scheduled with num_cpus=0 (tools are light); listed so the message is complete.
-        ActorDemand(name="env actor", count=cfg.rollout.num_env_actors, resources={}),
+        # Env actors are scheduled with num_cpus=0 (tools are light), on nodes with `ray.env_resources`.
+        ActorDemand(name="env actor", count=cfg.rollout.num_env_actors, resources=dict(rc.env_resources)),
     ]
     if ws == 1:
         demands.append(ActorDemand(name="learner", count=1, resources=actor_resources(

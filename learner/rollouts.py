@@ -20,6 +20,7 @@ from actors.generator import GeneratorClient
 from actors.types import RolloutSample
 from learner.batching import Group, mixed_outcomes, score_sample
 from learner.config import RunConfig
+from envs.core.files import append_durable
 from learner.metrics import json_record, rollout_metrics, write_samples
 from learner.tasks import TaskRef, episode_specs
 
@@ -107,8 +108,8 @@ class Rollouts:
         metrics = rollout_metrics(samples, cfg.rollout.max_response_tokens, prefix="val_")
         metrics["val_env_reward_mean"] = metrics.pop("val_env_reward_mean", 0.0)
         metrics["val_time_s"] = time.perf_counter() - t0
-        with (self.run_dir / "validation.jsonl").open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(json_record({"step": step, **metrics}), allow_nan=False) + "\n")
+        row = json.dumps(json_record({"step": step, **metrics}), allow_nan=False) + "\n"
+        append_durable(self.run_dir / "validation.jsonl", row.encode("utf-8"))  # a full disk: DiskFullError
         if cfg.trainer.save_trajectories:
             write_samples(samples, self.run_dir / "validation" / f"step_{step:06d}.parquet", step=step)
         self.last_val = metrics

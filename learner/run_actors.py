@@ -6,6 +6,11 @@ naming the missing resources; generators and the teacher are placed by resources
 the custom resources of `ray.generator_resources` / `ray.teacher_resources`); the learner places its
 DeepSpeed ranks in a placement group itself; `wait_started` waits for every actor's constructor
 (model loading) before any rendezvous clock starts.
+
+Node loss: generators, env actors and the teacher are restarted by Ray on another node that has
+their resources (`max_restarts`), and the run goes on; the learner's state (weights, optimizer) has
+no second copy outside its checkpoints, so losing a learner node stops the run with
+`LearnerNodeLost` naming the node, and `--resume` continues from the last checkpoint.
 """
 
 from __future__ import annotations
@@ -18,10 +23,11 @@ from learner.config import RunConfig
 from learner.placement import check_cluster_fits, learner_world_size, rank_placement, run_demands, wait_all_ready
 
 
-def init_ray(cfg: RunConfig) -> None:
+def init_ray(cfg: RunConfig, log: Callable[[str], None] | None = None) -> None:
     """Connect to `ray.address`, or start a local cluster with `ray.num_cpus` (no-op if connected).
 
-    A local cluster listens on 127.0.0.1 only (envs._runtime.init_ray)."""
+    A local cluster listens on 127.0.0.1 only (envs._runtime.init_ray). Before starting one, the
+    agents a killed driver's local cluster left behind are stopped (`reap_orphaned_ray_agents`)."""
     import ray
 
     from envs._runtime import init_ray as start_or_connect_ray
@@ -38,7 +44,63 @@ def init_ray(cfg: RunConfig) -> None:
         # A fresh local cluster, never a head some other process left running on this machine.
         address = "local"
         kwargs["num_cpus"] = rc.num_cpus
+        reaped = reap_orphaned_ray_agents()
+        if reaped and log is not None:
+            log(f"[setup] stopped {len(reaped)} Ray agent process(es) whose node was gone (left by a killed "
+                f"driver): pids {reaped}")
     start_or_connect_ray(address, **kwargs)
+
+
+# A Ray node's agents are children of its raylet. When a driver that started a local cluster is
+# SIGKILLed, its GCS and raylet exit within a second, but these two are re-parented to init and
+# linger 60-75 s (measured with Ray 2.60), holding loopback ports.
+ORPHAN_AGENT_TITLES = ("ray::DashboardAgent", "ray::RuntimeEnvAgent")
+
+
+def orphaned_ray_agents() -> list[int]:
+    """Pids of this user's Ray agent processes whose raylet is gone (their parent is now init).
+
+    An agent of a live node always has its raylet as parent, so no running cluster's agent matches."""
+    if not os.path.isdir("/proc"):
+        return []
+    found = []
+    uid = os.getuid()
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            if entry.stat().st_uid != uid:
+                continue
+            with open(f"/proc/{entry.name}/stat", "rb") as handle:
+                stat = handle.read()
+            ppid = int(stat[stat.rindex(b")") + 2:].split()[1])
+            if ppid != 1:
+                continue
+            with open(f"/proc/{entry.name}/cmdline", "rb") as handle:
+                title = handle.read().replace(b"\0", b" ").decode("utf-8", "replace").strip()
+        except (OSError, ValueError, IndexError):
+            continue  # exited meanwhile, or not ours to read
+        if title.split(" ")[0] in ORPHAN_AGENT_TITLES:
+            found.append(int(entry.name))
+    return found
+
+
+def reap_orphaned_ray_agents() -> list[int]:
+    """SIGKILL the agents `orphaned_ray_agents` finds; returns their pids. SIGKILL: their SIGTERM
+    handler runs on their event loop, and an orphan was measured still running 24 s after SIGTERM;
+    with no node left they hold nothing worth a clean exit. The shell equivalent:
+
+        ps -eo pid=,ppid=,args= | awk '$2 == 1 && ($3 == "ray::DashboardAgent" || $3 == "ray::RuntimeEnvAgent") {print $1}' | xargs -r kill -9
+    """
+    import signal
+
+    pids = orphaned_ray_agents()
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            continue
+    return pids
 
 
 def check_run_fits(cfg: RunConfig) -> None:
@@ -112,6 +174,68 @@ def start_kb_service(cfg: RunConfig):
     from kb_service.service import start_kb_service as start
 
     return start(cfg.kb.replicas, cfg.kb.path, cfg.kb.name, cfg.kb.num_cpus)
+
+
+class LearnerNodeLost(RuntimeError):
+    """A node that held the learner (or one of its ranks) left the cluster; the message names the
+    node, the checkpoint a resume starts from and what the learner needs to be placed again."""
+
+
+def dead_nodes(node_ids: list[str]) -> list[dict[str, Any]]:
+    """The entries of `ray.nodes()` among `node_ids` that Ray reports dead."""
+    import ray
+
+    wanted = set(node_ids)
+    return [n for n in ray.nodes() if n.get("NodeID") in wanted and not n.get("Alive", True)]
+
+
+def learner_node_lost(error: BaseException, learner_nodes: dict[str, str], needs: Callable[[], str],
+                      kept: Callable[[], str], step: int, wait_s: float = 3.0) -> LearnerNodeLost | None:
+    """`LearnerNodeLost` when the run failed because a node of the learner died, else None.
+
+    Args:
+        error: What stopped the run.
+        learner_nodes: Ray node id -> what ran there ("learner rank 0", "learner actor").
+        needs: What the learner asks Ray for, in words (named in the message, for the resume).
+        kept: The checkpoint a resume starts from, in words.
+        step: The last finished learner step.
+        wait_s: How long to wait for Ray to report the node dead after an actor error (the death
+            of an actor can reach the driver before the node's own).
+    """
+    import time
+
+    from ray.exceptions import RayActorError
+
+    if not learner_nodes:
+        return None
+    actor_error = any(isinstance(e, RayActorError) for e in _error_chain(error))
+    deadline = time.monotonic() + (wait_s if actor_error else 0.0)
+    while True:
+        dead = dead_nodes(list(learner_nodes))
+        if dead or time.monotonic() >= deadline:
+            break
+        time.sleep(0.2)
+    if not dead:
+        return None
+    where = "; ".join(f"{learner_nodes[n['NodeID']]} on node {n['NodeID']} ({n.get('NodeManagerAddress', '?')})"
+                      for n in dead)
+    return LearnerNodeLost(
+        f"lost the learner's node: {where} left the Ray cluster during step {step + 1}, and the learner's "
+        f"weights and optimizer state live only there and in checkpoints, so the run stopped. {kept()}. "
+        f"Rerun with --resume: it continues from that checkpoint on the remaining nodes if they hold what the "
+        f"learner needs ({needs()}); the resource check at start names anything missing")
+
+
+def _error_chain(error: BaseException):
+    seen: set[int] = set()
+    todo: list[BaseException | None] = [error]
+    while todo:
+        current = todo.pop()
+        if current is None or id(current) in seen:
+            continue
+        seen.add(id(current))
+        yield current
+        todo.extend([getattr(current, "cause", None), current.__cause__, current.__context__])
 
 
 def stop_learner(learner, timeout_s: float = 30.0) -> None:

@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 from typing import Any, Callable
 
+from envs.core.files import as_disk_full
 from learner.batching import BatchScheduler
 from modeling.checkpoint import (CheckpointError, checkpoint_dir, latest_checkpoint, mark_latest, prune_checkpoints,
                                 read_json, write_json_atomic)
@@ -34,6 +35,10 @@ async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: Teache
     A step folder left by an earlier attempt that never became `latest` (a driver or a learner
     killed mid-save, then resumed from an older checkpoint) is removed first, so none of its
     leftovers (temporary files of an interrupted write, parts of another attempt) ends up in this one.
+
+    Raises:
+        DiskFullError: naming the file (or the step folder) when the disk filled; the partial
+            step folder is removed and `latest` is left as it was.
     """
     directory = checkpoint_dir(run_dir, step)
     latest = latest_checkpoint(run_dir)
@@ -43,14 +48,26 @@ async def save_run_checkpoint(run_dir: Path, step: int, learner, teacher: Teache
         return directory
     if directory.exists():
         shutil.rmtree(directory)
-    directory.mkdir(parents=True)
-    await learner.save_checkpoint.remote(str(directory))
-    if teacher is not None:
-        await teacher.save(str(directory))
-    write_json_atomic(directory / DRIVER_STATE, {
-        "step": step, "teacher_version": teacher.version if teacher is not None else 0,
-        **scheduler.state_dict(), "counters": counters, "ledger": ledger,
-    })
+    try:
+        directory.mkdir(parents=True)
+        await learner.save_checkpoint.remote(str(directory))
+        if teacher is not None:
+            await teacher.save(str(directory))
+        write_json_atomic(directory / DRIVER_STATE, {
+            "step": step, "teacher_version": teacher.version if teacher is not None else 0,
+            **scheduler.state_dict(), "counters": counters, "ledger": ledger,
+        })
+    except Exception as exc:
+        # The learner writes through torch / safetensors, whose errors on a full disk name neither
+        # the file nor the cause ("basic_ios::clear: iostream error"); the driver checks the disk.
+        full = as_disk_full(exc, directory)
+        if full is None:
+            raise
+        # Never `latest`, so never read: removed, which also gives its space back.
+        shutil.rmtree(directory, ignore_errors=True)
+        kept = f"`latest` still names {latest.name}" if latest is not None else "the run has no checkpoint yet"
+        raise full.with_hint(f"The checkpoint of step {step} was not written (its partial folder {directory} "
+                             f"is removed); {kept}") from exc
     fault_point("checkpoint_saved", step)
     if mark:
         commit_run_checkpoint(run_dir, step, keep_last)

@@ -45,9 +45,11 @@ from learner.batching import BatchScheduler, Group, is_correct, mixed_outcomes, 
 from learner.config import RunConfig, dump_config, load_config
 from learner.metrics import MetricsSink, write_samples
 from learner.rollouts import Rollouts
+from envs.core.files import DiskFullError
 from learner.run_actors import (
     check_run_fits,
     init_ray,
+    learner_node_lost,
     start_generators,
     start_kb_service,
     start_learner,
@@ -96,6 +98,7 @@ class Trainer:
         self.teacher_client: TeacherClient | None = None
         self.publisher: WeightPublisher | None = None
         self.sink: MetricsSink | None = None
+        self.learner_nodes: dict[str, str] = {}  # Ray node id -> what of the learner runs there
 
     def _build(self) -> None:
         """Policy, tasks, actors and the collaborators of the loop."""
@@ -119,7 +122,7 @@ class Trainer:
         if cfg.trainer.val_interval or cfg.trainer.val_at_start:
             self.val_refs = select_tasks(d.domains, d.val_split, d.max_val_tasks, d.task_id_pattern,
                                          what="validation", loop=loop, max_prompt_tokens=max_prompt, log=self.log)
-        init_ray(cfg)
+        init_ray(cfg, self.log)
         check_run_fits(cfg)  # before any actor exists: a run the cluster cannot hold fails naming what is missing
         self.log(f"[setup] {len(train_refs)} train / {len(self.val_refs)} validation tasks; policy {self.policy_dir}")
         self.kb_client = start_kb_service(cfg)
@@ -130,7 +133,8 @@ class Trainer:
         self.learner = start_learner(cfg, str(self.policy_dir))
         r = cfg.rollout
         self.pool = EnvPool(**r.env_pool_options(cfg.reward.env_kwargs()), domain_modules=d.domain_modules,
-                            kb_service=cfg.kb.name if self.kb_client is not None else None)
+                            kb_service=cfg.kb.name if self.kb_client is not None else None,
+                            resources=dict(cfg.ray.env_resources) or None)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
                                           cfg.weight_sync.timeout_s,
                                           weights_provider=lambda: self.learner.get_weights.remote())
@@ -139,7 +143,11 @@ class Trainer:
         if cfg.teacher.enabled:
             self.teacher = start_teacher(cfg, str(self.policy_dir))
             self.teacher_client = TeacherClient(self.teacher, self.learner, cfg, self.counters, self.log)
-        wait_started(cfg, self.learner, self.generators, self.teacher, self.log)  # rendezvous clocks start after this
+        # rendezvous clocks start after this
+        report = wait_started(cfg, self.learner, self.generators, self.teacher, self.log)
+        self.learner_nodes = {node: f"learner rank {rank}" for rank, node in enumerate(report["rank_nodes"])}
+        self.learner_nodes.setdefault(report.get("learner_node", ""), "the learner actor")
+        self.learner_nodes.pop("", None)
         member = self.teacher_client.group_member if self.teacher_client is not None else None
         self.publisher = WeightPublisher(cfg, self.learner, self.generators, self.gen_client, self.log, member)
 
@@ -286,8 +294,35 @@ class Trainer:
         try:
             self._build()
             return asyncio.run(self._main())
+        except DiskFullError as exc:
+            hint = f"The run stopped at learner step {self.step}; {self._kept()}. Free space on that disk, then " \
+                   f"rerun with --resume (it continues from that checkpoint and redoes the steps after it)"
+            raise exc.with_hint(f"{exc.hint}. {hint}" if exc.hint else hint) from exc
+        except Exception as exc:
+            lost = learner_node_lost(exc, self.learner_nodes, self._learner_needs, self._kept, self.step)
+            if lost is None:
+                raise
+            raise lost from exc
         finally:
             self.shutdown()
+
+    def _kept(self) -> str:
+        """What a resume starts from, in words (for the error of a stopped run)."""
+        from modeling.checkpoint import latest_checkpoint
+
+        try:
+            latest = latest_checkpoint(self.run_dir)
+        except (OSError, ValueError):
+            latest = None
+        return f"the last complete checkpoint is {latest}" if latest is not None else \
+            f"{self.run_dir} has no complete checkpoint yet (a resume starts from step 0)"
+
+    def _learner_needs(self) -> str:
+        from learner.placement import run_demands
+
+        parts = [f"{d.count} x {d.name}: " + (", ".join(f"{k} {v:g}" for k, v in d.resources.items()) or "no resources")
+                 for d in run_demands(self.cfg) if d.name.startswith("learner")]
+        return "; ".join(parts)
 
     def shutdown(self) -> None:
         import ray

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
 
-from envs.core.files import replace_atomic
+from envs.core.files import as_disk_full, replace_atomic
 
 LATEST = "latest"
 STEP_DIR_PATTERN = re.compile(r"step_\d{6,}")
@@ -66,6 +66,7 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
     Raises:
         CheckpointError: naming the file and the key path of the first non-finite number.
         TypeError: naming the file, for a value JSON cannot represent.
+        DiskFullError: naming the file, when the disk is full.
     """
     path = Path(path)
     bad = find_non_finite(obj)
@@ -78,9 +79,12 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
             json.dump(obj, handle, indent=1, sort_keys=True, allow_nan=False)
         os.replace(tmp, path)
     except BaseException as exc:
+        full = as_disk_full(exc, path)  # before the unlink gives the space back
         Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, TypeError):
             raise TypeError(f"{path}: {exc}") from exc
+        if full is not None and full is not exc:
+            raise full from exc
         raise
 
 

@@ -15,11 +15,13 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
 from learner.config import dump_config
 from learner.metrics import MetricsSink, read_jsonl_rows, read_metrics
+from learner.run_actors import orphaned_ray_agents, reap_orphaned_ray_agents
 from modeling.checkpoint import checkpoint_dir, latest_checkpoint, temp_files
 from tests.training.test_train import tiny_config
 
@@ -66,6 +68,18 @@ def test_driver_killed_before_latest_moves_resumes_with_nothing_lost_or_doubled(
                             env={**os.environ, faults.FAULT_ENV: "metrics_written:2"},
                             capture_output=True, text=True, timeout=300)
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-3000:]
+    # The killed driver's local cluster: its GCS and raylet exit, its two agents would linger a
+    # minute (re-parented to init); a run starting a local cluster stops them first.
+    deadline = time.monotonic() + 10
+    while len(orphaned_ray_agents()) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    orphans = orphaned_ray_agents()
+    assert len(orphans) >= 2, orphans
+    assert set(reap_orphaned_ray_agents()) >= set(orphans)
+    deadline = time.monotonic() + 5
+    while any(os.path.exists(f"/proc/{pid}") for pid in orphans) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [pid for pid in orphans if os.path.exists(f"/proc/{pid}")]
     # Step 2 wrote its checkpoint, validation, trajectories and metrics row, but `latest` still
     # names step 1: a resume redoes step 2 rather than skipping what it recorded.
     assert latest_checkpoint(run) == checkpoint_dir(run, 1)

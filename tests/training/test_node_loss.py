@@ -1,0 +1,182 @@
+"""Node loss on a simulated multi-node cluster (ray.cluster_utils: separate raylets on this host).
+
+    head     CPU 1                                           the driver
+    learner  CPU 1, learner_node 1                           the learner (world size 1: it holds the model)
+    rollout  CPU 1, rollout_node 1, env_node 1               the generator and the env actor
+    spare    CPU 1, learner_node 1, rollout_node 1, env_node 1   joins during the run
+
+One run goes through the cases, so the cluster starts the run's actors as few times as possible:
+losing the node of the generator and the env actor lets the run go on (Ray restarts them on the
+spare, the episodes they held are re-run, every step is recorded once); losing the learner's node
+stops the run with an error naming the node; `--resume` continues from the last checkpoint on the
+spare; with no learner node left, a resume is refused at start naming the missing resource.
+
+The cluster is this module's own: the session-wide `ray_cluster` (conftest) is shut down first and
+started again when the module ends, as in test_placement.py.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from learner import faults
+from learner.metrics import read_metrics, read_samples
+from learner.placement import PlacementError
+from learner.run_actors import LearnerNodeLost
+from modeling.checkpoint import checkpoint_dir, latest_checkpoint
+from tests.training.conftest import SESSION_RAY_INIT
+from tests.training.test_faults import training_in_background, wait_for
+from tests.training.test_train import tiny_config
+
+pytestmark = pytest.mark.ray
+
+NODES = {
+    "learner": {"num_cpus": 1, "resources": {"learner_node": 1}},
+    "rollout": {"num_cpus": 1, "resources": {"rollout_node": 1, "env_node": 1}},
+}
+SPARE = {"num_cpus": 1, "resources": {"learner_node": 1, "rollout_node": 1, "env_node": 1}}
+
+
+@pytest.fixture(autouse=True)
+def no_fault_action_left_behind():
+    yield
+    faults.clear_actions()  # a test that failed before its point must not leave the action to a later run
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """The simulated cluster; yields (the `Cluster`, {name: its `Node`})."""
+    import ray
+    from ray.cluster_utils import Cluster
+
+    session_was_up = ray.is_initialized()
+    if session_was_up:
+        ray.shutdown()
+    # A node killed outright (no goodbye to the GCS) is found dead by the GCS's health checks:
+    # 3 missed checks 1 s apart here, instead of Ray's default 5 x 3 s.
+    health = {"health_check_period_ms": 1000, "health_check_timeout_ms": 1000, "health_check_failure_threshold": 3}
+    sim = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
+                                                        "_system_config": health})
+    try:
+        nodes = {name: sim.add_node(**args) for name, args in NODES.items()}
+        ray.init(address=sim.address, namespace="hcgym-node-loss-tests", log_to_driver=False)
+        yield sim, nodes
+    finally:
+        ray.shutdown()
+        sim.shutdown()
+        if session_was_up:
+            from envs._runtime import init_ray
+
+            init_ray(**SESSION_RAY_INIT)
+
+
+def node_of(handle) -> str:
+    import ray
+
+    return ray._private.state.actors(handle._actor_id.hex())["Address"]["NodeID"]
+
+
+def run_config(tmp_path, policy_dir, **trainer):
+    # One env actor, no TensorBoard: the fewest processes to start on each node.
+    return tiny_config(
+        tmp_path / "run", policy_dir,
+        trainer={"keep_checkpoints": 5, **trainer},
+        rollout={"num_env_actors": 1},
+        ray={"learner_num_cpus": 0, "learner_resources": {"learner_node": 1},
+             "generator_resources": {"rollout_node": 1}, "env_resources": {"env_node": 1}},
+        metrics={"tensorboard": False, "ray_metrics": False, "progress": False})
+
+
+def test_rollout_node_lost_run_goes_on_learner_node_lost_run_stops_naming_it_resume_moves_on(
+        cluster, ward_policy_dir, tmp_path):
+    from learner.train import Trainer, train
+
+    sim, nodes = cluster
+    run = tmp_path / "run"
+    steps = 5
+    cfg = run_config(tmp_path, ward_policy_dir, max_steps=steps, checkpoint_interval=1, max_staleness=1)
+    trainer = Trainer(cfg, log=lambda line: None)
+    seen: dict[str, object] = {}
+
+    paused, go_on = threading.Event(), threading.Event()
+
+    def pause():  # in the driver's thread: the run waits while the spare node joins
+        paused.set()
+        assert go_on.wait(300)
+
+    def lose_learner_node():
+        seen["rollout actors"] = {node_of(a) for a in [*trainer.generators, *trainer.pool.actors]}
+        seen["learner nodes"] = dict(trainer.learner_nodes)
+        sim.remove_node(nodes.pop("learner"))
+
+    faults.at("latest_marked:1", pause)
+    with pytest.raises(LearnerNodeLost) as info:
+        with training_in_background(trainer):
+            wait_for(paused.is_set, what="step 1")
+            seen["first rollout actors"] = {node_of(a) for a in [*trainer.generators, *trainer.pool.actors]}
+            seen["rollout node"] = nodes["rollout"].node_id
+            nodes["spare"] = sim.add_node(**SPARE)
+            go_on.set()
+            # While an episode is on the env actor and a request on the generator.
+            wait_for(lambda: sum(trainer.pool.loads()) > 0 and trainer.gen_client.outstanding[0] > 0,
+                     what="episodes and generation in flight")
+            # Killed outright, as a crashed machine goes: the episode's turn in flight cannot finish first.
+            seen["rollout lost at"] = trainer.step
+            sim.remove_node(nodes.pop("rollout"), allow_graceful=False)
+            rollout_actors = [*trainer.generators, *trainer.pool.actors]
+            wait_for(lambda: {node_of(a) for a in rollout_actors} == {nodes["spare"].node_id},
+                     what="the generator and the env actor restarted on the spare")
+            # The learner's node goes right after the next step becomes `latest` (its `latest_marked`
+            # comes after `trainer.step` counts it, so that point is still ahead).
+            seen["lost at"] = lost_at = trainer.step + 1
+            assert lost_at < steps
+            faults.at(f"latest_marked:{lost_at}", lose_learner_node)
+
+    # The rollout node's loss: Ray restarted the generator and the env actor on the spare, the
+    # episodes they held were re-run, and the steps so far were recorded once each, full batches.
+    spare, lost_at = nodes["spare"], seen["lost at"]
+    assert seen["first rollout actors"] == {seen["rollout node"]}
+    assert seen["rollout actors"] == {spare.node_id}
+    # Requests to the lost generator failed; the episodes in flight there were re-run or, when the
+    # generator's restart on the spare outlasted the client's retries, ended failed (their groups
+    # dropped, not trained on, replaced by new ones). Either way the ledger accounts for them.
+    assert trainer.gen_client.failures >= 1
+    ledger = trainer.rollouts.ledger
+    balance = ledger.balance()
+    assert balance["reruns"] + balance["failed"] >= 1, (balance, trainer.scheduler.status_counts())
+    assert all(why for why in ledger.failed.values())
+    ids = [[s.sample_id for s in read_samples(run / "trajectories" / f"step_{step:06d}.parquet")[0]]
+           for step in range(1, lost_at + 1)]
+    assert all(len(batch) == 4 for batch in ids) and len({i for batch in ids for i in batch}) == 4 * lost_at
+
+    # The learner node's loss stops the run, naming the node, the checkpoint and what a resume needs.
+    message = str(info.value)
+    (learner_node,) = seen["learner nodes"]
+    assert f"learner rank 0 on node {learner_node}" in message, message
+    assert f"left the Ray cluster during step {lost_at + 1}" in message, message
+    assert f"the last complete checkpoint is {checkpoint_dir(run, lost_at)}" in message, message
+    assert "--resume" in message and "learner_node 1" in message, message
+    assert latest_checkpoint(run) == checkpoint_dir(run, lost_at)
+    assert [r["step"] for r in read_metrics(run)] == list(range(1, lost_at + 1))
+
+    # The spare holds what the learner needs: the resume continues there.
+    logs: list[str] = []
+    summary = train(cfg, resume=True, log=logs.append)
+    assert summary["steps"] == steps
+    assert any(line.startswith(f"[resume] restored step {lost_at}") for line in logs), logs[-5:]
+    placed = next(line for line in logs if "learner rank nodes" in line)
+    assert spare.node_id[:8] in placed, placed
+    assert [r["step"] for r in read_metrics(run)] == list(range(1, steps + 1))
+    assert latest_checkpoint(run) == checkpoint_dir(run, steps)
+    print(f"[figures] rollout node lost after step {seen['rollout lost at']}: generator failures {trainer.gen_client.failures}, "
+          f"ledger {balance}, groups {trainer.scheduler.status_counts()}; learner node lost after step {lost_at}; "
+          f"resumed from step {lost_at} to {steps}")
+
+    # No learner node left: a resume is refused before any actor starts, naming what is missing.
+    sim.remove_node(nodes.pop("spare"))
+    with pytest.raises(PlacementError, match=r"learner_node: the run needs 1 \(1 x learner at 1 each\), "
+                                             r"the cluster has 0"):
+        train(cfg, resume=True, log=lambda line: None)
+    assert latest_checkpoint(run) == checkpoint_dir(run, steps)
