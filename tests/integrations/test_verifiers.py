@@ -111,7 +111,7 @@ def model_dir(venvs, loader_run, tasks, tmp_path_factory):
                             num_hidden_layers=1, num_attention_heads=1, num_key_value_heads=1, head_dim=64)
     tokenizer = load_tokenizer(path)
     model = AutoModelForCausalLM.from_pretrained(str(path), dtype=torch.float32)
-    ids = lambda text: tokenizer(text, add_special_tokens=False)["input_ids"]  # noqa: E731
+    ids = lambda text: tokenizer(text, add_special_tokens=False)["input_ids"]
     examples = [(ids(tokenizer.apply_chat_template(task.prompt, tools=tools, add_generation_prompt=True,
                                                    tokenize=False)), ids(reply))
                 for task, reply in zip(tasks, replies)]
@@ -213,7 +213,8 @@ def _vf_eval(server: str, out: Path, name: str) -> subprocess.CompletedProcess:
                "-m", SERVED_MODEL, "--client.base-url", server, "--client.api-key-var", "HCGYM_VF_API_KEY",
                "--sampling.temperature", "0", "--sampling.max-tokens", "64",
                "--no-push", "--no-rich", "-o", str(out), "--run.name", name]
-    return subprocess.run(command, capture_output=True, text=True, env=_vf_environ(), cwd=str(out), timeout=600)
+    return subprocess.run(command, capture_output=True, text=True, env=_vf_environ(), cwd=str(out), timeout=600,
+                          check=False)
 
 
 def trace_messages(trace: dict) -> list[dict]:

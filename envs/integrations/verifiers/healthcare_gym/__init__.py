@@ -2,4 +2,4 @@
 
 from .taskset import HealthcareGymEnvironment, HealthcareGymTaskset
 
-__all__ = ["HealthcareGymTaskset", "HealthcareGymEnvironment"]
+__all__ = ["HealthcareGymEnvironment", "HealthcareGymTaskset"]

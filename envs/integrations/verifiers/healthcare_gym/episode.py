@@ -14,12 +14,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import verifiers.v1 as vf
 from pydantic import BaseModel, ConfigDict, Field
 
-import verifiers.v1 as vf
-
-from envs.episode import EndReason, EpisodeEnd
 from envs.env import MAX_TOOL_RESULT_CHARS
+from envs.episode import EndReason, EpisodeEnd
 
 #: verifiers' stop conditions that cut a rollout, as the env's end reasons. Every cut is scored by
 #: the domain's scorer as a truncation whatever its reason; the reason names it in the record.

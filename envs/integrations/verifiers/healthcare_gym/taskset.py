@@ -69,7 +69,8 @@ class HealthcareGymTask(vf.Task[HealthcareGymData, EpisodeState, HealthcareGymTa
         """End the rollout's episode (`episode.replay_episode`) and keep the end on the trace."""
         state: EpisodeState = trace.state
         if state.task_id not in (None, self.data.id):
-            raise ValueError(f"the tool server ran task {state.task_id!r}, the rollout is task {self.data.id!r}")
+            raise ValueError(f"the tool server ran task {state.task_id!r}, "
+                             f"the rollout is task {self.data.id!r}")
         # In the event loop, not a worker thread: the env's scorers are not written to be thread-safe
         # (their graders load lazily into module caches on a process's first score).
         end = replay_episode(domain=self.data.domain, split=self.data.split, task_id=self.data.id,

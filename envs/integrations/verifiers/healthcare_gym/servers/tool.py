@@ -14,9 +14,8 @@ from __future__ import annotations
 import inspect
 from typing import TYPE_CHECKING, Any
 
-from pydantic import ConfigDict
-
 import verifiers.v1 as vf
+from pydantic import ConfigDict
 
 from ..episode import EnvLimits, EpisodeState, RecordedCall
 
@@ -57,11 +56,12 @@ class HealthcareGymToolset(vf.Toolset[HealthcareGymToolsetConfig, EpisodeState])
             function = schema["function"]
             # The SDK's ToolManager.add_tool returns the registered Tool, whose schema and argument
             # model are replaced below (MCPServer.add_tool returns nothing).
-            tool = mcp._tool_manager.add_tool(self._with_state(_handler(self, function["name"])),
-                                              name=function["name"], description=function.get("description") or "")
-            # The model sees the env's schema verbatim, and the env (not the MCP SDK) validates the
-            # arguments: the SDK's argument model would drop unknown keys and refuse wrong types
-            # before the env could record the call.
+            handler = self._with_state(_handler(self, function["name"]))
+            tool = mcp._tool_manager.add_tool(handler, name=function["name"],
+                                              description=function.get("description") or "")
+            # The model sees the env's schema verbatim, and the env (not the MCP SDK) validates
+            # the arguments: the SDK's argument model would drop unknown keys and refuse wrong
+            # types before the env could record the call.
             tool.parameters = function.get("parameters") or {"type": "object", "properties": {}}
             tool.fn_metadata = tool.fn_metadata.model_copy(update={"arg_model": _RawArguments})
 
