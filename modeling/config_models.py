@@ -203,8 +203,11 @@ class TeacherConfig(ConfigModel):
     dtype: Literal["float32", "bfloat16"] = "float32"
     device: Literal["cpu", "cuda"] = "cpu"
     logprob_chunk_size: int = Field(default=1024, ge=1)
-    pack_sequences: bool = Field(default=True, description="the teacher's forwards on real tokens only (as "
-                                                           "learner.pack_sequences)")
+    pack_sequences: bool = Field(
+        default=False, description="the teacher's forwards on real tokens only (as learner.pack_sequences). Off by "
+                                   "default: the teacher batches samples in arrival order, and a packed row's values "
+                                   "move at float rounding with its neighbours, so runs and resumes would differ in "
+                                   "the last bits; padded rows do not")
     # Where the fp32 EMA master lives when the teacher computes in bf16 (4 bytes per parameter: 38 GB
     # for a 9B model beside its 19 GB of bf16 weights): "model" = the teacher's device, "cpu" = host
     # memory, leaving the GPU to the scoring forward; `hcgym plan` says which one fits.

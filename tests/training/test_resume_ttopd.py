@@ -28,11 +28,12 @@ pytestmark = pytest.mark.ray
 def deterministic(record: dict) -> dict:
     """A metrics record without wall-clock figures, without the generator's reported log-probs
     (`logprob_*`, `is_*`: they move by ~1e-7 with the composition of the generation batch, which is
-    timing; the sampled tokens, the losses and the weights do not) and without object-store sizes
-    (`*_bytes`: Ray's framing varies by a few bytes)."""
+    timing; the sampled tokens, the losses and the weights do not), without object-store sizes
+    (`*_bytes`: Ray's framing varies by a few bytes) and without the teacher's padding share (its
+    batches are samples in arrival order: timing)."""
     return {k: v for k, v in record.items()
             if not (k.endswith(("_s", "_bytes")) or k.startswith(("time_", "logprob_", "is_")) or "per_s" in k
-                    or k == "teacher_wait_frac")}
+                    or k in ("teacher_wait_frac", "teacher_padding_frac"))}
 
 
 def split_and_resume(straight, run_dir, cfg_of, logs):
