@@ -65,3 +65,21 @@ def ward_policy_dir() -> str:
     out = build_tiny_model(root / "model", tok, seed=0, hidden_size=64, intermediate_size=128, num_hidden_layers=2,
                            num_attention_heads=4, num_key_value_heads=2, head_dim=16)
     return str(out)
+
+
+@pytest.fixture(scope="session")
+def ttopd_store_run(ray_cluster, ward_policy_dir, tmp_path_factory) -> Path:
+    """A 3-step TT-OPD run on the ward domain (weights and teacher updates through the object store,
+    staleness 0, a validation pass at the start): the run folder `hcgym train` writes, teacher hints
+    and log-probs included. tests/training/test_train.py compares it with the same run over the
+    collective group, and the viewer tests serve it; one run costs about 10 s on 2 cores."""
+    from actors.env_actor import register_domains
+    from learner.train import train
+    from tests.training.test_train import STORE_VS_GROUP_STEPS, ttopd_config
+
+    run_dir = tmp_path_factory.mktemp("ttopd_store_run") / "store"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("HCGYM_EMBEDDINGS", "0")
+        register_domains({"ward": "tests.fixtures.ward_domain.environment"})
+        train(ttopd_config(run_dir, ward_policy_dir, trainer=STORE_VS_GROUP_STEPS), log=lambda line: None)
+    return run_dir

@@ -169,20 +169,23 @@ def teacher_weights(run_dir):
     return load_tensors(latest_checkpoint(run_dir) / "teacher" / "teacher.safetensors")
 
 
-def test_teacher_updates_over_the_collective_group_equal_the_object_store_path(ray_cluster, ward_policy_dir, tmp_path):
+# The object-store run is the session fixture `ttopd_store_run` (tests/conftest.py), which the viewer
+# tests serve too; the collective run here differs from it only in `weight_sync`.
+STORE_VS_GROUP_STEPS = {"max_steps": 3, "checkpoint_interval": 0, "val_at_start": True}
+
+
+def test_teacher_updates_over_the_collective_group_equal_the_object_store_path(ray_cluster, ward_policy_dir,
+                                                                               ttopd_store_run, tmp_path):
     """Collective weight sync: the teacher is a member of the group and applies EMA / hard copy bucket
     by bucket; nothing goes through the object store, and the result is bit-identical to the
     object-store path (staleness 0 makes both runs deterministic)."""
     from learner.train import train
 
-    steps = {"max_steps": 3, "checkpoint_interval": 0}
-    by_store = ttopd_config(tmp_path / "store", ward_policy_dir, trainer=steps)
-    by_group = ttopd_config(tmp_path / "group", ward_policy_dir, trainer=steps,
+    by_group = ttopd_config(tmp_path / "group", ward_policy_dir, trainer=STORE_VS_GROUP_STEPS,
                             weight_sync={"transport": "collective", "backend": "gloo", "bucket_mb": 0.05,
                                          "timeout_s": 60})
-    train(by_store, log=lambda line: None)
     summary = train(by_group, log=lambda line: None)
-    store, group = read_metrics(by_store.output_dir), read_metrics(by_group.output_dir)
+    store, group = read_metrics(ttopd_store_run), read_metrics(by_group.output_dir)
     assert [r["teacher_action"] for r in group] == [0.0, 1.0, 2.0]  # none, EMA, hard copy
     assert [r["teacher_updates"] for r in group] == [0.0, 1.0, 2.0]
     # The object-store path counts every update it carried; the collective run used it for none.
@@ -198,7 +201,7 @@ def test_teacher_updates_over_the_collective_group_equal_the_object_store_path(r
     for a, b in zip(store, group):
         assert (a["kl_teacher"], a["loss"], a["grad_norm"]) == (b["kl_teacher"], b["loss"], b["grad_norm"]), a["step"]
         assert b["logprob_abs_diff"] < 1e-3  # the generators hold the learner's weights too
-    ta, tb = teacher_weights(tmp_path / "store"), teacher_weights(tmp_path / "group")
+    ta, tb = teacher_weights(ttopd_store_run), teacher_weights(tmp_path / "group")
     assert ta.keys() == tb.keys()
     assert not [k for k in ta if not torch.equal(ta[k], tb[k])], "collective teacher update differs"
     initial = {}

@@ -2,7 +2,8 @@
 headless Chromium driven through ChromeDriver (no browser download at install time).
 
 * `trained_run`: `learner.train.train` on the ward test domain with the tiny policy, TT-OPD, 3
-  steps and a validation pass: the files `hcgym train` writes, teacher hints and log-probs included.
+  steps and a validation pass: the files `hcgym train` writes, teacher hints and log-probs included
+  (the session fixture `ttopd_store_run` of tests/conftest.py, shared with the training tests).
 * `gold_run`: gold-replay episodes (the real env executes the gold tool calls) written with the
   trainer's own `write_samples` / metrics format, so episode pages have tool calls to show (the
   tiny random policy rarely calls a tool).
@@ -20,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from tests.evals.conftest import WARD
-from tests.training.conftest import NO_EMBEDDINGS, SESSION_RAY_INIT
+from tests.training.conftest import NO_EMBEDDINGS
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
@@ -39,31 +40,9 @@ def ward_registered():
 
 
 @pytest.fixture(scope="package")
-def trained_run(tmp_path_factory, ward_policy_dir, ward_registered):
-    import ray
-
-    from envs._runtime import init_ray
-    from learner.train import train
-    from tests.training.test_train import tiny_config
-
-    started = not ray.is_initialized()
-    if started:
-        init_ray(**SESSION_RAY_INIT)
-    try:
-        run_dir = tmp_path_factory.mktemp("viewer") / "ttopd-run"
-        cfg = tiny_config(
-            run_dir, ward_policy_dir,
-            trainer={"max_steps": 3, "max_staleness": 0, "checkpoint_interval": 0, "val_interval": 0,
-                     "val_at_start": True},
-            teacher={"enabled": True, "ema_interval": 1, "hard_copy_interval": 3, "ema_alpha": 0.5},
-            learner={"optim": {"lr": 1e-3}, "loss": {"entropy_coef": 0.01, "distill": {
-                "enabled": True, "lambda_distill": 1.0, "drop_length_truncated_turns": False}}},
-        )
-        train(cfg, log=lambda _: None)
-    finally:
-        if started:
-            ray.shutdown()
-    return run_dir
+def trained_run(ttopd_store_run):
+    """The session's 3-step TT-OPD run (tests/conftest.py), which tests/training/test_train.py also checks."""
+    return ttopd_store_run
 
 
 @pytest.fixture(scope="package")
