@@ -81,19 +81,24 @@ def label_rule(name: str) -> PregnancyLabelRule | None:
     return PREGNANCY_LABEL_RULES.get(ALIASES.get(key, key))
 
 
+def rule_report(rule: PregnancyLabelRule) -> dict:
+    """What a tool reports from a label rule: its conclusion, section and basis (a letter only with its date)."""
+    out = {"fda_category": rule.letter, "fda_category_date": rule.letter_date,
+           "recommendation": rule.recommendation, "risk_summary": rule.statement, "label_section": rule.section,
+           "basis": "US label" + (f"; letter {rule.letter} assigned {rule.letter_date}" if rule.letter
+                                  else "; no letter category (PLLR risk summary)")}
+    if rule.contraindicated_for:
+        out["contraindicated_for"] = rule.contraindicated_for
+    return out
+
+
 def pregnancy_report(name: str, package_letter: str | None) -> dict:
     """What a tool reports for a drug's pregnancy data: the label rule's conclusion where the table has
     one (its letter only with the date the FDA assigned it), else the package letter named as undated
     package data, else nothing known."""
     rule = label_rule(name)
     if rule is not None:
-        out = {"fda_category": rule.letter, "fda_category_date": rule.letter_date,
-               "recommendation": rule.recommendation, "risk_summary": rule.statement, "label_section": rule.section,
-               "basis": "US label" + (f"; letter {rule.letter} assigned {rule.letter_date}" if rule.letter
-                                      else "; no letter category (PLLR risk summary)")}
-        if rule.contraindicated_for:
-            out["contraindicated_for"] = rule.contraindicated_for
-        return out
+        return rule_report(rule)
     if package_letter:
         return {"fda_category": package_letter, "fda_category_date": None, "label_section": None,
                 "basis": PACKAGE_LETTER_BASIS}

@@ -16,6 +16,7 @@ from envs.rewards import RewardBreakdown, RewardWeights, score_episode
 from envs.rewards.adapters import _VERL_KEYS
 from envs.rewards.dimensions import ALWAYS_REPORTED, DIMENSIONS, GRADING_ORDER, Dimension, Graded, grading_order, registry
 from learner.config import ConfigError, load_config
+from tests.config_files import extended_config
 from tests.rewards.builders import MC_OPTIONS, episode
 
 REPO = Path(__file__).resolve().parents[2]
@@ -72,9 +73,7 @@ def test_unknown_or_invalid_weights_name_the_field():
 
 
 def _write_config(tmp_path: Path, weights: str) -> Path:
-    path = tmp_path / "run.yaml"
-    path.write_text(f"extends: {REPO / 'configs' / 'tiny_cpu_grpo.yaml'}\nreward:\n  weights: {weights}\n")
-    return path
+    return extended_config(tmp_path, f"reward:\n  weights: {weights}")
 
 
 def test_reward_weights_from_the_run_config_reach_the_env_actors_and_change_the_score(tmp_path):

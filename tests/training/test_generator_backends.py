@@ -16,6 +16,7 @@ from actors.generator import REPO_ROOT, generator_backend, generator_backends, g
 from actors.generator_hf import HFGenerator, HFOptions
 from actors.generator_vllm import VLLMOptions
 from learner.config import ConfigError, GeneratorConfig, load_config
+from tests.config_files import extended_config
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -32,9 +33,7 @@ def test_the_registry_holds_the_hf_and_vllm_backends_with_their_options_and_inte
 
 
 def _config(tmp_path: Path, generator: str) -> Path:
-    path = tmp_path / "run.yaml"
-    path.write_text(f"extends: {REPO / 'configs' / 'tiny_cpu_grpo.yaml'}\ngenerator:\n{textwrap.indent(generator, '  ')}\n")
-    return path
+    return extended_config(tmp_path, f"generator:\n{textwrap.indent(generator, '  ')}")
 
 
 def test_backend_and_options_are_checked_when_the_config_loads(tmp_path):

@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 
 from envs.core.fuzzy import close_matches
-from envs.domains.pregnancy_labels import PACKAGE_LETTER_BASIS, PREGNANCY_LABEL_RULES, PregnancyLabelRule  # noqa: F401
+from envs.domains.pregnancy_labels import PACKAGE_LETTER_BASIS, PREGNANCY_LABEL_RULES, PregnancyLabelRule, rule_report  # noqa: F401
 
 from .data_model import (
     DoseProfile, Drug, DrugClass, DrugInteractionDB, InteractionRule, Patient, RenalProfile, RouteDose, SeverityLevel,
@@ -696,13 +696,7 @@ def pregnancy_assessment(db: DrugInteractionDB, drug: Drug) -> dict:
     else the US label's pregnancy contraindication when there is one; else no data."""
     rule = PREGNANCY_LABEL_RULES.get(drug.id)
     if rule is not None:
-        out = {"drug": drug.id, "fda_category": rule.letter, "fda_category_date": rule.letter_date,
-               "recommendation": rule.recommendation, "risk_summary": rule.statement, "label_section": rule.section,
-               "basis": "US label" + (f"; letter {rule.letter} assigned {rule.letter_date}" if rule.letter
-                                      else "; no letter category (PLLR risk summary)")}
-        if rule.contraindicated_for:
-            out["contraindicated_for"] = rule.contraindicated_for
-        return out
+        return {"drug": drug.id, **rule_report(rule)}
     profile = db.dose_profiles.get(drug.id)
     category = profile.pregnancy_category if profile else None
     if category not in PREGNANCY_CATEGORIES:
