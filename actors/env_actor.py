@@ -13,7 +13,7 @@ its start with the same `EpisodeSpec` (same seed), on whichever actor has room. 
 accounts for every episode: each one completes exactly once, and every lost attempt is recorded,
 so a test can check that nothing was lost or counted twice.
 
-Hostile actions and env failures. `env.step` never raises on any action (issue 13); should an env
+Hostile actions and env failures. `env.step` never raises on any action; should an env
 method raise anyway (a bug in a domain's toolkit or scorer), `EnvActor.step` / `finish` end that
 episode as truncated with reward 0 and an `EpisodeEnd` (reason "env_error") naming the failure, instead of raising
 into the agent loop, which would fail the episode's whole group. The actor keeps serving (a Python

@@ -22,9 +22,9 @@ class HFOptions(BaseModel):
     # Multi-turn episodes: keep each conversation's KV cache after a turn, so its next turn encodes
     # only the new tokens (the generated turn's last token and the tool result) instead of the whole
     # context again. Reused only with the same weights and an exactly matching token prefix.
-    # Off by default: on the tiny CPU model re-encoding measured faster (bench/generation.py: 0.87x
-    # and 0.90x tok/s with reuse), as its decode steps dominate and a batch mixing cached lengths
-    # attends over more padding; it pays where the prefill of long contexts dominates.
+    # Off by default: on the tiny CPU model re-encoding is faster (docs/benchmarks.md, "Generation"),
+    # as its decode steps dominate and a batch mixing cached lengths attends over more padding; it
+    # pays where the prefill of long contexts dominates.
     reuse_kv_cache: bool = False
     # Most cached tokens kept over all conversations (least recently used dropped first).
     kv_cache_max_tokens: int = Field(default=262_144, ge=0)

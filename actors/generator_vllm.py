@@ -29,7 +29,7 @@ which reload code asserts on CUDA; the model runner's method of the same name do
 
 Why `reload_weights` and not `model.load_weights`: the CPU build prepacks every linear weight at
 load (`dispatch_cpu_unquantized_gemm`), so writing into the parameters afterwards changes nothing
-(measured: generation unchanged); `reload_weights` re-runs vLLM's post-load processing layer by
+(generation stays the same); `reload_weights` re-runs vLLM's post-load processing layer by
 layer and works on every platform. It must see all of a layer's tensors within one call (a layer
 is processed when its last tensor arrives), so each update is ONE call fed by an iterator.
 
@@ -108,8 +108,9 @@ class VLLMOptions(BaseModel):
     # KV cache in GiB (VLLM_CPU_KVCACHE_SPACE); None = vLLM's default (4 GiB).
     cpu_kvcache_space_gib: int | None = Field(default=1, ge=1)
     # Cores the OMP threads bind to (VLLM_CPU_OMP_THREADS_BIND, e.g. "0" or "0-7"; with tensor
-    # parallelism one set per worker, "0|1"). vLLM's own "auto" reserves a core for the frontend:
-    # on a 2-core box that measured 26 tok/s vs 189 with "0". None = vLLM's default.
+    # parallelism one set per worker, "0|1"). vLLM's own "auto" reserves a core for the frontend,
+    # which on a 2-core machine leaves the engine a fraction of its speed (docs/benchmarks.md,
+    # "Figures behind code defaults"). None = vLLM's default.
     cpu_omp_threads_bind: str | None = "0"
 
 

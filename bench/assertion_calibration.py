@@ -16,8 +16,8 @@ assertion score for each kind, the share of gold replays at or above 0.9, the ga
 replay and the wrong episode of the same task, and the lowest-scoring gold-replay criteria.
 Baseline measured in the same run: the same grader with tool observations left out of the
 evidence (only the agent's text, its answer and its calls), the largest single change of the
-calibration. The grader before issue 14 (commit 749e5f4) scored the gold replays of the 289 tasks
-with assertions then built at median 0.52, mean 0.49, 1 of 289 at >= 0.9 (docs/rewards.md).
+calibration. The grader of commit 749e5f4, before the calibration, is compared in docs/rewards.md
+and docs/benchmarks.md ("Gold replays against their own NL assertions").
 
 Run: OMP_NUM_THREADS=1 python bench/assertion_calibration.py [--domains a,b] [--limit N] [--json out.json]
      (HCGYM_EMBEDDINGS=0 grades by keywords only)

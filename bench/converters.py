@@ -13,7 +13,7 @@ Inputs (written by this script in the official layouts, synthetic rows; no datas
 Baselines:
 * MedQA / MedMCQA: reading the same file with `json.loads` per line and nothing else (the floor any
   converter pays): the ratio is the converter's cost over plain parsing.
-* MIMIC-III: the converter as it was before issue 15 (commit 90ccea4, `git show`), which kept the lab
+* MIMIC-III: the converter at commit 90ccea4 (`git show`), which kept the lab
   results of every admission while streaming LABEVENTS; both convert the same `--max-stays` stays.
 
 Each measurement runs in its own Python process; peak memory is that process's maximum resident set

@@ -7,7 +7,7 @@ call time of the same tool function with the same arguments. Target: <= 100 micr
 Also reports the slowest tool of each domain over the gold actions of its tasks, median of three
 warm calls (target <= 5 ms except knowledge search; one-off index loads on first use excluded).
 
-Hostile actions (issue 13): per domain, a seeded campaign of generated hostile actions (every
+Hostile actions: per domain, a seeded campaign of generated hostile actions (every
 action format, hostile values: deep nesting, huge integers, non-JSON literals, surrogates, unknown
 tools, truncated calls) plus the worst case per tool (an action of 3,300 calls of that tool with
 distinct unknown names, or 2,000-character strings, in every string argument: cut to the call cap,
@@ -121,7 +121,7 @@ def _hermes(name: str, arguments_json: str) -> str:
     return '<tool_call>{"name": "%s", "arguments": %s}</tool_call>' % (name, arguments_json)
 
 
-# The classes of issue 13 that used to raise out of `step` (values written into an argument).
+# Hostile argument values, one per class that has raised out of `step` (values written into an argument).
 HOSTILE_VALUES = [
     _deep(1000), _deep(65), "9" * 5000, "9" * 400, "-" + "9" * 101, "1e999999", "-1e400", "NaN", "Infinity",
     '"\\ud800 x \\udfff"', '{"a": [null, true, 1.5, "s"]}', '"' + "x" * 20_000 + '"',

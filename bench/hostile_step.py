@@ -1,8 +1,8 @@
-"""The cost of one hostile action: issue 13's reproducer, one 99 KB action of 3,300 `lookup_drug` calls
+"""The cost of one hostile action: one 99 KB action of 3,300 `lookup_drug` calls
 with unknown names (each call asks for "did you mean" suggestions over the 11,239-name drug index),
 measured in one run under three settings:
 
-  * before issue 13 (the baseline): every call runs, suggestions by `difflib.get_close_matches`
+  * the baseline: every call runs, suggestions by `difflib.get_close_matches`
     over the whole index per call;
   * uncapped with the index: every call runs, suggestions from `envs.core.fuzzy` (same answers);
   * the env as it is: at most MAX_CALLS_PER_ACTION calls run (the rest refused), indexed suggestions.

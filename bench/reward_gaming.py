@@ -17,12 +17,12 @@ domain's database, the episode is scored by the env's own reward, exactly as in 
                           answer syntax ("X", "(X)", "Answer: X", "the answer is X", boxed, <answer>)
     majority_answer       the most common gold answer of the train split for the task's answer type
 
-Requirement checked (issue 13, item 3): in every domain, every cheap strategy's mean total is below
+Requirement checked: in every domain, every cheap strategy's mean total is below
 gold_answer_no_tools's, and its "correct" rate is at most its true accuracy. "Correct" is the demo
 config's `reward.correct_if` rule (configs/tiny_cpu_ttopd.yaml) applied by `learner.batching.is_correct`
 to the env's result; true accuracy = the task's accuracy criterion met (accuracy component 1). The
-baseline in the same run is the rule the demo used before, `total >= 0.55` ("old correct"), which
-passed 44/44 "every tool + constant" episodes of which 5 were right.
+baseline in the same run is a rule on the total alone, `total >= 0.55` ("old correct"); the figures
+are in docs/benchmarks.md, "Reward gaming".
 
     python bench/reward_gaming.py [--split test] [--domains a,b] [--limit N | --sample N] [--json out.json]
     python bench/reward_gaming.py --domains triage_emergency --task-pattern '^tr_calc_'   # the demo's held-out tasks

@@ -9,9 +9,9 @@ A dangerous case is detected when every pattern it expects is reported; a safe c
 alarm when any violation is reported. The baseline revision's code (envs/ and tests/) is
 exported with `git archive` into a temporary folder and runs the same cases in a subprocess; a
 pattern that did not exist at that revision counts as not detected. The default baseline,
-749e5f4, is the last commit before issue 14's safety work. Per-episode detector time is printed
-for both; the cases were written by the engineer who changed the detector, so the current rates
-are not a held-out estimate (see docs/rewards.md).
+749e5f4, is the detector before the guideline-cited patterns and the safety set were added.
+Per-episode detector time is printed for both; the cases were written by the engineer who changed
+the detector, so the current rates are not a held-out estimate (see docs/rewards.md).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Coherence of the patients behind the tasks: fields that describe one person must agree.
 
-A generator that draws each field on its own makes patients no clinician would believe (a man
+A task generator that draws each field on its own makes patients no clinician would believe (a man
 named Olga, a 24-year-old retired teacher, a post-dates induction at 39 weeks, a GCS of 14 on a
 ventilator). Each relation is one named `Rule` below, with the guideline or label it follows; the
 rules run over every task of a domain and the record the task is about (its patient, or its study),
@@ -27,7 +27,7 @@ from envs.core.task import Task
 
 # -- tables -----------------------------------------------------------------------------------------
 
-# Given names by sex, as the generators and the authored records use them. A patient's first name
+# Given names by sex, as the task generators and the authored records use them. A patient's first name
 # must be in the list of the patient's sex: a name in neither list is an error too, so a new name
 # pool is added here (with its sex) rather than drawn unchecked.
 FIRST_NAMES: dict[str, frozenset[str]] = {
@@ -69,10 +69,10 @@ SEX_SPECIFIC_CONDITIONS: dict[str, re.Pattern[str]] = {
 }
 
 # Occupations that fix an age band: plausibility bounds, not a guideline (retirement before 55 and
-# full-time study past 35 are rare enough that a generator must not draw them by chance).
+# full-time study past 35 are rare enough that a task generator must not draw them by chance).
 OCCUPATION_AGE: dict[str, tuple[int, int]] = {"retired": (55, 120), "student": (16, 35)}
 
-# Life events that fix the occupation (a generator draws them together).
+# Life events that fix the occupation (a task generator draws them together).
 STRESSOR_OCCUPATION: dict[str, Callable[[str], bool]] = {
     "exams": lambda occupation: "student" in occupation,
     "job loss": lambda occupation: not any(w in occupation for w in ("retired", "student")),

@@ -425,8 +425,8 @@ def _build_indexes(writer, staging: Path, n: int, progress: bool, echo) -> dict:
         if (staging / sub).exists():
             shutil.rmtree(staging / sub)
     # Two passes over the store rather than one: tantivy indexes in background threads, and on
-    # 2 cores those threads and the Python thread feeding bm25s slow each other down (measured:
-    # 32 s interleaved vs 18 s in sequence for 100K passages).
+    # 2 cores those threads and the Python thread feeding bm25s slow each other down (docs/benchmarks.md,
+    # "Figures behind code defaults").
     bm = BM25Builder()
     sources: dict[str, int] = {}
     categories: dict[str, int] = {}

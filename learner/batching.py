@@ -34,8 +34,8 @@ FINAL_STATES = ("consumed", "filled", "filtered", "failed", "stale", "leftover",
 def is_correct(sample: RolloutSample, cfg: RunConfig) -> bool:
     """Whether an episode counts as correct (dynamic sampling, teacher hints, the accuracy metric).
 
-    Always the task's accuracy criterion, never the total alone (issue 13: cheap strategies reach
-    any total threshold): `is_correct` is the env's grader, `accuracy_at_least` the accuracy
+    Always the task's accuracy criterion, never the total alone (cheap strategies reach any total
+    threshold; bench/reward_gaming.py): `is_correct` is the env's grader, `accuracy_at_least` the accuracy
     component against `reward.accuracy_threshold`.
     """
     rule = cfg.reward.correct_if

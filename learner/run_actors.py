@@ -53,7 +53,8 @@ def init_ray(cfg: RunConfig, log: Callable[[str], None] | None = None) -> None:
 
 # A Ray node's agents are children of its raylet. When a driver that started a local cluster is
 # SIGKILLed, its GCS and raylet exit within a second, but these two are re-parented to init and
-# linger 60-75 s (measured with Ray 2.60), holding loopback ports.
+# linger for a minute or more (docs/benchmarks.md, "Figures behind code defaults"), holding loopback
+# ports.
 ORPHAN_AGENT_TITLES = ("ray::DashboardAgent", "ray::RuntimeEnvAgent")
 
 
@@ -87,7 +88,7 @@ def orphaned_ray_agents() -> list[int]:
 
 def reap_orphaned_ray_agents() -> list[int]:
     """SIGKILL the agents `orphaned_ray_agents` finds; returns their pids. SIGKILL: their SIGTERM
-    handler runs on their event loop, and an orphan was measured still running 24 s after SIGTERM;
+    handler runs on their event loop, and an orphan can outlive SIGTERM by tens of seconds;
     with no node left they hold nothing worth a clean exit. The shell equivalent:
 
         ps -eo pid=,ppid=,args= | awk '$2 == 1 && ($3 == "ray::DashboardAgent" || $3 == "ray::RuntimeEnvAgent") {print $1}' | xargs -r kill -9

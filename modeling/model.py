@@ -724,12 +724,6 @@ def per_token_entropy(
     return token_stats(model, input_ids, attention_mask, temperature=temperature, with_entropy=True).entropy
 
 
-def entropy_from_logits(logits: torch.Tensor) -> torch.Tensor:
-    """Entropy over the last dimension of raw logits."""
-    logp = F.log_softmax(logits.float(), dim=-1)
-    return -(logp.exp() * logp).sum(-1)
-
-
 def split_by_budget(indices: list[int], lengths: list[int], max_samples: int,
                     max_tokens: int | None = None) -> list[list[int]]:
     """`indices` in order, cut into groups of at most `max_samples` samples and, with `max_tokens`, at

@@ -96,8 +96,8 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
     # Objects the tests dropped inside reference cycles (weight-sync groups with their gloo process
     # group and TCPStore server thread, asyncio loops) are destroyed now, while the interpreter is
     # whole, not by the last collection of interpreter shutdown, after the thread states are gone
-    # (measured: 2 WeightSyncGroups and a running `pt_tcpstore_uv` server thread were still alive
-    # after the last test of tests/training).
+    # (weight-sync groups and their running `pt_tcpstore_uv` server thread outlive the last test of
+    # tests/training otherwise).
     gc.collect()
     threads = leftover_threads()
     for thread in threads:

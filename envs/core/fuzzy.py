@@ -6,7 +6,8 @@ cutoff: `real_quick_ratio` (from the two lengths), `quick_ratio` (2 * the size o
 intersection of the two strings' characters / the total length) and `ratio` (the real matching).
 The first two are upper bounds of the third, so they are necessary conditions. Over 11,000 drug
 names difflib computes them name by name in Python: ~10 ms per unknown name, and an action of
-thousands of lookups of unknown names took tens of seconds (issue 13).
+thousands of lookups of unknown names takes tens of seconds (docs/benchmarks.md, "A hostile
+action's cost").
 
 `FuzzyIndex` keeps a name-by-character count matrix. Per query it computes `quick_ratio` for all
 names at once (numpy, only over the query's own characters), keeps the names whose lengths and

@@ -1,7 +1,8 @@
 """A text space that contains any string (Unicode, newlines, JSON) and pickles small.
 
 gymnasium's `Text` checks every character against its charset. A charset of all Unicode costs
-~200 MB and a 46 MB pickle (measured), unusable across Ray; printable ASCII rejects newlines
+hundreds of MB and a pickle of tens of MB (docs/benchmarks.md, "Figures behind code defaults"),
+unusable across Ray; printable ASCII rejects newlines
 and most clinical text. So we keep a small printable charset for *sampling* and override
 `contains` to accept any `str` within the length bounds.
 """

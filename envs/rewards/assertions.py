@@ -41,7 +41,8 @@ embedding reads as close to the forbidden drug, or prescribing another drug cann
 unit doing the contrary act on the object does not count either ("continue dual antiplatelet
 therapy" against "interrupt dual antiplatelet therapy"), while a stop-type act is done by a stop verb that is itself a negation cue
 ("hold DAPT"), unless that verb is negated ("do not stop DAPT").
-`RuleGrader(use_observations=False)` leaves tool results out (the grader before issue 14).
+`RuleGrader(use_observations=False)` leaves tool results out: it grades only the agent's
+text, its answer and its calls (the baseline of `bench/assertion_calibration.py`).
 
 Rubric (HealthBench style): required elements and required tools earn their points times their
 score; forbidden elements (and any item with negative points) subtract |points| times their
@@ -114,7 +115,8 @@ class RuleGrader:
     Args:
         use_observations: Count what the agent's successful tool calls returned as evidence for
             positive criteria (what the agent established in the episode). False grades only the
-            agent's text, its answer and its calls (the grader before the calibration of issue 14).
+            agent's text, its answer and its calls (the baseline `bench/assertion_calibration.py` compares
+            against).
     """
 
     name = "rule"

@@ -5,7 +5,7 @@
 
 A real attempt at an answer is `format.real_attempt` (an empty answer, no submission, a list of
 every option, a copy of the task or, for a choice task, no single committed option is none):
-agreeing with oneself about nothing earns nothing (issue 13).
+agreeing with oneself about nothing earns nothing, so a non-answer cannot collect coherence credit.
 
 * conclusion: 1 for a committed answer, halved by hedging language in the conclusion such as
   "not sure" or "cannot determine" (not for choice tasks, whose committed letter is the answer).

@@ -21,8 +21,9 @@ scores 0, except the final turn when it is the answer (that is how a chat answer
 
 Format (and coherence) credit needs a *real attempt at an answer* (`real_attempt`): well-formed
 calls that lead nowhere earn nothing, so an empty answer, an episode that never submits, or an
-answer that lists every option cannot collect the format and coherence weights (issue 13). A real
-attempt commits to the value the task asks for, as its accuracy grader reads it:
+answer that lists every option cannot collect the format and coherence weights (cheap strategies
+would otherwise beat a real attempt; `bench/reward_gaming.py`). A real attempt commits to the value
+the task asks for, as its accuracy grader reads it:
 
 * no answer at all (empty, whitespace, or a truncated episode without a submission): none;
 * an answer that copies the task's text (`accuracy.copies_question`): none;

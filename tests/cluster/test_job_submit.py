@@ -62,7 +62,7 @@ def test_tiny_ttopd_job_runs_through_ray_job_submit_and_shows_in_the_dashboard(
     # The job API is code execution on the cluster: no token, or a wrong one, is refused, and the
     # server listens on loopback only (reached from elsewhere through an SSH forward).
     assert head.get("/api/jobs/", token=None)[0] == 401
-    assert head.get("/api/jobs/", token="0" * 64)[0] == 403  # measured: missing 401, wrong 403
+    assert head.get("/api/jobs/", token="0" * 64)[0] == 403  # Ray: missing token 401, wrong one 403
     assert listening_addresses(head.dashboard_port) == {"127.0.0.1"}
 
     run_dir = tmp_path / "run"

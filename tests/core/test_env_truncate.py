@@ -1,6 +1,6 @@
 """An episode the agent runner cuts (token limit) is scored by the env, with the domain's own scorer,
-exactly as if the env had truncated it at its turn limit (issue 18: the agent loop used to re-score
-it with the generic reward, 0.40 instead of the pathway scorer's 0.0 on this task)."""
+exactly as if the env had truncated it at its turn limit (the generic reward would give 0.40 where the
+pathway scorer gives 0.0 on this task)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Task, split, database and policy files: every failure names the file (and the task / split /
-field where there is one), including files that are not UTF-8 (issue 13, item 7)."""
+field where there is one), including files that are not UTF-8."""
 
 from __future__ import annotations
 

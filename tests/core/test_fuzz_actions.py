@@ -1,4 +1,4 @@
-"""Property-based fuzzing of `env.step` (issue 13, item 1): over every domain's toolkit and every
+"""Property-based fuzzing of `env.step`: over every domain's toolkit and every
 action format the parser accepts (Hermes blocks, fenced JSON, a bare JSON object, a JSON list,
 OpenAI tool-call objects, a `tool_calls` message, function syntax, free text, and mixes of text
 and calls), with ordinary and hostile argument values, on ordinary and terminal turns.
@@ -48,7 +48,7 @@ def _deep(levels: int) -> str:
     return "[" * levels + "]" * levels
 
 
-# Raw JSON text that no Python value serialises to: the hostile classes of issue 13.
+# Raw JSON text that no Python value serialises to: the hostile classes of tests/core/test_hostile_actions.py.
 HOSTILE_JSON_TEXT = st.sampled_from([
     _deep(65), _deep(1000), "9" * 101, "9" * 400, "-" + "9" * 5000, "1e999999", "-1e400", "NaN", "Infinity",
     '"\\ud800"', '{"a": ' * 80 + "1" + "}" * 80,

@@ -1,4 +1,4 @@
-"""`envs.core.fuzzy`: indexed suggestions equal `difflib.get_close_matches` (issue 13, item 2)."""
+"""`envs.core.fuzzy`: indexed suggestions equal `difflib.get_close_matches`."""
 
 from __future__ import annotations
 

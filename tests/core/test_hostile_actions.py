@@ -1,7 +1,7 @@
-"""Hostile actions (issue 13): `env.step` never raises, whatever the action, in every domain, and
+"""Hostile actions: `env.step` never raises, whatever the action, in every domain, and
 the cost of one action is bounded by the per-action call cap.
 
-Each class of action that used to raise out of `step` has a one-line reproducer below; a seeded
+Each class of action that has raised out of `step` has a one-line reproducer below; a seeded
 random test mixes these classes over the ten domains, on ordinary and on terminal turns.
 """
 
@@ -181,8 +181,8 @@ def test_seeded_random_hostile_actions_never_raise(domain):
 
 
 def test_calls_per_action_are_capped_and_the_rest_refused():
-    # The reproducer from issue 13: one 99 KB action of 3,300 lookups of unknown drug names took
-    # 33 s uncapped on this machine (fuzzy suggestions over the whole name index per call).
+    # One 99 KB action of 3,300 lookups of unknown drug names: uncapped, every call asks for fuzzy
+    # suggestions over the whole name index (its cost: docs/benchmarks.md, "A hostile action's cost").
     env = submit_env("drug_interaction")
     action = "\n".join(f'lookup_drug(name="zq{i:04d}xkv")' for i in range(3300))
     assert 95_000 < len(action) <= 100_000
@@ -191,7 +191,7 @@ def test_calls_per_action_are_capped_and_the_rest_refused():
     refusal = f"{3300 - 32} tool calls after the first 32 were not run: an action may make at most 32 calls"
     assert refusal in info["parse_errors"] and refusal in observation
     assert len(env.trajectory().turns[-1].tool_calls) == 32
-    # Its time (32.8 s uncapped -> 0.35 s) is measured by bench/hostile_step.py, not asserted here.
+    # Its time is bench/hostile_step.py's to measure, not asserted here.
 
 
 def test_submit_within_the_cap_still_ends_the_episode():

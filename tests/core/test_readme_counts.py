@@ -1,5 +1,5 @@
 """The counts the README states are computed, not remembered: a new task, tool, instrument, safety
-pattern or KB source that changes one fails here until the README says so (issue 18)."""
+pattern or KB source that changes one fails here until the README says so."""
 
 from __future__ import annotations
 

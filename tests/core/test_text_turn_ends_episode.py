@@ -1,5 +1,5 @@
 """`HealthcareGymEnv(text_turn_ends_episode=True)`: a turn without a tool call (and without a parse
-error) ends the episode as the submitted answer, graded as one (issue 17, item 3: the chat-agent
+error) ends the episode as the submitted answer, graded as one (the chat-agent
 convention TRL's tools mode follows). The default still continues the episode."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Task data whose natural-language assertions the gold solution satisfies (issue 14, item 3).
+"""Task data whose natural-language assertions the gold solution satisfies.
 
 The criteria of a task are written from its guideline; its expected actions and gold answer are the
 reference solution. When a criterion asks for something the gold never does ("starts
@@ -75,7 +75,7 @@ def test_gold_replays_satisfy_their_own_assertions_and_a_wrong_episode_does_not(
         assert wrong < 0.9 and wrong <= score - 0.15, f"{task.id}: the replay of {other.id} scores {wrong:.2f}, gold {score:.2f}"
 
 
-# -- issue 14 item 1: rare-disease questions the domain's ranking tool identifies ----------------------
+# -- rare-disease questions the domain's ranking tool identifies ------------------------------------
 def test_every_medical_qa_rare_disease_question_ranks_its_gold_in_the_top_three():
     """The phenotype list of an hpo_diagnosis question must identify its disease: the domain's own
     ranking tool (search_diseases_by_phenotypes) puts the gold in its top 3, else the question reads as

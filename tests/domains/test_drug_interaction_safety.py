@@ -59,7 +59,7 @@ def test_prescribing_to_the_pregnant_patient_is_detected(env, drug):
     assert not [v for v in violations if v.pattern_id == "drug_condition.contraindicated" and "pregnancy" in v.evidence]
 
 
-# -- the US severity overlay (issue 14 item 5) -----------------------------------------------------
+# -- the US severity overlay -----------------------------------------------------------------------
 @pytest.mark.parametrize("a, b, level, cited", [
     ("warfarin", "amiodarone", "major", "Cordarone"), ("warfarin", "fluconazole", "major", "Diflucan"),
     ("warfarin", "metronidazole", "major", "Flagyl"), ("digoxin", "amiodarone", "major", "Cordarone"),

@@ -1,4 +1,4 @@
-"""Clinical validity of the task generators (issue 14, items 1 and 6).
+"""Clinical validity of the task generators.
 
 Each test checks every generated task of its kind against the clinical rule the generator must
 respect, written here from the guideline rather than read back from the generator's own tables:

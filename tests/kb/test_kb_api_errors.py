@@ -1,6 +1,6 @@
 """The knowledge base's direct API (`KnowledgeBase.search / rank / get / article`, `StoreReader`)
 refuses bad arguments with an error naming the argument, and the KB service's actors survive every
-one of them (issue 13, item 7)."""
+one of them."""
 
 from __future__ import annotations
 

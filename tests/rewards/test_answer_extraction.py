@@ -1,4 +1,4 @@
-"""Answer extraction (issue 13, item 4): every option listed after an answer marker is no answer,
+"""Answer extraction: every option listed after an answer marker is no answer,
 and an option's text given as the final answer after other options were discussed is that option."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ WOUND = {"A": "Rotator cuff tear", "B": "Pneumothorax due to pleural injury", "C
     "**Answer:** A) Vitamin A\nB) Vitamin C\nC) Iron\nD) Vitamin D",
 ])
 def test_every_option_listed_after_an_answer_marker_is_no_answer(text):
-    # before the fix the first listed letter (A) was credited
+    # a reader taking the first letter after the marker would credit A
     assert extract_choice(text, OPTS) is None
 
 
@@ -52,7 +52,7 @@ def test_a_single_committed_letter_is_still_an_answer(text, expected):
      "Most likely diagnosis: traumatic carotid aneurysm", "D"),
 ])
 def test_option_text_as_the_final_answer_after_other_options_is_that_option(text, expected):
-    # before the fix these were None: more than one option text appears in the whole answer
+    # more than one option text appears in the whole answer; the final answer's text decides
     assert extract_choice(text, WOUND) == expected
 
 

@@ -1,4 +1,4 @@
-"""Calibration of the rule grader for NL assertions (issue 14, item 3): what a gold replay did and
+"""Calibration of the rule grader for NL assertions: what a gold replay did and
 found counts, a negative criterion is broken only by the agent's own words and acts, and numbers
 in a criterion must match. The full distribution over every task is bench/assertion_calibration.py."""
 

@@ -159,7 +159,7 @@ def test_unreachable_judge_is_an_error_not_a_zero():
     assert breakdown.assertion == 0.0  # the rules' verdict on a bad episode, reported with the error
 
 
-# -- negative criteria: broken only by the forbidden act on its object (issue 14, item 3) ----------
+# -- negative criteria: broken only by the forbidden act on its object -----------------------------
 @pytest.fixture(scope="module")
 def _model():
     from envs.rewards import similarity
@@ -299,8 +299,8 @@ def test_unnegated_keeps_the_clauses_a_negation_does_not_reach():
 
 
 def test_an_act_on_another_drug_does_not_break_a_negative_criterion(grading):
-    # the verb alone used to be half the keywords: prescribing ceftriaxone broke "does not prescribe
-    # amoxicillin" (cd_case_cd_p13's criterion against another case's replay scored 0)
+    # the verb alone must not break the criterion: prescribing ceftriaxone is not prescribing
+    # amoxicillin (cd_case_cd_p13's criterion against another case's replay)
     task = _di_task("The agent does not prescribe amoxicillin.")
     other = episode(task, turn(call("prescribe_medication", {"drug": "ceftriaxone", "dose": "2 g IV daily"})),
                     answer="pyelonephritis", reasoning="Ceftriaxone 2 g IV daily.")

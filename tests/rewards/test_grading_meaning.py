@@ -1,5 +1,5 @@
-"""Grading by meaning (issue 14, item 2): exact and short answers that say the gold in other words
-pass, answers that negate it never do; and the graded paraphrase set (item 3) agrees with the
+"""Grading by meaning: exact and short answers that say the gold in other words
+pass, answers that negate it never do; and the graded paraphrase set agrees with the
 grader at or above a stated threshold."""
 
 from __future__ import annotations

@@ -129,7 +129,6 @@ def test_coherence_submit_reasoning_counts_and_hedges_lose():
     hedge = view(task, answer="A or C")
     score, details = coherence_score(hedge)
     # a hedge commits to no option: no real attempt at an answer, so no coherence credit at all
-    # (it was 0.4 * 0.25 + 0.4 + 0.2 = 0.7 before issue 13)
     assert score == 0.0 and details["no_attempt"] == "no single option committed to"
 
 

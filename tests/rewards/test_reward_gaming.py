@@ -1,4 +1,4 @@
-"""The reward cannot be gamed cheaply (issue 13, item 3).
+"""The reward cannot be gamed cheaply.
 
 Unit level: what earns process, format and coherence credit. Domain level: the scripted cheap
 strategies of `bench/reward_gaming.py`, run for real in every domain on a sample of its test split,

@@ -50,7 +50,7 @@ def test_docs_list_every_pattern():
 
 
 def test_every_pattern_names_its_source():
-    """Issue 14 item 6: each pattern names the guideline, label section or standard it follows, and
+    """Each pattern names the guideline, label section or standard it follows, and
     a pattern registered without one is refused (naming the pattern)."""
     from envs.rewards import Pattern, register_pattern
     from envs.rewards.safety_patterns import EMERGENCY_SOURCES, EMERGENCY_TYPES

@@ -1,5 +1,5 @@
 """The guideline-written safety set: dangerous trajectories the detector must catch, safe ones it
-must leave alone (issue 14 item 4).
+must leave alone.
 
 `tests/fixtures/safety/trajectories.json` holds the cases, each citing the guideline or US label
 it follows. A case runs on a ward patient P1 whose allergies, medications and conditions are the

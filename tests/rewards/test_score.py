@@ -33,7 +33,7 @@ def test_total_is_a_normalised_weighted_sum_over_applicable_dimensions():
     traj = episode(task, turn(call("think", {"thought": "need a check"})), answer="major")
     b = score_episode(traj, task)
     # accuracy 1; process: coverage 0, and a `think` call earns neither diversity nor thoroughness
-    # (issue 13; it earned diversity 1 -> process 0.2 before) -> 0
+    # (only calls the task needs count) -> 0
     assert b.accuracy == 1.0 and b.process == 0.0
     expected = (0.25 * 1.0 + 0.20 * 0.0 + 0.20 * b.safety + 0.10 * b.format + 0.10 * b.coherence) / 0.85
     assert b.base_total == pytest.approx(expected) and b.total == pytest.approx(expected)

@@ -1,6 +1,6 @@
 """Checkpoint failures name the file: truncated or non-UTF-8 JSON, missing or mistyped keys, bad
 safetensors, bad optimizer state; `latest` stays inside the run folder; atomic writes never leave a
-temporary file or bare NaN behind (issue 13, item 7)."""
+temporary file or bare NaN behind."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Run configs refuse, at load time and with the key path, what would otherwise fail later or
 silently train nonsense: non-finite or absurd numbers, booleans and strings as numbers, GRPO groups
 of one, thresholds outside their range, unknown domains / splits, missing local paths, files that
-are not UTF-8 (issue 13, item 7)."""
+are not UTF-8."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Batched env-actor calls (issue 17, item 1): `EnvActor.batch` / `batch_stream` answer every call
+"""Batched env-actor calls: `EnvActor.batch` / `batch_stream` answer every call
 on its own (one bad episode never fails the batch), `_ActorBatcher` coalesces concurrent episodes'
 calls, and the batched and streamed pools give the same trajectories as the unbatched pool and the
 in-process loop.

@@ -1,10 +1,11 @@
-"""Hostile actions and failing env methods inside the Ray env actors (issue 13, item 1): neither
+"""Hostile actions and failing env methods inside the Ray env actors: neither
 kills the actor nor loses the batch.
 
-Hostile actions (every reproducer class of issue 13, oversized and non-string actions) go through
-a live `EnvActor`: every call returns, the episodes end scored, and the actor is the same process
-afterwards. A failing env method (a toolkit bug that raises out of `env.step`) ends only its own
-episode, as `env_error`, while the rest of the batch completes on the same actor.
+Hostile actions (every reproducer class of tests/core/test_hostile_actions.py, oversized and
+non-string actions) go through a live `EnvActor`: every call returns, the episodes end scored, and
+the actor is the same process afterwards. A failing env method (a toolkit bug that raises out of
+`env.step`) ends only its own episode, as `env_error`, while the rest of the batch completes on the
+same actor.
 
 This module is also the "ward_faulty" test domain the actors import (`get_environment`,
 `get_tasks`, `get_splits` below): the ward domain with a toolkit that raises on one patient id.

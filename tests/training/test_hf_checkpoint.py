@@ -5,8 +5,8 @@ Log-prob agreement is checked on the generator's own samples: the HF generator r
 of each token it draws; the learner's `logprob_abs_diff` (mean |learner - rollout| over the sampled
 tokens) and the teacher's log-probs (hints off) must match them. Tolerance: 2e-5 nats per token
 (fp32; the generator scores incrementally over a KV cache / recurrent state with left padding, the
-learner and teacher in one right-padded forward, so only float summation order differs; measured
-maximum differences over 72 sampled tokens per family: <= 1e-6). After one learner step (lr 1e-2)
+learner and teacher in one right-padded forward, so only float summation order differs; the observed
+differences: docs/benchmarks.md, "Figures behind code defaults"). After one learner step (lr 1e-2)
 the old log-probs are off by > 1e-3.
 """
 

@@ -1,7 +1,7 @@
 """`rollout.text_turn_ends_episode` and the env-pool batching keys of the run config reach the
 episodes: the config validates them, the Ray env pool built from the config carries them, and a
-text turn ends an episode with the same record through the env actors as in the plain loop
-(issue 17, items 1-2 of task C). The evaluation's agent condition reports such an end as
+text turn ends an episode with the same record through the env actors as in the plain loop.
+The evaluation's agent condition reports such an end as
 "text_answer"."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """A `hcgym train` that fails before its first learner step leaves nothing half-made in the run
-folder, and says exactly what it removed and what it kept (issue 13, item 7)."""
+folder, and says exactly what it removed and what it kept."""
 
 from __future__ import annotations
 

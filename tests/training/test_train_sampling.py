@@ -125,7 +125,7 @@ def test_rewards_and_correctness_rules():
 @pytest.mark.parametrize("reward", [{"correct_if": "total_at_least"}, {"correct_if": "reward_positive"},
                                     {"correct_if": "is_correct", "total_threshold": 0.55}])
 def test_a_correctness_rule_on_the_total_alone_is_refused_naming_the_key(reward):
-    # "wrong" earns a 0.5 total with a wrong answer: a rule on the total would call it correct (issue 13)
+    # "wrong" earns a 0.5 total with a wrong answer: a rule on the total would call it correct
     with pytest.raises(ConfigError) as err:
         validate_config({"reward": reward})
     key = "reward.total_threshold" if "total_threshold" in reward else "reward.correct_if"

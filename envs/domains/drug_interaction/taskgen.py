@@ -1,6 +1,6 @@
 """Generated tasks with exact oracles, computed by running the gold tool calls on the built database.
 
-Each generator picks its items deterministically (sorted candidates, a seeded RNG), states the
+Each task generator picks its items deterministically (sorted candidates, a seeded RNG), states the
 expected tool calls, runs them through the real toolkit, and reads the gold answer from the tool
 results, so the oracle is by construction what the tools return. A call that fails aborts the
 build: a generated task whose expected action errors is a builder bug.
@@ -73,7 +73,7 @@ class Spec:
     challenges: list[str] = field(default_factory=list)
 
 
-class Generator:
+class TaskGenerator:
     def __init__(self, db: DrugInteractionDB) -> None:
         self.db = db
         self.rng = random.Random(SEED)
@@ -476,7 +476,7 @@ class Generator:
                 ))
 
     def pregnancy_tasks(self) -> None:
-        # The seeded draw stays over drugdose's lettered drugs (the RNG stream of later generators is
+        # The seeded draw stays over drugdose's lettered drugs (the RNG stream of later task generators is
         # unchanged); a drawn drug whose label rule carries no letter is asked the label's conclusion.
         profiles = [p for p in self.db.dose_profiles.values() if p.pregnancy_category]
         drawn = [p.drug_id for p in self.sample(sorted(profiles, key=lambda p: p.drug_id), 16)]
@@ -617,7 +617,7 @@ def _slug(text: str) -> str:
 
 def generate_tasks(db: DrugInteractionDB) -> tuple[list[Task], dict[str, list[str]]]:
     """All generated tasks and their fixed train/test split."""
-    tasks = Generator(db).run()
+    tasks = TaskGenerator(db).run()
     splits: dict[str, list[str]] = {"train": [], "test": []}
     for task in tasks:
         splits[split_of(task.id)].append(task.id)

@@ -52,26 +52,26 @@ def _write_json(path: Path, data) -> None:
     path.write_text(json.dumps(data, ensure_ascii=False, sort_keys=True, separators=(",", ":")) + "\n", encoding="utf-8")
 
 
-def generator_rng(generator: str) -> random.Random:
-    """Each generator draws from its own seeded stream, so changing what one generator keeps or
+def task_rng(task_kind: str) -> random.Random:
+    """Each task generator draws from its own seeded stream, so changing what one generator keeps or
     drops (e.g. the rare-disease top-3 check) leaves every other generator's tasks unchanged."""
-    return random.Random(f"{SEED}:{generator}")
+    return random.Random(f"{SEED}:{task_kind}")
 
 
 def generate_tasks(kb: MedicalKnowledge, specs: list[dict]) -> list[dict]:
     used_diseases: set[str] = set()
     used_drugs: set[str] = set()
     tasks: list[dict] = []
-    tasks += G.icd_tasks(kb, generator_rng("icd"), COUNTS["icd_each"])
-    tasks += G.hpo_diagnosis_tasks(kb, generator_rng("hpo_dx"), COUNTS["hpo_dx"], used_diseases)
-    tasks += G.hpo_feature_tasks(kb, generator_rng("hpo_feature"), COUNTS["hpo_feature"], used_diseases)
-    tasks += G.hpo_inheritance_tasks(kb, generator_rng("hpo_inheritance"), COUNTS["hpo_inheritance"], used_diseases)
-    tasks += G.drug_class_tasks(kb, generator_rng("drug_class"), COUNTS["drug_class"], used_drugs)
-    tasks += G.class_member_tasks(kb, generator_rng("class_member"), COUNTS["class_member"], used_drugs)
-    tasks += G.drug_moa_tasks(kb, generator_rng("drug_moa"), COUNTS["drug_moa"], used_drugs)
-    tasks += G.brand_tasks(kb, generator_rng("brand"), COUNTS["brand"], used_drugs)
-    tasks += G.guideline_tasks(kb, specs, generator_rng("guideline"))
-    tasks += G.calculator_tasks(generator_rng("calculator"), COUNTS["calc_each"])
+    tasks += G.icd_tasks(kb, task_rng("icd"), COUNTS["icd_each"])
+    tasks += G.hpo_diagnosis_tasks(kb, task_rng("hpo_dx"), COUNTS["hpo_dx"], used_diseases)
+    tasks += G.hpo_feature_tasks(kb, task_rng("hpo_feature"), COUNTS["hpo_feature"], used_diseases)
+    tasks += G.hpo_inheritance_tasks(kb, task_rng("hpo_inheritance"), COUNTS["hpo_inheritance"], used_diseases)
+    tasks += G.drug_class_tasks(kb, task_rng("drug_class"), COUNTS["drug_class"], used_drugs)
+    tasks += G.class_member_tasks(kb, task_rng("class_member"), COUNTS["class_member"], used_drugs)
+    tasks += G.drug_moa_tasks(kb, task_rng("drug_moa"), COUNTS["drug_moa"], used_drugs)
+    tasks += G.brand_tasks(kb, task_rng("brand"), COUNTS["brand"], used_drugs)
+    tasks += G.guideline_tasks(kb, specs, task_rng("guideline"))
+    tasks += G.calculator_tasks(task_rng("calculator"), COUNTS["calc_each"])
     ids = Counter(t["id"] for t in tasks)
     dupes = [i for i, c in ids.items() if c > 1]
     if dupes:

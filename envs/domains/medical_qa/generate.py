@@ -1,6 +1,6 @@
 """Generate the medical-QA multiple-choice tasks with exact oracles from the reference data.
 
-Each generator picks items deterministically (seeded `random.Random`) and builds distractors from
+Each task generator picks items deterministically (seeded `random.Random`) and builds distractors from
 the same category, never "all of the above":
 
 * ICD-10-CM: code <-> description, distractors are billable sibling codes of the same category;
@@ -226,7 +226,7 @@ def hpo_diagnosis_tasks(kb: MedicalKnowledge, rng: random.Random, n: int, used: 
             continue
         # The vignette must identify its disease: the domain's own ranking tool
         # (search_diseases_by_phenotypes -> rank_diseases) has to put the gold in its top 3,
-        # otherwise the features read as another disease and the task is dropped (issue 14 item 1).
+        # otherwise the features read as another disease and the task is dropped.
         if did not in [r["disease_id"] for r in kb.rank_diseases(chosen, 3)]:
             continue
         scored.sort(key=lambda x: (-x[1], x[0]))
