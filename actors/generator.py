@@ -350,9 +350,6 @@ class GeneratorService:
     def version(self) -> int:
         return self.generator.version
 
-    def get_stats(self) -> dict[str, float]:
-        return dict(self.stats, version=self.generator.version)
-
     async def _run(self) -> None:
         while True:
             batch = [await self._queue.get()]

@@ -2,11 +2,12 @@
 
 * Free text (almost every agent query): **bm25s** with its numba backend. bm25s precomputes
   every (term, document) BM25 weight into a CSC sparse matrix, so a query is a sum of a few
-  columns plus a top-k selection: measured 1.7 ms at the median over 828K passages, against
-  6.5 ms for tantivy and 674 ms for the paper's SQLite FTS5 (see docs/kb.md, docs/benchmarks.md).
+  columns plus a top-k selection, the fastest of the engines compared (docs/kb.md; docs/benchmarks.md,
+  "Knowledge base").
   Loaded with ``mmap=True``, so every process on a machine shares one copy in the page cache.
   Queried with our own numba kernel over that matrix (`_topk_kernel`: the same weights, a
-  top-k over only the documents the query touches), 1.9x faster than bm25s's `retrieve`.
+  top-k over only the documents the query touches), faster than bm25s's `retrieve` because it skips
+  the dense score array of all documents (docs/benchmarks.md, "Knowledge base").
 * Query syntax (phrases, AND/OR/NOT, +/-): **tantivy**, which has positions, phrase queries,
   boolean queries and block-max WAND. Same analyzer, same BM25 parameters (k1=1.2, b=0.75,
   Lucene idf), so the two engines score a plain term identically up to tantivy's one-byte

@@ -254,8 +254,8 @@ class RewardConfig(ConfigModel):
     penalize: list[Literal["response_tokens", "max_turns"]] = Field(default_factory=lambda: ["response_tokens"])
     # is_correct: the env's grader (the task's accuracy criterion met, no critical violation);
     # accuracy_at_least: the accuracy component >= accuracy_threshold. No rule on the total alone:
-    # "every READ tool once + a constant answer" passed `total >= 0.55` in 44 of 44 episodes, 5 right
-    # (issue 13; bench/reward_gaming.py).
+    # cheap strategies such as "every READ tool once + a constant answer" pass any total threshold
+    # while mostly wrong (bench/reward_gaming.py; docs/benchmarks.md, "Reward gaming").
     correct_if: Literal["is_correct", "accuracy_at_least"] = "is_correct"
     accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
     weights: dict[str, Any] | None = Field(
