@@ -44,13 +44,15 @@ class RolloutLimits(BaseModel):
     """Episode limits (paper defaults)."""
 
     model_config = ConfigDict(extra="forbid")
-    max_turns: int = Field(default=5, ge=1)
-    max_prompt_tokens: int = Field(default=8192, ge=1)
-    max_response_tokens: int = Field(default=12288, ge=1)
-    max_new_tokens_per_turn: int = Field(default=2048, ge=1)
-    # Tool results longer than this many characters are cut (with a marker) before tokenization;
-    # None keeps them whole. Tiny CPU configs use it to keep sequences short.
-    max_observation_chars: int | None = Field(default=None, ge=16)
+    max_turns: int = Field(default=5, ge=1, description="assistant turns per episode at most")
+    max_prompt_tokens: int = Field(default=8192, ge=1, description="tokens of the initial prompt at most")
+    max_response_tokens: int = Field(default=12288, ge=1, description="tokens after the prompt (generated plus tool "
+                                                                      "results) per episode at most")
+    max_new_tokens_per_turn: int = Field(default=2048, ge=1, description="tokens generated per assistant turn at most")
+    # Tiny CPU configs use it to keep sequences short.
+    max_observation_chars: int | None = Field(default=None, ge=16, description="tool results longer than this many "
+                                                                               "characters are cut (with a marker) "
+                                                                               "before tokenization; null = kept whole")
 
 
 PromptStyle = Literal["env", "compact"]

@@ -42,9 +42,9 @@ class SamplingConfig(BaseModel):
     """How tokens are drawn. Shared by every backend."""
 
     model_config = ConfigDict(extra="forbid")
-    temperature: float = Field(default=1.0, gt=0)
-    top_p: float = Field(default=1.0, gt=0, le=1)
-    top_k: int = Field(default=0, ge=0)  # 0 = off
+    temperature: float = Field(default=1.0, gt=0, description="sampling temperature (must equal learner.temperature)")
+    top_p: float = Field(default=1.0, gt=0, le=1, description="nucleus sampling mass; 1 = off")
+    top_k: int = Field(default=0, ge=0, description="sample among the k likeliest tokens; 0 = off")
 
 
 class GenerationRequest(BaseModel):

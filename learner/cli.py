@@ -1,4 +1,5 @@
-"""`hcgym train`, `hcgym plot`, `hcgym replay`, `hcgym plan` and `hcgym model fetch` (registered by `envs.cli`)."""
+"""`hcgym train`, `hcgym plot`, `hcgym replay`, `hcgym plan`, `hcgym model fetch` and `hcgym config reference`
+(registered by `envs.cli`)."""
 
 from __future__ import annotations
 
@@ -52,6 +53,21 @@ def _model_fetch(args: argparse.Namespace) -> int:
 
     path = fetch_model(args.model_id, revision=args.revision, cache_dir=args.cache_dir)
     print(path)
+    return 0
+
+
+def _config_reference(args: argparse.Namespace) -> int:
+    from learner.config_reference import check_reference, render_reference, write_reference
+
+    if args.check:
+        problems = check_reference(args.output or "docs/config.md")
+        for problem in problems:
+            print(f"hcgym config reference: {problem}", file=sys.stderr)
+        return 1 if problems else 0
+    if args.output is None:
+        sys.stdout.write(render_reference())
+    else:
+        print(write_reference(args.output))
     return 0
 
 
@@ -123,3 +139,15 @@ def register(subparsers) -> None:
     fetch.add_argument("--revision", default=None, help="branch, tag or commit (default: main)")
     fetch.add_argument("--cache-dir", default=None, help="cache folder (default: the Hugging Face hub cache)")
     fetch.set_defaults(func=_model_fetch)
+
+    config = subparsers.add_parser("config", help="the run config's schema")
+    config_sub = config.add_subparsers(dest="config_command", required=True)
+    reference = config_sub.add_parser(
+        "reference", help="the reference page of every run-config setting (docs/config.md)",
+        description="Render the run config's reference page from the config models: one section per top-level "
+                    "section, a table per model (dotted key, type, default, description).")
+    reference.add_argument("--output", default=None, help="write the page here (default: print it)")
+    reference.add_argument("--check", action="store_true",
+                           help="exit 1 naming each setting without a description and a page at --output "
+                                "(default docs/config.md) that differs from the models")
+    reference.set_defaults(func=_config_reference)

@@ -47,12 +47,14 @@ class ConfigError(ValueError):
 class TinyModelConfig(ConfigModel):
     """A Qwen-architecture model built from a config, with a BPE tokenizer trained on the task corpus."""
 
-    architecture: Literal["qwen3", "qwen2"] = "qwen3"
-    vocab_size: int = Field(default=3072, ge=300)
-    include_stdlib_corpus: bool = True
-    max_stdlib_files: int = Field(default=150, ge=0)
-    # Config fields replacing modeling.model.TINY_MODEL_DEFAULTS (hidden_size, num_hidden_layers, ...).
-    overrides: dict[str, int | float | bool] = Field(default_factory=dict)
+    architecture: Literal["qwen3", "qwen2"] = Field(default="qwen3", description="model family of the built model")
+    vocab_size: int = Field(default=3072, ge=300, description="BPE vocabulary size, special and tool tokens included")
+    include_stdlib_corpus: bool = Field(default=True, description="also train the tokenizer on Python stdlib sources "
+                                                                  "(coverage of code-like text)")
+    max_stdlib_files: int = Field(default=150, ge=0, description="stdlib files read when include_stdlib_corpus is set")
+    overrides: dict[str, int | float | bool] = Field(
+        default_factory=dict, description="model config fields replacing modeling.model.TINY_MODEL_DEFAULTS "
+                                          "(hidden_size, num_hidden_layers, ...)")
 
 
 class ModelConfig(ConfigModel):
@@ -63,7 +65,8 @@ class ModelConfig(ConfigModel):
     Checkpoint layouts read: modeling/hf_checkpoint.py.
     """
 
-    kind: Literal["tiny", "pretrained"] = "tiny"
+    kind: Literal["tiny", "pretrained"] = Field(default="tiny", description="tiny: build a small model from model.tiny; "
+                                                                         "pretrained: load model.path")
     path: str | None = Field(default=None, description="local checkpoint folder or cached hub id (kind: pretrained)")
     revision: str | None = Field(default=None, description="hub revision (branch, tag or commit) when path is a hub id")
     tiny: TinyModelConfig = Field(default_factory=TinyModelConfig)
@@ -82,34 +85,37 @@ class ModelConfig(ConfigModel):
 class SFTConfig(ConfigModel):
     """Warm start: supervised fine-tuning on gold-replay trajectories before RL."""
 
-    enabled: bool = False
-    epochs: float = Field(default=3.0, gt=0)
-    lr: float = Field(default=3e-3, gt=0, le=1)
-    batch_size: int = Field(default=8, ge=1)
+    enabled: bool = Field(default=False, description="run the gold-replay SFT warm start before RL")
+    epochs: float = Field(default=3.0, gt=0, description="passes over the gold replays (a fraction allowed)")
+    lr: float = Field(default=3e-3, gt=0, le=1, description="peak AdamW learning rate (linear warmup, then cosine "
+                                                            "decay to 0)")
+    batch_size: int = Field(default=8, ge=1, description="gold replays per optimizer step")
     max_tasks: int | None = Field(default=None, ge=1, description="gold replays from at most this many train tasks")
-    weight_decay: float = Field(default=0.0, ge=0)
-    warmup_frac: float = Field(default=0.05, ge=0, le=1)
-    max_grad_norm: float = Field(default=1.0, gt=0)
-    # Share of the gold replays shown with a TT-OPD hint turn inserted (reinforcing or corrective at
-    # random, same gold response), so the teacher's hinted context is not out of distribution for a
-    # policy that would otherwise never have seen one. Used only when teacher hints are on.
-    hint_fraction: float = Field(default=0.0, ge=0, le=1)
+    weight_decay: float = Field(default=0.0, ge=0, description="AdamW weight decay")
+    warmup_frac: float = Field(default=0.05, ge=0, le=1, description="share of the SFT steps with linear warmup")
+    max_grad_norm: float = Field(default=1.0, gt=0, description="clip the gradients' global L2 norm to this")
+    # So the teacher's hinted context is not out of distribution for a policy that would otherwise
+    # never have seen one.
+    hint_fraction: float = Field(default=0.0, ge=0, le=1,
+                                 description="share of the gold replays shown with a TT-OPD hint turn inserted "
+                                             "(reinforcing or corrective at random, same gold response); read only "
+                                             "when teacher hints are on")
 
 
 class DataConfig(ConfigModel):
-    domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1)
-    # Domains outside envs/domains to register first (name -> module with get_environment/get_tasks),
-    # in the driver and in every env actor.
-    domain_modules: dict[str, str] = Field(default_factory=dict)
-    train_split: str = "train"
-    val_split: str = "test"
-    max_train_tasks: int | None = Field(default=None, ge=1)
-    max_val_tasks: int | None = Field(default=None, ge=1)
-    # Tasks whose prompt exceeds rollout.max_prompt_tokens are dropped up front (counted, logged).
-    filter_long_prompts: bool = True
-    # Keep only tasks whose id matches this regular expression (e.g. "^tr_calc_" for the calculator
-    # tasks of triage_emergency); None keeps all.
-    task_id_pattern: str | None = None
+    domains: list[str] = Field(default_factory=lambda: ["drug_interaction"], min_length=1,
+                               description="domains the tasks come from (registered names or data.domain_modules keys)")
+    domain_modules: dict[str, str] = Field(
+        default_factory=dict, description="domains outside envs/domains to register first, in the driver and in every "
+                                          "env actor: name -> module with get_environment/get_tasks")
+    train_split: str = Field(default="train", description="split the training tasks come from")
+    val_split: str = Field(default="test", description="split the validation tasks come from")
+    max_train_tasks: int | None = Field(default=None, ge=1, description="training tasks per run at most; null = all")
+    max_val_tasks: int | None = Field(default=None, ge=1, description="validation tasks at most; null = all")
+    filter_long_prompts: bool = Field(default=True, description="drop tasks whose prompt exceeds "
+                                                                "rollout.max_prompt_tokens up front (counted, logged)")
+    task_id_pattern: str | None = Field(default=None, description="keep only tasks whose id matches this regular "
+                                                                  "expression (e.g. '^tr_calc_'); null = all")
 
     @field_validator("task_id_pattern")
     @classmethod
@@ -125,29 +131,30 @@ class DataConfig(ConfigModel):
 class RolloutConfig(RolloutLimits):
     """Episode limits (from `RolloutLimits`) plus how rollouts are produced."""
 
-    # "env": the environment's system prompt (policy + JSON tool schemas); "compact": the call format
-    # and one signature line per tool (tiny CPU models; see actors.agent_loop.compact_system_prompt).
-    system_prompt: Literal["env", "compact"] = "env"
+    system_prompt: Literal["env", "compact"] = Field(
+        default="env", description="env: the environment's system prompt (policy + JSON tool schemas); compact: the "
+                                   "call format and one signature line per tool (tiny CPU models)")
     group_size: int = Field(default=3, description="G rollouts per prompt (at least 2: GRPO)")
-    num_env_actors: int = Field(default=2, ge=1)
-    slots_per_env_actor: int = Field(default=8, ge=1)
-    env_actor_max_restarts: int = Field(default=-1, ge=-1)
+    num_env_actors: int = Field(default=2, ge=1, description="env actor processes")
+    slots_per_env_actor: int = Field(default=8, ge=1, description="episodes in flight per env actor")
+    env_actor_max_restarts: int = Field(default=-1, ge=-1, description="Ray restarts per env actor; -1 = unlimited")
     max_episode_attempts: int = Field(default=5, ge=1, description="re-runs of an episode whose env actor died")
-    # Environment variables of the env actors (and of the driver's own in-process episodes: SFT gold
-    # replays), e.g. {"HCGYM_EMBEDDINGS": "0"} to grade free text by token overlap instead of loading
-    # a sentence-embedding model into every env process.
-    env_vars: dict[str, str] = Field(default_factory=dict)
-    # End an episode at a turn without a tool call (and without a parse error): its text is the
-    # submitted answer, end_reason "text_answer" (envs.env.HealthcareGymEnv text_turn_ends_episode).
-    # The chat-agent convention TRL's tools mode follows; off: the env reminds the agent of the call
-    # format and the episode goes on to submit_answer or max_turns.
-    text_turn_ends_episode: StrictBool = False
-    # Env-pool batching (actors.env_actor.EnvPool): send the calls of all episodes waiting on an env
-    # actor in one actor call (False: one actor call per reset / step / finish); with
-    # env_stream_after_s, stream a batch's answers back in chunks, one per that much actor time
-    # (null, the default: the whole batch's answers at once; docs/benchmarks.md "Batched env actors").
-    env_batch_calls: StrictBool = True
-    env_stream_after_s: float | None = Field(default=None, ge=0)
+    # E.g. {"HCGYM_EMBEDDINGS": "0"} grades free text by token overlap instead of loading a
+    # sentence-embedding model into every env process.
+    env_vars: dict[str, str] = Field(default_factory=dict, description="environment variables of the env actors (and "
+                                                                       "of the driver's in-process SFT gold replays)")
+    # The chat-agent convention TRL's tools mode follows (envs.env.HealthcareGymEnv text_turn_ends_episode).
+    text_turn_ends_episode: StrictBool = Field(
+        default=False, description="a turn without a tool call (and without a parse error) ends the episode, its text "
+                                   "the submitted answer (end_reason text_answer); false: the env reminds the agent of "
+                                   "the call format and the episode goes on")
+    # Env-pool batching (actors.env_actor.EnvPool; docs/benchmarks.md "Batched env actors").
+    env_batch_calls: StrictBool = Field(default=True, description="send the calls of all episodes waiting on an env "
+                                                                  "actor in one actor call; false: one actor call per "
+                                                                  "reset / step / finish")
+    env_stream_after_s: float | None = Field(
+        default=None, ge=0, description="stream a batch's answers back in chunks, one per this many seconds of actor "
+                                        "time; null = the whole batch's answers at once (needs env_batch_calls)")
 
     def env_kwargs(self) -> dict[str, Any]:
         """The `HealthcareGymEnv` arguments this section sets (the env actors and the driver's
@@ -184,15 +191,15 @@ class RolloutConfig(RolloutLimits):
 class GeneratorConfig(ConfigModel):
     backend: str = Field(default="hf", description="generator backend: a name in actors.generator.generator_backends() "
                                                    "(hf, vllm)")
-    num_generators: int = Field(default=1, ge=1)
+    num_generators: int = Field(default=1, ge=1, description="generator actors (one engine each)")
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
-    max_batch_size: int = Field(default=16, ge=1)
-    batch_wait_s: float = Field(default=0.01, ge=0)
+    max_batch_size: int = Field(default=16, ge=1, description="requests per generate batch at most")
+    batch_wait_s: float = Field(default=0.01, ge=0, description="seconds the first request of a batch waits for company")
     options: dict[str, Any] = Field(default_factory=dict, description="the backend's options (its options model: "
                                                                      "HFOptions, VLLMOptions), checked when the config loads")
-    num_cpus: float = Field(default=1.0, ge=0)
-    num_gpus: float = Field(default=0.0, ge=0)
-    max_restarts: int = Field(default=-1, ge=-1)
+    num_cpus: float = Field(default=1.0, ge=0, description="CPUs Ray reserves per generator actor")
+    num_gpus: float = Field(default=0.0, ge=0, description="GPUs Ray reserves per generator actor")
+    max_restarts: int = Field(default=-1, ge=-1, description="Ray restarts per generator actor; -1 = unlimited")
     max_call_attempts: int = Field(default=5, ge=1, description="retries of one generate call across restarts")
     python_executable: str | None = Field(
         default="auto",
@@ -243,21 +250,27 @@ class GeneratorConfig(ConfigModel):
 class RewardConfig(ConfigModel):
     """The RL reward and the correctness rule (dynamic sampling and teacher hints read `correct`)."""
 
-    kind: Literal["total", "cosine"] = "total"
-    # Eq. 4 (cosine length reward); max_length None = rollout.max_response_tokens.
-    r_max: float = 1.1
-    r_min: float = 0.7
-    r_penalty: float = -0.5
-    max_length: int | None = Field(default=None, ge=1)
-    # Which limits count as "truncated" (R_penalty) in Eq. 4: the response-token limit L_max, and
-    # optionally running out of assistant turns without submitting.
-    penalize: list[Literal["response_tokens", "max_turns"]] = Field(default_factory=lambda: ["response_tokens"])
+    kind: Literal["total", "cosine"] = Field(default="total", description="total: the env's 5D total in [0, 1]; "
+                                                                          "cosine: Eq. 4's length-shaped reward")
+    r_max: float = Field(default=1.1, description="Eq. 4: reward of a correct answer of length 0")
+    r_min: float = Field(default=0.7, description="Eq. 4: reward of a correct answer at max_length (a wrong one "
+                                                  "falls to -|r_min|)")
+    r_penalty: float = Field(default=-0.5, description="Eq. 4: reward of a truncated episode (see penalize)")
+    max_length: int | None = Field(default=None, ge=1, description="Eq. 4's L_max in assistant tokens; null = "
+                                                                   "rollout.max_response_tokens")
+    penalize: list[Literal["response_tokens", "max_turns"]] = Field(
+        default_factory=lambda: ["response_tokens"],
+        description="limits that count as truncated (r_penalty) in Eq. 4: response_tokens = the response-token limit, "
+                    "max_turns = out of assistant turns without submitting")
     # is_correct: the env's grader (the task's accuracy criterion met, no critical violation);
     # accuracy_at_least: the accuracy component >= accuracy_threshold. No rule on the total alone:
     # cheap strategies such as "every READ tool once + a constant answer" pass any total threshold
     # while mostly wrong (bench/reward_gaming.py; docs/benchmarks.md, "Reward gaming").
-    correct_if: Literal["is_correct", "accuracy_at_least"] = "is_correct"
-    accuracy_threshold: float = Field(default=1.0, ge=0, le=1)
+    correct_if: Literal["is_correct", "accuracy_at_least"] = Field(
+        default="is_correct", description="is_correct: the env's grader; accuracy_at_least: the accuracy component "
+                                          ">= accuracy_threshold")
+    accuracy_threshold: float = Field(default=1.0, ge=0, le=1, description="accuracy component a correct answer needs "
+                                                                           "(correct_if accuracy_at_least)")
     weights: dict[str, Any] | None = Field(
         default=None,
         description="the env's reward weights and penalties (`envs.rewards.RewardWeights` fields: a weight per "
@@ -305,41 +318,46 @@ _CORRECT_IF_INSTEAD = ("use 'is_correct' (the env's grader: the task's accuracy 
 
 
 class DynamicSamplingConfig(ConfigModel):
-    enabled: bool = True
+    enabled: bool = Field(default=True, description="admit to a batch only groups with mixed outcomes (criterion)")
     criterion: Literal["correct", "reward"] = Field(
-        default="correct", description="mixed outcome = both correct and incorrect members / reward std > eps")
-    reward_eps: float = Field(default=1e-6, ge=0)
-    # Groups admitted per step at most, as a multiple of trainer.batch_size; past it the step trains
-    # on what it has (logged as a short batch), or skips when it has nothing.
-    max_admissions_factor: float = Field(default=4.0, ge=1)
+        default="correct", description="mixed outcome = both correct and incorrect members / reward range > reward_eps")
+    reward_eps: float = Field(default=1e-6, ge=0, description="criterion reward: the group's max minus min reward must "
+                                                              "exceed this")
+    max_admissions_factor: float = Field(
+        default=4.0, ge=1, description="groups inspected per step at most, as a multiple of trainer.batch_size; past it "
+                                       "the step trains on what it has (a short batch), or skips when it has nothing")
 
 
 class TrainerConfig(ConfigModel):
     batch_size: int = Field(default=8, ge=1, description="prompts (groups) per learner step")
-    max_steps: int = Field(default=60, ge=0)
+    max_steps: int = Field(default=60, ge=0, description="learner steps of the run")
     max_staleness: int = Field(default=0, ge=0, description="max policy-version lag of admitted work; 0 = on-policy")
     dynamic_sampling: DynamicSamplingConfig = Field(default_factory=DynamicSamplingConfig)
     checkpoint_interval: int = Field(default=0, ge=0, description="steps between checkpoints; 0 = only at the end")
-    keep_checkpoints: int = Field(default=2, ge=1)
+    keep_checkpoints: int = Field(default=2, ge=1, description="newest checkpoints kept; older ones are deleted")
     val_interval: int = Field(default=5, ge=0, description="steps between validations; 0 = off")
-    val_at_start: bool = True
-    val_group_size: int = Field(default=1, ge=1)
+    val_at_start: bool = Field(default=True, description="validate before the first step")
+    val_group_size: int = Field(default=1, ge=1, description="rollouts per validation task")
     val_greedy: bool = Field(default=True, description="argmax decoding for validation (less noise than sampling)")
-    save_trajectories: bool = True
-    teacher_timeout_s: float = Field(default=600.0, gt=0)
+    save_trajectories: bool = Field(default=True, description="write each step's trajectories (parquet) to the run "
+                                                              "directory")
+    teacher_timeout_s: float = Field(default=600.0, gt=0, description="seconds a step waits for the teacher's scores")
     drain_timeout_s: float = Field(default=120.0, ge=0, description="at the end, wait this long for admitted groups")
 
 
 class RayConfig(ConfigModel):
     address: str | None = Field(default=None, description="None = the cluster in RAY_ADDRESS (set for `ray job submit` jobs), else a new local one")
-    num_cpus: int | None = Field(default=2, ge=1)
-    include_dashboard: bool = False
-    namespace: str = "hcgym"
-    learner_num_cpus: float = Field(default=1.0, ge=0)
-    learner_num_gpus: float = Field(default=0.0, ge=0)
-    teacher_num_cpus: float = Field(default=0.0, ge=0)
-    teacher_num_gpus: float = Field(default=0.0, ge=0)
-    teacher_max_restarts: int = Field(default=-1, ge=-1)
+    num_cpus: int | None = Field(default=2, ge=1, description="CPUs of a new local cluster; null = Ray's count of "
+                                                              "this machine's")
+    include_dashboard: bool = Field(default=False, description="start Ray's dashboard with a local cluster")
+    namespace: str = Field(default="hcgym", description="Ray namespace of the run's actors")
+    learner_num_cpus: float = Field(default=1.0, ge=0, description="CPUs Ray reserves for the learner actor (ranks: "
+                                                                   "learner.deepspeed.num_cpus_per_rank)")
+    learner_num_gpus: float = Field(default=0.0, ge=0, description="GPUs Ray reserves for the learner actor (ranks: "
+                                                                   "learner.deepspeed.num_gpus_per_rank)")
+    teacher_num_cpus: float = Field(default=0.0, ge=0, description="CPUs Ray reserves for the teacher actor")
+    teacher_num_gpus: float = Field(default=0.0, ge=0, description="GPUs Ray reserves for the teacher actor")
+    teacher_max_restarts: int = Field(default=-1, ge=-1, description="Ray restarts of the teacher actor; -1 = unlimited")
     # Placement (learner/placement.py). Custom resources are per actor, e.g. generator_resources:
     # {"rollout_node": 1} with nodes started as `ray start --resources='{"rollout_node": 4}'`.
     learner_resources: dict[str, float] = Field(default_factory=dict, description="custom resources per learner rank (the learner actor at world size 1)")
@@ -359,23 +377,24 @@ class KBConfig(ConfigModel):
     """The knowledge-base service env actors share (kb_service.service); off = each process opens
     the KB itself when a tool needs it."""
 
-    service: bool = False
-    replicas: int = Field(default=1, ge=1)
+    service: bool = Field(default=False, description="run the shared knowledge-base service actors")
+    replicas: int = Field(default=1, ge=1, description="KB service actors")
     path: str | None = Field(default=None, description="KB directory; None = the default build location")
-    num_cpus: float = Field(default=0.0, ge=0)
-    name: str = "hcgym-kb"
+    num_cpus: float = Field(default=0.0, ge=0, description="CPUs Ray reserves per KB service actor")
+    name: str = Field(default="hcgym-kb", description="name prefix of the KB service's named actors")
 
 
 class MetricsConfig(ConfigModel):
-    tensorboard: bool = True
-    ray_metrics: bool = True
-    progress: bool = True  # one line per step on stdout
+    tensorboard: bool = Field(default=True, description="write TensorBoard event files to the run directory")
+    ray_metrics: bool = Field(default=True, description="also export ray.util.metrics gauges and histograms")
+    progress: bool = Field(default=True, description="one line per step on stdout")
 
 
 class RunConfig(ConfigModel):
-    name: str = "run"
-    seed: int = 0
-    output_dir: str = "runs/run"
+    name: str = Field(default="run", description="run name (the metrics' run label)")
+    seed: int = Field(default=0, description="seed of the episodes, a built model and the SFT order")
+    output_dir: str = Field(default="runs/run", description="run directory: checkpoints, metrics, trajectories, the "
+                                                            "resolved config")
     model: ModelConfig = Field(default_factory=ModelConfig)
     sft: SFTConfig = Field(default_factory=SFTConfig)
     data: DataConfig = Field(default_factory=DataConfig)

@@ -79,13 +79,14 @@ class ClusterConfig(ConfigModel):
     The defaults are cluster.yaml's node type (AWS p4de.24xlarge) and its gp3 root volume.
     """
 
-    gpu: GpuKind = "a100-80gb"
-    gpus_per_node: int = Field(default=8, ge=1)
-    cpus_per_node: int = Field(default=96, ge=1)
-    host_memory_gib: float = Field(default=1152.0, gt=0)
-    # Sustained write throughput of the volume the run directory is on: gp3's baseline is 125 MiB/s,
-    # provisioned up to 1000 MiB/s (cluster.yaml's BlockDeviceMappings.Ebs.Throughput).
-    checkpoint_volume_mib_s: float = Field(default=125.0, gt=0)
+    gpu: GpuKind = Field(default="a100-80gb", description="GPU model of every node")
+    gpus_per_node: int = Field(default=8, ge=1, description="GPUs per node")
+    cpus_per_node: int = Field(default=96, ge=1, description="CPU cores per node")
+    host_memory_gib: float = Field(default=1152.0, gt=0, description="host memory per node, GiB")
+    # gp3's baseline is 125 MiB/s, provisioned up to 1000 MiB/s (cluster.yaml's
+    # BlockDeviceMappings.Ebs.Throughput).
+    checkpoint_volume_mib_s: float = Field(default=125.0, gt=0, description="sustained write throughput of the volume "
+                                                                            "the run directory is on, MiB/s")
 
 
 # ---------------------------------------------------------------------------------------------
