@@ -59,7 +59,8 @@ ORPHAN_AGENT_TITLES = ("ray::DashboardAgent", "ray::RuntimeEnvAgent")
 
 
 def orphaned_ray_agents() -> list[int]:
-    """Pids of this user's Ray agent processes whose raylet is gone (their parent is now init).
+    """Pids of this user's Ray agent processes whose raylet is gone (re-parented to init, or to a
+    subreaper such as `systemd --user`).
 
     An agent of a live node always has its raylet as parent, so no running cluster's agent matches."""
     if not os.path.isdir("/proc"):
@@ -74,14 +75,16 @@ def orphaned_ray_agents() -> list[int]:
                 continue
             with open(f"/proc/{entry.name}/stat", "rb") as handle:
                 stat = handle.read()
-            ppid = int(stat[stat.rindex(b")") + 2:].split()[1])
-            if ppid != 1:
-                continue
             with open(f"/proc/{entry.name}/cmdline", "rb") as handle:
                 title = handle.read().replace(b"\0", b" ").decode("utf-8", "replace").strip()
+            if title.split(" ")[0] not in ORPHAN_AGENT_TITLES:
+                continue
+            ppid = int(stat[stat.rindex(b")") + 2:].split()[1])
+            with open(f"/proc/{ppid}/comm", "rb") as handle:
+                parent = handle.read().strip()
         except (OSError, ValueError, IndexError):
             continue  # exited meanwhile, or not ours to read
-        if title.split(" ")[0] in ORPHAN_AGENT_TITLES:
+        if parent != b"raylet":
             found.append(int(entry.name))
     return found
 
@@ -92,6 +95,8 @@ def reap_orphaned_ray_agents() -> list[int]:
     with no node left they hold nothing worth a clean exit. The shell equivalent:
 
         ps -eo pid=,ppid=,args= | awk '$2 == 1 && ($3 == "ray::DashboardAgent" || $3 == "ray::RuntimeEnvAgent") {print $1}' | xargs -r kill -9
+
+    (`$2 == 1`: where orphans go to init; under a subreaper, its pid.)
     """
     import signal
 

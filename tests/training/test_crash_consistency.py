@@ -26,6 +26,16 @@ from modeling.checkpoint import checkpoint_dir, latest_checkpoint, temp_files
 from tests.training.test_train import tiny_config
 
 
+def running(pid: int) -> bool:
+    """The process exists and is not a zombie (a killed orphan stays one until init reaps it)."""
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            stat = handle.read()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
 def write_rows(path, steps, width=0):
     path.write_text("".join(json.dumps({"step": s, "pad": "x" * width}) + "\n" for s in steps), encoding="utf-8")
 
@@ -77,9 +87,9 @@ def test_driver_killed_before_latest_moves_resumes_with_nothing_lost_or_doubled(
     assert len(orphans) >= 2, orphans
     assert set(reap_orphaned_ray_agents()) >= set(orphans)
     deadline = time.monotonic() + 5
-    while any(os.path.exists(f"/proc/{pid}") for pid in orphans) and time.monotonic() < deadline:
+    while any(map(running, orphans)) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not [pid for pid in orphans if os.path.exists(f"/proc/{pid}")]
+    assert not [pid for pid in orphans if running(pid)]
     # Step 2 wrote its checkpoint, validation, trajectories and metrics row, but `latest` still
     # names step 1: a resume redoes step 2 rather than skipping what it recorded.
     assert latest_checkpoint(run) == checkpoint_dir(run, 1)
