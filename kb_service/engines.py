@@ -119,17 +119,22 @@ class BM25Builder:
         return {"data": data, "indices": indices.astype(np.int32), "indptr": indptr, "num_docs": n_docs}
 
     def save(self, out_dir: Path) -> dict:
-        import bm25s
-
         scores = self.build()
-        retriever = bm25s.BM25(k1=self.k1, b=self.b, method=self.method, backend="numba", auto_compile=False)
-        retriever.scores = scores
-        retriever.vocab_dict = self.vocab
-        retriever.unique_token_ids_set = set(self.vocab.values())
-        retriever.nonoccurrence_array = None
-        out_dir.mkdir(parents=True, exist_ok=True)
-        retriever.save(str(out_dir), show_progress=False)
+        save_bm25s(out_dir, scores, self.vocab, self.k1, self.b, self.method)
         return {"num_docs": scores["num_docs"], "vocab": len(self.vocab), "postings": int(len(scores["data"]))}
+
+
+def save_bm25s(out_dir: Path, scores: dict, vocab: dict[str, int], k1: float, b: float, method: str) -> None:
+    """Write a precomputed weight matrix (bm25s's `scores` dict) in bm25s's on-disk format."""
+    import bm25s
+
+    retriever = bm25s.BM25(k1=k1, b=b, method=method, backend="numba", auto_compile=False)
+    retriever.scores = scores
+    retriever.vocab_dict = vocab
+    retriever.unique_token_ids_set = set(vocab.values())
+    retriever.nonoccurrence_array = None
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    retriever.save(str(out_dir), show_progress=False)
 
 
 @functools.cache
@@ -229,8 +234,11 @@ class BM25Searcher:
     def _thread_buffers(self) -> tuple[np.ndarray, np.ndarray]:
         buf = getattr(self._buffers, "pair", None)
         if buf is None:
+            # `touched` has one slot more than there are documents: the kernel writes a document
+            # into the next slot before knowing whether it is new, so once a query has touched
+            # every document the next posting writes one past the last (a heap overrun otherwise).
             buf = self._buffers.pair = (np.zeros(self.num_docs, dtype=np.float32),
-                                        np.zeros(self.num_docs, dtype=np.int64))
+                                        np.zeros(self.num_docs + 1, dtype=np.int64))
         return buf
 
     def search(self, ids: list[int], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ A knowledge base is a directory written by `kb_service.ingest.build_kb`:
 
     manifest.json        counts per source, engine settings, provenance, build inputs
     passages.sqlite      the passages (SQLite, read-only + immutable once published)
-    bm25/                bm25s index (CSC matrix, memory-mapped)
+    bm25/                bm25s index (CSC matrix, memory-mapped), or shards of it (shards.json)
     tantivy/             tantivy index (positions; used for phrase/boolean queries)
     docmeta/             per-document source and category ids (numpy, memory-mapped)
     articles/            optional article store (pages.zlib + pages.sqlite)
@@ -144,8 +144,13 @@ class KnowledgeBase:
         n = manifest.get("n_passages")
         if not isinstance(n, int) or n <= 0:
             raise _fail(KBNotBuiltError, path, "is empty (0 passages)")
-        required = ["passages.sqlite", "bm25/params.index.json", "bm25/vocab.index.json", "bm25/data.csc.index.npy",
-                    "bm25/indices.csc.index.npy", "bm25/indptr.csc.index.npy", "tantivy/meta.json",
+        from kb_service.shards import SHARDS_FILE, is_sharded
+
+        sharded = is_sharded(path / "bm25")
+        bm25_files = [f"bm25/{SHARDS_FILE}"] if sharded else [
+            "bm25/params.index.json", "bm25/vocab.index.json", "bm25/data.csc.index.npy",
+            "bm25/indices.csc.index.npy", "bm25/indptr.csc.index.npy"]
+        required = ["passages.sqlite", *bm25_files, "tantivy/meta.json",
                     "docmeta/source_ids.npy", "docmeta/category_ids.npy", "docmeta/names.json"]
         missing = [r for r in required if not (path / r).is_file()]
         if missing:
@@ -162,7 +167,12 @@ class KnowledgeBase:
         if rows != n:
             raise _fail(KBCorruptError, path, f"has {rows} passages in passages.sqlite but the manifest says {n}")
         try:
-            bm25 = BM25Searcher(path / "bm25")
+            if sharded:
+                from kb_service.shards import ShardedBM25Searcher
+
+                bm25 = ShardedBM25Searcher(path / "bm25")
+            else:
+                bm25 = BM25Searcher(path / "bm25")
             bm25.validate()
         except Exception as exc:
             raise _fail(KBCorruptError, path, f"has an unreadable bm25 index ({type(exc).__name__}: {exc})") from None
