@@ -115,10 +115,12 @@ def test_rollout_node_lost_run_goes_on_learner_node_lost_run_stops_naming_it_res
     with pytest.raises(LearnerNodeLost) as info:
         with training_in_background(trainer):
             wait_for(paused.is_set, what="step 1")
-            seen["first rollout actors"] = {node_of(a) for a in [*trainer.generators, *trainer.pool.actors]}
-            seen["rollout node"] = nodes["rollout"].node_id
-            nodes["spare"] = sim.add_node(**SPARE)
-            go_on.set()
+            try:
+                seen["first rollout actors"] = {node_of(a) for a in [*trainer.generators, *trainer.pool.actors]}
+                seen["rollout node"] = nodes["rollout"].node_id
+                nodes["spare"] = sim.add_node(**SPARE)
+            finally:
+                go_on.set()  # never leave the driver waiting
             # While an episode is on the env actor and a request on the generator.
             wait_for(lambda: sum(trainer.pool.loads()) > 0 and trainer.gen_client.outstanding[0] > 0,
                      what="episodes and generation in flight")
