@@ -72,7 +72,7 @@ def leaf_settings(model: type[BaseModel] | None = None) -> list[Setting]:
 
 def undocumented(model: type[BaseModel] | None = None) -> list[str]:
     """`dotted.key (ModelName in module)` of every leaf setting without a description."""
-    return [f"{s.key} ({s.model.__name__} in {s.model.__module__})"
+    return [f"{s.key} ({s.model.__name__} in {_public_module(s.model)})"
             for s in leaf_settings(model) if not (s.field.description or "").strip()]
 
 
@@ -132,6 +132,11 @@ def _summary(model: type[BaseModel]) -> str:
     return " ".join(inspect.cleandoc(doc).split("\n\n")[0].split())
 
 
+def _public_module(model: type[BaseModel]) -> str:
+    """Where to import the model from: `learner.config` for the sections its package defines."""
+    return "learner.config" if model.__module__.startswith("learner.config.") else model.__module__
+
+
 def _table(prefix: str, model: type[BaseModel]) -> list[str]:
     rows = [(name, field) for name, field in model.model_fields.items() if _section_model(field.annotation) is None]
     if not rows:
@@ -167,7 +172,7 @@ def render_reference() -> str:
             if prefix != f"{name}.":
                 out += [f"### `{key}`", ""]
             summary = _summary(model)
-            out += [f"{summary + ' ' if summary else ''}Model: `{model.__module__}.{model.__qualname__}`.", ""]
+            out += [f"{summary + ' ' if summary else ''}Model: `{_public_module(model)}.{model.__qualname__}`.", ""]
             table = _table(prefix, model)
             out += table + ([""] if table else [])
     return "\n".join(out).rstrip("\n") + "\n"
