@@ -21,8 +21,7 @@ from envs.validate import gold_replay
 from envs.rewards.assertions import RuleGrader, grade_assertions
 from envs.rewards.view import EpisodeView
 
-DOMAINS = ["clinical_diagnosis", "drug_interaction", "medical_qa", "obstetrics", "psychiatry", "radiology_report",
-           "triage_emergency", "visual_diagnosis", "ehr_management", "cross_domain"]
+DOMAINS = [d for d in registry.list_domains() if registry.DOMAINS[d].startswith("envs.domains.")]  # every built-in one
 SAMPLE = 4  # tasks per domain, spread evenly over the domain's tasks with assertions
 
 
