@@ -166,13 +166,18 @@ def read_corpus(files: list[Path], corpus: str, strict: bool = False, skip: int 
                 ) -> Iterator[MedRAGPassage | BadRow]:
     """The corpus's lines in file order after the first `skip` (bad rows count as lines)."""
     for path in files:
-        for item in read_chunk_file(path, corpus):
-            if skip:
-                skip -= 1
-                continue
-            if strict and isinstance(item, BadRow):
-                raise MedRAGFormatError(f"MedRAG {corpus}: {item}")
-            yield item
+        rel = f"{corpus}/chunk/{path.name}"
+        with open(path, "rb") as fh:
+            for lineno, raw in enumerate(fh, 1):
+                if not raw.strip():
+                    continue
+                if skip:  # resuming: lines already ingested are counted, not parsed
+                    skip -= 1
+                    continue
+                item = _parse(raw, corpus, rel, lineno)
+                if strict and isinstance(item, BadRow):
+                    raise MedRAGFormatError(f"MedRAG {corpus}: {item}")
+                yield item
 
 
 def medrag_inputs(root: str | Path, corpora: list[str] | None = None, strict: bool = False) -> list:

@@ -212,3 +212,13 @@ def test_shard_command_on_a_built_kb_ranks_exactly_as_before(kb_dir, kb, tmp_pat
     shutil.rmtree(copy / "bm25" / "shard-00002")
     with pytest.raises(KBCorruptError, match="unreadable bm25 index"):
         KnowledgeBase.open(copy)
+
+
+def test_resume_skips_exactly_the_lines_already_ingested(tmp_path):
+    """A build resumes a corpus after the lines it committed (bad rows and blank lines included in
+    the count the way the build counts them): skipping n gives the tail of the full read."""
+    root = _bad_copy(tmp_path)
+    files = find_corpora(root)["pubmed"]
+    full = list(read_corpus(files, "pubmed"))
+    for n in (0, 1, 3, 4, 7, len(full)):
+        assert list(read_corpus(files, "pubmed", skip=n)) == full[n:]
