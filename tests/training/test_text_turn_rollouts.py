@@ -165,7 +165,7 @@ def test_the_trainer_builds_its_env_pool_from_the_rollout_section(tmp_path, monk
         raise _PoolBuilt
 
     monkeypatch.setattr(learner.sft, "prepare_policy", lambda cfg, run_dir, log=None: ward_policy_dir)
-    for name, value in (("select_tasks", lambda *a, **k: []), ("init_ray", lambda cfg: None),
+    for name, value in (("select_tasks", lambda *a, **k: []), ("init_ray", lambda cfg, log=None: None),
                         ("check_run_fits", lambda cfg: None), ("start_kb_service", lambda cfg: None),
                         ("start_generators", lambda *a: []), ("start_learner", lambda *a: None), ("EnvPool", pool)):
         monkeypatch.setattr(train, name, value)
