@@ -112,21 +112,6 @@ def find_corpora(root: str | Path) -> dict[str, list[Path]]:
     return out
 
 
-def read_chunk_file(path: Path, corpus: str, skip: int = 0) -> Iterator[MedRAGPassage | BadRow]:
-    """Every non-blank line of one chunk file as a passage or a `BadRow`, after the first `skip`."""
-    rel = f"{corpus}/chunk/{path.name}"
-    seen = 0
-    # Binary read + per-line decode: a bad byte sequence is one bad row, not a failed file.
-    with open(path, "rb") as fh:
-        for lineno, raw in enumerate(fh, 1):
-            if not raw.strip():
-                continue
-            seen += 1
-            if seen <= skip:
-                continue
-            yield _parse(raw, corpus, rel, lineno)
-
-
 def _parse(raw: bytes, corpus: str, rel: str, lineno: int) -> MedRAGPassage | BadRow:
     def bad(reason: str) -> BadRow:
         return BadRow(corpus=corpus, file=rel, line=lineno, reason=reason)
@@ -164,7 +149,9 @@ def _parse(raw: bytes, corpus: str, rel: str, lineno: int) -> MedRAGPassage | Ba
 
 def read_corpus(files: list[Path], corpus: str, strict: bool = False, skip: int = 0
                 ) -> Iterator[MedRAGPassage | BadRow]:
-    """The corpus's lines in file order after the first `skip` (bad rows count as lines)."""
+    """Every non-blank line of the corpus's files, in order, as a `MedRAGPassage` or a `BadRow`,
+    after the first `skip` lines (bad rows count as lines). Files are read in binary and decoded
+    line by line: a bad byte sequence is one bad row, not a failed file."""
     for path in files:
         rel = f"{corpus}/chunk/{path.name}"
         with open(path, "rb") as fh:
