@@ -26,7 +26,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml constraints-cpu.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q -c constraints-cpu.txt torch==2.13.0
-	$(BIN)/pip install -q -c constraints-cpu.txt -e ".[test,embed,mcp,trl,skyrl]"
+	$(BIN)/pip install -q -c constraints-cpu.txt -e ".[test,embed,mcp,trl,skyrl]" uv==0.13.8
 	$(BIN)/python -c "import torch; assert torch.__version__.endswith('+cpu'), torch.__version__"
 	touch $(STAMP)
 
@@ -58,18 +58,25 @@ $(VLLM_STAMP): pyproject.toml constraints-cpu.txt
 # script) through `uv sync --script`, whose dependencies are downloaded here, once, into
 # $(VF_VENV)/wheelhouse at the versions installed, so a run installs them with no index
 # (UV_NO_INDEX=1 UV_FIND_LINKS=$(VF_VENV)/wheelhouse; docs/integrations.md).
+# The integration venvs are installed by uv (seconds where pip took 4 minutes each). uv does not read
+# pip's configuration, so the indexes and wheel folders pip is configured with here are passed on.
+UV := $(BIN)/uv
+UV_INSTALL = $(UV) pip install -q --index-strategy unsafe-best-match \
+	$(addprefix --extra-index-url ,$(shell $(BIN)/pip config get global.extra-index-url 2>/dev/null)) \
+	$(addprefix --find-links ,$(shell $(BIN)/pip config get global.find-links 2>/dev/null))
+
 VF_VENV := .venv-verifiers
 VF_STAMP := $(VF_VENV)/.installed
 VF_CHAT_DEPS := openai "mcp==2.0.0" httpx httpx2 tenacity certifi
 
 verifiers: $(VF_STAMP)
 
-$(VF_STAMP): pyproject.toml constraints-cpu.txt envs/integrations/verifiers/pyproject.toml
-	test -x $(VF_VENV)/bin/python || $(PYTHON) -m venv $(VF_VENV)
-	$(VF_VENV)/bin/pip install -q -c constraints-cpu.txt verifiers==0.4.0 uv==0.13.8 "gymnasium>=1.4,<1.5" \
+$(VF_STAMP): $(STAMP) pyproject.toml constraints-cpu.txt envs/integrations/verifiers/pyproject.toml
+	test -x $(VF_VENV)/bin/python || $(UV) venv -q --seed --python $(PYTHON) $(VF_VENV)
+	$(UV_INSTALL) --python $(VF_VENV)/bin/python -c constraints-cpu.txt verifiers==0.4.0 uv==0.13.8 "gymnasium>=1.4,<1.5" \
 		"pydantic>=2.14,<3" "numpy>=2.3,<2.5" "scipy>=1.17,<1.18" "pyyaml>=6.0,<7" "pyarrow>=26,<27" \
 		"tantivy>=0.27,<0.28" "bm25s>=0.3.16,<0.4" "numba>=0.68,<0.69"
-	$(VF_VENV)/bin/pip install -q --no-deps -e . -e envs/integrations/verifiers
+	$(UV_INSTALL) --python $(VF_VENV)/bin/python --no-deps -e . -e envs/integrations/verifiers
 	$(VF_VENV)/bin/pip freeze --exclude-editable > $(VF_VENV)/versions.txt
 	$(VF_VENV)/bin/pip download -q -d $(VF_VENV)/wheelhouse -c $(VF_VENV)/versions.txt $(VF_CHAT_DEPS)
 	$(VF_VENV)/bin/python -c "import verifiers, verifiers.v1 as vf, healthcare_gym, envs.export; \
@@ -87,10 +94,10 @@ OPENENV_REQUIREMENTS := envs/integrations/openenv/server/requirements.txt
 
 openenv: $(OPENENV_STAMP)
 
-$(OPENENV_STAMP): pyproject.toml constraints-cpu.txt $(OPENENV_REQUIREMENTS)
-	test -x $(OPENENV_VENV)/bin/python || $(PYTHON) -m venv $(OPENENV_VENV)
-	$(OPENENV_VENV)/bin/pip install -q -c constraints-cpu.txt -r $(OPENENV_REQUIREMENTS)
-	$(OPENENV_VENV)/bin/pip install -q --no-deps -e .
+$(OPENENV_STAMP): $(STAMP) pyproject.toml constraints-cpu.txt $(OPENENV_REQUIREMENTS)
+	test -x $(OPENENV_VENV)/bin/python || $(UV) venv -q --seed --python $(PYTHON) $(OPENENV_VENV)
+	$(UV_INSTALL) --python $(OPENENV_VENV)/bin/python -c constraints-cpu.txt -r $(OPENENV_REQUIREMENTS)
+	$(UV_INSTALL) --python $(OPENENV_VENV)/bin/python --no-deps -e .
 	$(OPENENV_VENV)/bin/python -c "import importlib.metadata as m, envs.integrations.openenv.server.app, \
 		envs.integrations.openenv.client; assert m.version('openenv') == '0.10.0', m.version('openenv')"
 	touch $(OPENENV_STAMP)
