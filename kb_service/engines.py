@@ -243,16 +243,23 @@ class BM25Searcher:
 
     def search(self, ids: list[int], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Top-k (doc indices, scores) with score > 0, best first (ties: lower document first)."""
+        docs, top = self.search_unscaled(ids, k, weight_mask)
+        # bm25s's Lucene variant leaves out BM25's constant (k1 + 1) numerator; tantivy keeps it.
+        # Multiply it back so both engines report scores on one scale (ranking is unchanged).
+        return docs, top * self.scale
+
+    def search_unscaled(self, ids: list[int], k: int, weight_mask: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """`search` before the (k1 + 1) factor: the kernel's float32 sums, in the order it ranked
+        them. Two different sums can round to the same value once multiplied, so whoever merges
+        rankings (the sharded index) must compare these, not the scaled scores."""
         if not ids or k <= 0:
             return np.zeros(0, np.int64), np.zeros(0, np.float32)
         k = min(k, self.num_docs)
         scores, touched = self._thread_buffers()
         mask = self._no_mask if weight_mask is None else weight_mask
-        docs, top = _topk_kernel()(np.asarray(ids, dtype=np.int64), self.data, self.indptr, self.indices, k,
-                                   scores, touched, mask, weight_mask is not None)
-        # bm25s's Lucene variant leaves out BM25's constant (k1 + 1) numerator; tantivy keeps it.
-        # Multiply it back so both engines report scores on one scale (ranking is unchanged).
-        return docs, top * self.scale
+        return _topk_kernel()(np.asarray(ids, dtype=np.int64), self.data, self.indptr, self.indices, k,
+                              scores, touched, mask, weight_mask is not None)
 
     def warmup(self) -> None:
         """Load (or compile) the numba kernel now (the first call otherwise pays for it)."""

@@ -17,7 +17,8 @@ Searching: the query's terms are selected with their global document frequency (
 shards' column lengths, the same `MAX_QUERY_TERMS` rule as `BM25Searcher.term_ids`), each shard
 returns its own top k with the same kernel (scores summed in the same term order, so equal to
 the single index's float32 sums), and the k best of those (score descending, then global
-document number ascending, the kernel's tie rule) are the global top k: any document of the
+document number ascending, the kernel's tie rule, on the kernel's float32 sums before the
+(k1 + 1) factor, which can round two different sums to one value) are the global top k: any document of the
 global top k is in its own shard's top k.
 
 Layout under the KB's ``bm25/``: ``shards.json`` (written last, so a reader sees the sharded
@@ -202,14 +203,16 @@ class ShardedBM25Searcher:
             if not ids:
                 continue
             mask = None if weight_mask is None else weight_mask[offset:offset + shard.num_docs]
-            docs, scores = shard.search(ids, k, mask)
+            docs, raw = shard.search_unscaled(ids, k, mask)
             all_docs.append(docs + offset)
-            all_scores.append(scores)
+            all_scores.append(raw)
         if not all_docs:
             return np.zeros(0, np.int64), np.zeros(0, np.float32)
-        docs, scores = np.concatenate(all_docs), np.concatenate(all_scores)
-        order = np.lexsort((docs, -scores))[:k]
-        return docs[order], scores[order]
+        docs, raw = np.concatenate(all_docs), np.concatenate(all_scores)
+        # Merge on the kernel's own sums: after the (k1 + 1) factor two different sums can round
+        # to one value, and ordering those by document would differ from the single index.
+        order = np.lexsort((docs, -raw))[:k]
+        return docs[order], raw[order] * self.scale
 
     def warmup(self) -> None:
         for shard in self.shards:
