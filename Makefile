@@ -25,8 +25,8 @@ setup: $(STAMP)
 
 $(STAMP): pyproject.toml constraints-cpu.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install -q -c constraints-cpu.txt torch==2.13.0
-	$(BIN)/pip install -q -c constraints-cpu.txt -e ".[test,embed,mcp,trl,skyrl]" uv==0.13.8
+	$(BIN)/pip install -q uv==0.13.8
+	$(UV_INSTALL) --python $(BIN)/python -c constraints-cpu.txt "torch==2.13.0+cpu" -e ".[test,embed,mcp,trl,skyrl]"
 	$(BIN)/python -c "import torch; assert torch.__version__.endswith('+cpu'), torch.__version__"
 	touch $(STAMP)
 
