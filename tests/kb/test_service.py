@@ -62,3 +62,24 @@ def test_service_end_to_end(cluster, kb_dir, kb, tmp_path):
         client.shutdown()
     with pytest.raises(RuntimeError, match="no knowledge-base service"):
         connect("never-started")
+
+
+def test_service_serves_a_sharded_kb(cluster, kb_dir, kb, tmp_path):
+    """A replica opens a sharded KB like any other (all shards in one actor) and answers exactly
+    as the single-index KB in process."""
+    import shutil
+
+    from kb_service.service import start_kb_service
+    from kb_service.shards import shard_kb
+
+    copy = tmp_path / "kb"
+    shutil.copytree(kb_dir, copy)
+    shard_kb(copy, 100, echo=lambda s: None)
+    client = start_kb_service(replicas=1, path=copy, name="test-kb-sharded", num_cpus=0.25)
+    try:
+        for query in ("asthma corticosteroid", "pheochromocytoma headache", "fever rash"):
+            got = [(p.doc_id, p.score) for p in client.search(query, k=10, source=["guidelines", "wiki"])]
+            want = [(p.doc_id, p.score) for p in kb.search(query, k=10, source=["guidelines", "wiki"])]
+            assert got == want and got
+    finally:
+        client.shutdown()
