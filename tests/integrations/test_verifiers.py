@@ -18,16 +18,14 @@ from __future__ import annotations
 import json
 import math
 import os
-import socket
 import subprocess
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
 
 from envs.env import HealthcareGymEnv
 from envs.export import task_rows
+from tests.vllm_server import openai_server
 
 REPO = Path(__file__).resolve().parents[2]
 VF_VENV = REPO / ".venv-verifiers"
@@ -137,49 +135,14 @@ def model_dir(venvs, loader_run, tasks, tmp_path_factory):
     return str(path)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def server(model_dir, tmp_path_factory):
     """`http://127.0.0.1:PORT/v1`: vLLM's OpenAI server on the tiny model, Hermes tool calls parsed."""
-    port = _free_port()
     log_path = tmp_path_factory.mktemp("vf_vllm") / "server.log"
-    env = dict(os.environ, VLLM_CPU_KVCACHE_SPACE="1", VLLM_CPU_OMP_THREADS_BIND="0", OMP_NUM_THREADS="1",
-               VLLM_ENABLE_V1_MULTIPROCESSING="0", VLLM_USE_V2_MODEL_RUNNER="0", VLLM_LOGGING_LEVEL="WARNING")
-    command = [str(VLLM_PYTHON), "-m", "vllm.entrypoints.openai.api_server", "--model", model_dir,
-               "--served-model-name", SERVED_MODEL, "--host", "127.0.0.1", "--port", str(port),
-               "--dtype", "float32", "--max-model-len", str(MAX_MODEL_LEN), "--enforce-eager",
-               "--gpu-memory-utilization", "0.1", "--seed", "0", "--no-enable-chunked-prefill",
-               "--enable-auto-tool-choice", "--tool-call-parser", "hermes", "--disable-uvicorn-access-log"]
-    with open(log_path, "wb") as log:
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=str(REPO),
-                                   start_new_session=True)
-    try:
-        deadline = time.monotonic() + SERVER_START_TIMEOUT_S
-        while True:
-            if process.poll() is not None:
-                raise RuntimeError(f"vLLM server exited with {process.returncode}:\n{log_path.read_text()[-4000:]}")
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2) as response:
-                    if response.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"vLLM server not up in {SERVER_START_TIMEOUT_S} s:\n{log_path.read_text()[-4000:]}")
-            time.sleep(0.5)
-        yield f"http://127.0.0.1:{port}/v1"
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=30)
+    with openai_server(model_dir, SERVED_MODEL, MAX_MODEL_LEN, log_path, start_timeout_s=SERVER_START_TIMEOUT_S,
+                       extra_args=("--no-enable-chunked-prefill",),
+                       extra_env={"VLLM_USE_V2_MODEL_RUNNER": "0"}) as base_url:
+        yield base_url
 
 
 LOADER = """

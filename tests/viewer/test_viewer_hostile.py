@@ -9,7 +9,6 @@ The run folder is the trainer's output: gold-replay episodes written by `write_s
 
 from __future__ import annotations
 
-import asyncio
 import json
 import os
 import socket
@@ -24,6 +23,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
+
+from tests.raw_http import burst_statuses
 
 ROOT = Path(__file__).resolve().parents[2]
 ROWS = 400            # episodes in the flooded step file
@@ -143,31 +144,8 @@ def test_an_unexpected_error_is_a_500_and_a_busy_server_a_503(hostile_run, caplo
 
 def test_a_burst_of_1000_connections_is_answered_not_reset(server):
     proc, (host, port) = server
-
-    async def one() -> str:
-        try:
-            reader, writer = await asyncio.open_connection(host, port)
-            writer.write(b"GET /api/sources HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n")
-            await writer.drain()
-            data = await reader.read()
-            writer.close()
-        except ConnectionResetError:
-            return "reset"
-        except OSError as exc:
-            return type(exc).__name__
-        return data.split(b" ", 2)[1].decode() if data else "no answer"
-
-    async def answered_within(seconds: float) -> str:
-        try:
-            return await asyncio.wait_for(one(), timeout=seconds)
-        except TimeoutError:
-            return "no answer in 15 s"
-
-    async def burst() -> list[str]:
-        return await asyncio.gather(*(answered_within(15) for _ in range(1000)))
-
     start = time.perf_counter()
-    outcomes = asyncio.run(burst())
+    outcomes = burst_statuses(host, port, b"GET /api/sources HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n", 1000, 15)
     counts = {k: outcomes.count(k) for k in set(outcomes)}
     print(f"burst of 1000: {counts} in {time.perf_counter() - start:.1f} s; server {memory_kb(proc.pid)}")
     assert set(counts) <= {"200", "503"}, counts

@@ -1,0 +1,37 @@
+"""Raw-socket HTTP for the servers' hostile-load tests: which status each of many simultaneous
+connections gets, or why it got none."""
+
+from __future__ import annotations
+
+import asyncio
+
+
+async def status_of(host: str, port: int, request: bytes) -> str:
+    """The status code of the answer to `request` on a new connection; "reset", the name of another
+    OSError, or "no answer" when the server closed without one."""
+    try:
+        reader, writer = await asyncio.open_connection(host, port)
+        writer.write(request)
+        await writer.drain()
+        data = await reader.read()
+        writer.close()
+    except ConnectionResetError:
+        return "reset"
+    except OSError as exc:
+        return type(exc).__name__
+    return data.split(b" ", 2)[1].decode() if data else "no answer"
+
+
+def burst_statuses(host: str, port: int, request: bytes, count: int, timeout_s: float) -> list[str]:
+    """`count` connections at once, each sending `request`: `status_of` each, or "no answer in N s"."""
+
+    async def within() -> str:
+        try:
+            return await asyncio.wait_for(status_of(host, port, request), timeout=timeout_s)
+        except TimeoutError:
+            return f"no answer in {timeout_s:g} s"
+
+    async def burst() -> list[str]:
+        return await asyncio.gather(*(within() for _ in range(count)))
+
+    return asyncio.run(burst())
