@@ -4,6 +4,7 @@ connections gets, or why it got none."""
 from __future__ import annotations
 
 import asyncio
+import socket
 
 
 async def status_of(host: str, port: int, request: bytes) -> str:
@@ -35,3 +36,19 @@ def burst_statuses(host: str, port: int, request: bytes, count: int, timeout_s: 
         return await asyncio.gather(*(within() for _ in range(count)))
 
     return asyncio.run(burst())
+
+
+def send_raw(address: tuple[str, int], request: bytes, timeout: float = 30.0) -> bytes:
+    """`request` as bytes on a new socket (HTTP client libraries refuse what a hostile client sends) and
+    everything the server sent back; a connection closed without an answer fails the test."""
+    with socket.create_connection(address, timeout=timeout) as sock:
+        sock.sendall(request)
+        data = b""
+        try:
+            while chunk := sock.recv(65536):
+                data += chunk
+        except ConnectionResetError:
+            if not data:  # a reset after a whole answer is the kernel refusing the unread rest of a request
+                raise
+    assert data, f"{request[:80]!r}: the connection closed without an answer"
+    return data

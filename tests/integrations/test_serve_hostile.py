@@ -30,7 +30,7 @@ from mcp import Client
 from mcp_types import CLIENT_CAPABILITIES_META_KEY, PROTOCOL_VERSION_META_KEY
 
 from envs.serve.mcp_server import EPISODE_META_KEY, ServeSettings, build_app, uvicorn_server
-from tests.raw_http import burst_statuses
+from tests.raw_http import burst_statuses, send_raw
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 1.0        # the tight server's request timeout
@@ -101,17 +101,8 @@ def open_fds(pid: int) -> int:
 
 
 def raw(address, head: bytes, body: bytes = b"", timeout: float = 30.0) -> tuple[int, dict[str, str], bytes]:
-    """One request as bytes on a socket (HTTP client libraries refuse what a hostile client sends)."""
-    with socket.create_connection(address, timeout=timeout) as sock:
-        sock.sendall(head + body)
-        data = b""
-        try:
-            while chunk := sock.recv(65536):
-                data += chunk
-        except ConnectionResetError:
-            if not data:  # a reset after a whole answer is the kernel refusing the unread rest of a request
-                raise
-    assert data, f"{head[:80]!r}: the connection closed without an answer"
+    """One request as bytes on a socket: (status, headers, body)."""
+    data = send_raw(address, head + body, timeout)
     top, _, payload = data.partition(b"\r\n\r\n")
     lines = top.decode("latin-1").split("\r\n")
     headers = dict(line.split(": ", 1) for line in lines[1:] if ": " in line)

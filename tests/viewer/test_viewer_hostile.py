@@ -24,7 +24,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
-from tests.raw_http import burst_statuses
+from tests.raw_http import burst_statuses, send_raw
 
 ROOT = Path(__file__).resolve().parents[2]
 ROWS = 400            # episodes in the flooded step file
@@ -69,17 +69,8 @@ def server(hostile_run):
 
 
 def raw_get(address, target: bytes, timeout: float = 30.0) -> tuple[int, str]:
-    """One request as bytes on a socket (http.client refuses what a hostile client sends)."""
-    with socket.create_connection(address, timeout=timeout) as sock:
-        sock.sendall(b"GET " + target + b" HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n")
-        data = b""
-        try:
-            while chunk := sock.recv(65536):
-                data += chunk
-        except ConnectionResetError:
-            if not data:  # a reset after a whole answer is the kernel refusing the unread rest of a request
-                raise
-    assert data, f"{target[:80]!r}: the connection closed without an answer"
+    """One GET as bytes on a socket: (status, body)."""
+    data = send_raw(address, b"GET " + target + b" HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n", timeout)
     head, _, body = data.partition(b"\r\n\r\n")
     return int(head.split()[1]), body.decode("utf-8", "replace")
 

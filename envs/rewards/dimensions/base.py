@@ -53,6 +53,17 @@ class Grading:
         return self.view.task
 
 
+def scored_by(score: Callable[["EpisodeView"], tuple[float, dict[str, Any]]]) -> Callable[[Grading], Graded]:
+    """A `grade` for a dimension that always applies and reads only the episode:
+    `score(view) -> (score, details)`."""
+
+    def grade(grading: Grading) -> Graded:
+        value, details = score(grading.view)
+        return Graded(score=value, details=details)
+
+    return grade
+
+
 @dataclass(frozen=True)
 class Dimension:
     """A reward dimension.
