@@ -36,7 +36,8 @@ from pydantic import BaseModel, ConfigDict
 from actors.types import RolloutSample, TeacherBatch, TeacherOutput
 from modeling.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
 from modeling.config_models import TeacherConfig, teacher_update_action
-from modeling.model import IM_START, load_policy, pad_batch, packing_unsupported, split_by_budget, token_stats
+from modeling.model import (IM_START, load_policy, pad_batch, packing_unsupported, packs_sequences, split_by_budget,
+                            token_stats)
 
 GENERATION_PROMPT = f"{IM_START}assistant\n"
 
@@ -69,8 +70,7 @@ class Teacher:
         self.model.to(self.config.device).requires_grad_(False)
         self.pad_id = self.tokenizer.pad_token_id if self.tokenizer.pad_token_id is not None else 0
         # Forwards on real tokens only where the model's layers allow it (modeling.model.packing_unsupported).
-        unsupported = packing_unsupported(self.model) if self.config.pack_sequences else None
-        self.packed = self.config.pack_sequences and unsupported is None
+        unsupported = packing_unsupported(self.model) if self.config.pack_sequences is True else None
         if unsupported:
             print(f"[teacher] teacher.pack_sequences: {unsupported}", flush=True)
         # EMA in fp32: alpha = 0.995 moves bf16 weights by less than their rounding step. The shadow
@@ -165,11 +165,12 @@ class Teacher:
                     wanted[b, p + (c.hint_tokens if p >= c.insert_at else 0)] = True
         dev = self.config.device
         k = self.config.serve_topk
+        packed = packs_sequences(self.config.pack_sequences, self.model, mask)
         with self._weights_lock, torch.no_grad():
             version = self._version
             stats = token_stats(self.model, ids.to(dev), mask.to(dev), temperature=self.config.temperature,
                                 topk=k, chunk_size=self.config.logprob_chunk_size, positions=wanted.to(dev),
-                                packed=self.packed)
+                                packed=packed)
         lp = stats.logprobs.cpu()
         tk_lp = stats.topk_logprobs.cpu() if k else None
         tk_id = stats.topk_ids.cpu() if k else None
@@ -199,7 +200,7 @@ class Teacher:
                         topk_ids[p] = ir
                         topk_lp[p] = lr
             length = len(c.input_ids)
-            computed = length if self.packed else int(mask.shape[1])
+            computed = length if packed else int(mask.shape[1])
             outs.append(TeacherOutput(sample_id=s.sample_id, teacher_version=version, hint=c.hint,
                                       hint_tokens=c.hint_tokens, input_length=n, logprobs=row,
                                       topk_ids=topk_ids, topk_logprobs=topk_lp,

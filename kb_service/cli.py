@@ -106,7 +106,7 @@ def cmd_build(args) -> int:
         summary = build_kb(inputs, out, article_files=[Path(p) for p in args.articles] or None, resume=not args.force,
                            progress=not args.quiet, echo=echo)
         if args.shard_docs:
-            from kb_service.shards import shard_kb
+            from kb_service.reshard import shard_kb
 
             summary["bm25_shards"] = shard_kb(out, args.shard_docs, progress=not args.quiet, echo=echo)
     if args.json:
@@ -118,7 +118,7 @@ def cmd_build(args) -> int:
 
 def cmd_shard(args) -> int:
     from kb_service.kb import default_kb_path
-    from kb_service.shards import shard_kb
+    from kb_service.reshard import shard_kb
 
     echo = (lambda s: print(s, file=sys.stderr)) if args.json else print
     info = shard_kb(args.path or default_kb_path(), args.shard_docs, progress=not args.quiet, echo=echo)

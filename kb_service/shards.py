@@ -24,7 +24,7 @@ global top k is in its own shard's top k.
 Layout under the KB's ``bm25/``: ``shards.json`` (written last, so a reader sees the sharded
 index only once it is complete) and ``shard-00000/`` ... (each a bm25s directory). The raw
 postings live in the builder's ``work_dir`` during the build and are removed by `save`.
-`shard_kb` turns a built KB's single index into shards in place.
+`kb_service.reshard.shard_kb` turns a built KB's single index into shards in place.
 """
 
 from __future__ import annotations
@@ -217,68 +217,3 @@ class ShardedBM25Searcher:
     def warmup(self) -> None:
         for shard in self.shards:
             shard.warmup()
-
-
-def shard_kb(path: Path, shard_docs: int = DEFAULT_SHARD_DOCS, progress: bool = False,
-             echo=print) -> dict:
-    """Rewrite the bm25 index of the built KB at `path` as shards of `shard_docs` documents.
-
-    The passages are read from the KB's store in row order and analysed exactly as the build
-    does, so the sharded index ranks and scores as the single one did (tests/kb/test_shards.py).
-    `shards.json` is written last; until then the KB keeps opening its single index, and the
-    single index's files are removed only after it. The tantivy index (query syntax) is unchanged.
-
-    Raises:
-        KBNotBuiltError / KBCorruptError: no valid KB at `path`.
-        ValueError: `shard_docs` is not a positive integer, or the KB is already sharded.
-    """
-    import sqlite3
-    import time
-
-    from kb_service.analysis import analyze
-    from kb_service.kb import KnowledgeBase
-
-    path = Path(path)
-    kb = KnowledgeBase.open(path, warmup=False)  # validates the KB (and names the build command)
-    n = kb.n_passages
-    kb.close()
-    bm25_dir = path / "bm25"
-    if is_sharded(bm25_dir):
-        have = json.loads((bm25_dir / SHARDS_FILE).read_text(encoding="utf-8"))
-        raise ValueError(f"the knowledge base at {path} is already sharded ({len(have['shards'])} shards of "
-                         f"{have.get('shard_docs')} documents); rebuild it (hcgym kb build --force ...) to reshard")
-    t0 = time.perf_counter()
-    builder = ShardedBM25Builder(path / "bm25.raw", shard_docs=shard_docs)
-    conn = sqlite3.connect(f"file:{path / 'passages.sqlite'}?mode=ro", uri=True)
-    try:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n, unit=" passages", desc="shard bm25", disable=not progress, mininterval=1.0)
-        last = 0
-        while True:
-            rows = conn.execute("SELECT rowid, title, content FROM passages WHERE rowid > ? ORDER BY rowid LIMIT 20000",
-                                (last,)).fetchall()
-            if not rows:
-                break
-            for rowid, title, content in rows:
-                # The text the build indexes (kb_service/ingest.py, _build_indexes): title, newline, content.
-                builder.add(analyze(f"{title}\n{content}" if title else content))
-            last = rows[-1][0]
-            bar.update(len(rows))
-        bar.close()
-    finally:
-        conn.close()
-    if builder.n_docs != n:
-        raise ValueError(f"{path / 'passages.sqlite'} gave {builder.n_docs} passages, the manifest says {n}")
-    info = builder.save(bm25_dir)
-    for f in bm25_dir.iterdir():  # the single index, now superseded by shards.json
-        if f.is_file() and f.name != SHARDS_FILE:
-            f.unlink()
-    manifest_path = path / "manifest.json"
-    manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
-    manifest.setdefault("engine", {})["bm25_shards"] = {"shard_docs": shard_docs, "shards": info["shards"]}
-    write_json(manifest_path, manifest)
-    info["seconds"] = round(time.perf_counter() - t0, 1)
-    echo(f"[kb] {path}: bm25 index rewritten as {info['shards']} shards of up to {shard_docs} passages "
-         f"({info['postings']} postings, {info['seconds']}s)")
-    return info

@@ -158,10 +158,13 @@ class LearnerConfig(ConfigModel):
                                                                       "instead of keeping them")
     logprob_chunk_size: int = Field(default=1024, ge=1, description="positions per LM-head chunk when computing "
                                                                     "log-probs (bounds the logits' memory)")
-    pack_sequences: bool = Field(
-        default=True, description="run the policy, reference and pi_old forwards on each micro-batch's real tokens "
-                                  "only (sequences packed into one row, position ids restarting per sequence); a model "
-                                  "with recurrent layers (Qwen3.5's linear attention) runs padded")
+    pack_sequences: bool | Literal["auto"] = Field(
+        default="auto", description="run the policy, reference and pi_old forwards on each micro-batch's real tokens "
+                                    "only (sequences packed into one row, position ids restarting per sequence); "
+                                    "'auto': always with a varlen attention kernel (flash attention), else a micro-batch "
+                                    "whose packed attention area N^2 is at most its padded B*T^2 (a dense block mask "
+                                    "covers the whole packed row); a model with recurrent layers (Qwen3.5's linear "
+                                    "attention) always runs padded")
     loss: LossConfig = Field(default_factory=LossConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
     deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)

@@ -495,6 +495,28 @@ def _decoder_and_head(model):
 PACKABLE_LAYER_TYPES = frozenset({"full_attention", "sliding_attention"})
 
 
+#: Attention implementations that run packed sequences as variable-length batches (no dense mask).
+#: Under the others (sdpa, eager) a packed row of N tokens attends through a dense block-diagonal
+#: [N, N] mask, so its attention grows with N^2 against B * T^2 padded (docs/benchmarks.md,
+#: "Sequence packing": 2x faster with a long-tail length mix, 3-5x slower with even lengths).
+VARLEN_ATTENTION = frozenset({"flash_attention_2", "flash_attention_3"})
+
+
+def packs_sequences(setting: bool | str, model, attention_mask: torch.Tensor) -> bool:
+    """Whether this batch of `model` runs packed under a `pack_sequences` setting: True, False, or "auto":
+    always with a varlen attention kernel, else when the packed row's attention area N^2 is no larger
+    than the padded batch's B * T^2. Never where `packing_unsupported` names a reason."""
+    if setting == "auto":
+        if getattr(model.config, "_attn_implementation", None) in VARLEN_ATTENTION:
+            wanted = True
+        else:
+            rows, width = attention_mask.shape
+            wanted = int(attention_mask.sum()) ** 2 <= rows * width * width
+    else:
+        wanted = bool(setting)
+    return wanted and packing_unsupported(model) is None
+
+
 def packing_unsupported(model) -> str | None:
     """Why `model` cannot run packed sequences (`token_stats(packed=True)`), or None when it can."""
     config = model.config.get_text_config() if hasattr(model.config, "get_text_config") else model.config

@@ -33,7 +33,8 @@ from learner.losses import (
     group_advantages,
     turn_weights,
 )
-from modeling.model import pad_batch, packing_unsupported, padding_fraction, split_by_budget, token_stats
+from modeling.model import (pad_batch, packing_unsupported, packs_sequences, padding_fraction, split_by_budget,
+                            token_stats)
 
 
 @dataclass
@@ -117,8 +118,7 @@ class RankWorker:
         tokenizer = load_tokenizer(model_dir)
         self.pad_id = tokenizer.pad_token_id if tokenizer.pad_token_id is not None else 0
         # The policy, reference and pi_old forwards run on real tokens only where the model allows it.
-        unsupported = packing_unsupported(self.backend.policy) if self.config.pack_sequences else None
-        self.packed = self.config.pack_sequences and unsupported is None
+        unsupported = packing_unsupported(self.backend.policy) if self.config.pack_sequences is True else None
         if unsupported and rank == 0:
             print(f"[learner] learner.pack_sequences: {unsupported}", flush=True)
         # The version of the weights this rank holds (batches trained so far): the same count as
@@ -259,6 +259,10 @@ class RankWorker:
                 token_stats(self.backend.policy, ids, torch.ones_like(ids))
 
     # -- the step ------------------------------------------------------------------------------
+    def _packed(self, t: dict[str, torch.Tensor]) -> bool:
+        """Whether this micro-batch's forwards run packed (`learner.pack_sequences`)."""
+        return packs_sequences(self.config.pack_sequences, self.backend.policy, t["attention_mask"])
+
     def _forward(self, t: dict[str, torch.Tensor], *, grad: bool):
         d = self.config.loss.distill
         self.backend.begin_forward()
@@ -270,7 +274,7 @@ class RankWorker:
                 chunk_size=self.config.logprob_chunk_size,
                 entropy_requires_grad=grad and self.config.loss.entropy_coef > 0,
                 # Every loss term reads only the trained tokens: the LM head runs on those alone.
-                positions=t["loss_mask"] > 0, packed=self.packed,
+                positions=t["loss_mask"] > 0, packed=self._packed(t),
             )
 
     def _reference_logprobs(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:
@@ -280,7 +284,7 @@ class RankWorker:
         with torch.no_grad(), self.backend.autocast():
             return token_stats(ref, t["input_ids"], t["attention_mask"], temperature=self.config.temperature,
                                chunk_size=self.config.logprob_chunk_size, positions=t["loss_mask"] > 0,
-                               packed=self.packed).logprobs
+                               packed=self._packed(t)).logprobs
 
     def _run(self, samples: list[RolloutSample], teacher, *, update: bool) -> dict[str, float]:
         t0 = time.perf_counter()
@@ -296,7 +300,7 @@ class RankWorker:
                 cache.append({})
                 continue
             t = self._tensors(prep, idx)
-            pad, total = padding_fraction(t["attention_mask"], self.packed)
+            pad, total = padding_fraction(t["attention_mask"], self._packed(t))
             padded, computed = padded + pad, computed + total
             t_ref = time.perf_counter()
             entry = {"t": t, "idx": idx, "ref": self._reference_logprobs(t)}

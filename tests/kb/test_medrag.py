@@ -205,7 +205,7 @@ def test_shard_command_on_a_built_kb_ranks_exactly_as_before(kb_dir, kb, tmp_pat
     filters = [{}, {"source": "guidelines"}, {"category": "cardiology"}, {"source": ["wiki", "drugs"]}]
     assert _assert_same_rankings(kb, sharded, seed=9, trials=300, filters=filters) > 250
     from kb_service.kb import KBCorruptError
-    from kb_service.shards import shard_kb
+    from kb_service.reshard import shard_kb
 
     with pytest.raises(ValueError, match="already sharded"):
         shard_kb(copy, 50)

@@ -70,7 +70,7 @@ def test_service_serves_a_sharded_kb(cluster, kb_dir, kb, tmp_path):
     import shutil
 
     from kb_service.service import start_kb_service
-    from kb_service.shards import shard_kb
+    from kb_service.reshard import shard_kb
 
     copy = tmp_path / "kb"
     shutil.copytree(kb_dir, copy)

@@ -98,6 +98,19 @@ def test_packing_and_token_budget_micro_batches_do_not_change_the_update(model_d
             assert torch.allclose(v, other[k], atol=2e-5), k
 
 
+def test_auto_packing_packs_a_long_tail_and_pads_even_lengths(model_dir):
+    """sdpa masks a packed row densely: "auto" packs a micro-batch only when its packed attention area
+    N^2 is at most the padded B*T^2 (bench/packing.py: 2x faster on a long tail, 3-5x slower on even
+    lengths)."""
+    from modeling.model import packs_sequences
+
+    model, _ = load_policy(model_dir)
+    long_tail = pad_batch([[5] * n for n in (96, 128, 160, 192, 256, 384, 1024, 2048)], 0)[1]
+    even = pad_batch([[5] * n for n in (480, 496, 512, 512, 512, 528, 528, 544)], 0)[1]
+    assert packs_sequences("auto", model, long_tail) and not packs_sequences("auto", model, even)
+    assert packs_sequences(True, model, even) and not packs_sequences(False, model, long_tail)
+
+
 def test_token_budget_split_keeps_order_counts_and_a_long_sample_alone():
     from modeling.model import split_by_budget
 
