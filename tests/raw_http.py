@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+from pathlib import Path
 
 
 async def status_of(host: str, port: int, request: bytes) -> str:
@@ -52,3 +53,13 @@ def send_raw(address: tuple[str, int], request: bytes, timeout: float = 30.0) ->
                 raise
     assert data, f"{request[:80]!r}: the connection closed without an answer"
     return data
+
+
+def memory_kb(pid: int) -> dict[str, int]:
+    """VmRSS, VmHWM (kB) and Threads of a process, from /proc."""
+    fields = {}
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(("VmRSS:", "VmHWM:", "Threads:")):
+            name, value = line.split(":")
+            fields[name] = int(value.split()[0])
+    return fields

@@ -30,7 +30,7 @@ from mcp import Client
 from mcp_types import CLIENT_CAPABILITIES_META_KEY, PROTOCOL_VERSION_META_KEY
 
 from envs.serve.mcp_server import EPISODE_META_KEY, ServeSettings, build_app, uvicorn_server
-from tests.raw_http import burst_statuses, send_raw
+from tests.raw_http import burst_statuses, memory_kb, send_raw
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT_S = 1.0        # the tight server's request timeout
@@ -85,15 +85,6 @@ def tight():
         finally:
             served.should_exit = True
             thread.join(timeout=10)
-
-
-def memory_kb(pid: int) -> dict[str, int]:
-    fields = {}
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(("VmRSS:", "VmHWM:", "Threads:")):
-            name, value = line.split(":")
-            fields[name] = int(value.split()[0])
-    return fields
 
 
 def open_fds(pid: int) -> int:

@@ -24,7 +24,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
-from tests.raw_http import burst_statuses, send_raw
+from tests.raw_http import burst_statuses, memory_kb, send_raw
 
 ROOT = Path(__file__).resolve().parents[2]
 ROWS = 400            # episodes in the flooded step file
@@ -73,15 +73,6 @@ def raw_get(address, target: bytes, timeout: float = 30.0) -> tuple[int, str]:
     data = send_raw(address, b"GET " + target + b" HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n", timeout)
     head, _, body = data.partition(b"\r\n\r\n")
     return int(head.split()[1]), body.decode("utf-8", "replace")
-
-
-def memory_kb(pid: int) -> dict[str, int]:
-    fields = {}
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(("VmRSS:", "VmHWM:", "Threads:")):
-            name, value = line.split(":")
-            fields[name] = int(value.split()[0])
-    return fields
 
 
 @pytest.mark.parametrize(("target", "status", "named"), [
