@@ -147,6 +147,33 @@ def is_sharded(bm25_dir: Path) -> bool:
     return (Path(bm25_dir) / SHARDS_FILE).is_file()
 
 
+def select_terms(terms: list[str], dfs: list[int], max_terms: int) -> list[str]:
+    """The terms with a global document frequency `dfs[i]` > 0, in query order (repeats kept),
+    cut to the `max_terms` most selective (smallest df, ties to the earlier term) as
+    `BM25Searcher.term_ids` cuts them."""
+    kept = [(t, df) for t, df in zip(terms, dfs) if df > 0]
+    if len(kept) > max_terms:
+        keep = sorted(range(len(kept)), key=lambda j: (kept[j][1], j))[:max_terms]
+        kept = [kept[j] for j in sorted(keep)]
+    return [t for t, _ in kept]
+
+
+def merge_top_k(docs: list[np.ndarray], raw: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k best of several top-k lists: (global document numbers, unscaled float32 sums).
+
+    Each list is a shard's (or a group of shards') own top k, documents already offset to global
+    numbers. Merged on the kernel's own sums, score descending then document ascending (the
+    kernel's tie rule): after the (k1 + 1) factor two different sums can round to one value, and
+    ordering those by document would differ from the single index. Merging merged lists again
+    gives the same result, so shard actors can merge their shards before the service merges them.
+    """
+    if not docs:
+        return np.zeros(0, np.int64), np.zeros(0, np.float32)
+    all_docs, all_raw = np.concatenate(docs), np.concatenate(raw)
+    order = np.lexsort((all_docs, -all_raw))[:k]
+    return all_docs[order], all_raw[order]
+
+
 class ShardedBM25Searcher:
     """The `BM25Searcher` interface over a sharded index (`term_ids`, `search`, `num_docs`...).
 
@@ -186,12 +213,7 @@ class ShardedBM25Searcher:
 
     def term_ids(self, terms: list[str], max_terms: int) -> list[str]:
         """The query terms any shard knows, cut to `max_terms` by global df (as `BM25Searcher`)."""
-        kept = [(t, self.df(t)) for t in terms]
-        kept = [(t, df) for t, df in kept if df > 0]
-        if len(kept) > max_terms:  # the most selective terms, ties to the earlier term
-            keep = sorted(range(len(kept)), key=lambda j: (kept[j][1], j))[:max_terms]
-            kept = [kept[j] for j in sorted(keep)]
-        return [t for t, _ in kept]
+        return select_terms(terms, [self.df(t) for t in terms], max_terms)
 
     def search(self, terms: list[str], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Global top-k (document numbers, scores), best first; ties go to the lower document."""
@@ -208,11 +230,8 @@ class ShardedBM25Searcher:
             all_scores.append(raw)
         if not all_docs:
             return np.zeros(0, np.int64), np.zeros(0, np.float32)
-        docs, raw = np.concatenate(all_docs), np.concatenate(all_scores)
-        # Merge on the kernel's own sums: after the (k1 + 1) factor two different sums can round
-        # to one value, and ordering those by document would differ from the single index.
-        order = np.lexsort((docs, -raw))[:k]
-        return docs[order], raw[order] * self.scale
+        docs, raw = merge_top_k(all_docs, all_scores, k)
+        return docs, raw * self.scale
 
     def warmup(self) -> None:
         for shard in self.shards:
