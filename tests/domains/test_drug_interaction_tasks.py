@@ -12,7 +12,7 @@ from envs.core.contamination import find_leaks
 from envs.validate import validate_task
 from envs.domains.drug_interaction import build as di_build
 from envs.domains.drug_interaction import environment as di_env
-from envs.domains.drug_interaction.taskgen import split_of
+from envs.domains.drug_interaction.generate import split_of
 
 
 @pytest.fixture(scope="module")

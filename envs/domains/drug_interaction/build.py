@@ -104,9 +104,9 @@ def build(offline: bool = False, force: bool = False) -> dict:
     except DataSourceError as exc:
         raise DataSourceError(f"drug_interaction build failed: {exc} (package cache: {package_cache_dir()})") from None
 
-    from .taskgen import generate_tasks  # imported late: it needs the tools, which need the database model
+    from .generate import generate  # imported late: it needs the tools, which need the database model
 
-    tasks, splits = generate_tasks(db)
+    tasks, splits = generate(db)
     out.mkdir(parents=True, exist_ok=True)
     tmp_db = out / "db.json.tmp"
     db.dump(tmp_db)

@@ -1,6 +1,6 @@
 """The clinical computations behind the tools, as plain functions over the database.
 
-Tools (tools.py) wrap these with agent-facing errors; the task generator (taskgen.py) uses the
+Tools (tools.py) wrap these with agent-facing errors; the task generator (generate.py) uses the
 same functions to compute its oracles, so a gold answer is exactly what the tools return.
 Every rule below is either read from the data or stated here explicitly (hepatic policy,
 pregnancy category meanings, renal-function formulas).

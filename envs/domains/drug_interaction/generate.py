@@ -615,7 +615,7 @@ def _slug(text: str) -> str:
     return "_".join(p for p in out.split("_") if p)
 
 
-def generate_tasks(db: DrugInteractionDB) -> tuple[list[Task], dict[str, list[str]]]:
+def generate(db: DrugInteractionDB) -> tuple[list[Task], dict[str, list[str]]]:
     """All generated tasks and their fixed train/test split."""
     tasks = TaskGenerator(db).run()
     splits: dict[str, list[str]] = {"train": [], "test": []}
