@@ -174,6 +174,27 @@ def merge_top_k(docs: list[np.ndarray], raw: list[np.ndarray], k: int) -> tuple[
     return all_docs[order], all_raw[order]
 
 
+def search_shards(shards: list[BM25Searcher], offsets: list[int], terms: list[str], k: int,
+                  weight_mask: np.ndarray | None = None, mask_start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The merged top k of `shards` (shard i holds global documents from `offsets[i]`) for the
+    query `terms`: (global document numbers, unscaled sums; see `merge_top_k`). `weight_mask`
+    covers the documents from `mask_start` on (the whole corpus for `ShardedBM25Searcher`, a
+    shard actor's own range in the KB service)."""
+    if not terms or k <= 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.float32)
+    all_docs, all_scores = [], []
+    for offset, shard in zip(offsets, shards):
+        ids = [shard.vocab[t] for t in terms if t in shard.vocab]
+        if not ids:
+            continue
+        start = offset - mask_start
+        mask = None if weight_mask is None else weight_mask[start:start + shard.num_docs]
+        docs, raw = shard.search_unscaled(ids, k, mask)
+        all_docs.append(docs + offset)
+        all_scores.append(raw)
+    return merge_top_k(all_docs, all_scores, k)
+
+
 class ShardedBM25Searcher:
     """The `BM25Searcher` interface over a sharded index (`term_ids`, `search`, `num_docs`...).
 
@@ -217,20 +238,7 @@ class ShardedBM25Searcher:
 
     def search(self, terms: list[str], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Global top-k (document numbers, scores), best first; ties go to the lower document."""
-        if not terms or k <= 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.float32)
-        all_docs, all_scores = [], []
-        for offset, shard in zip(self.offsets, self.shards):
-            ids = [shard.vocab[t] for t in terms if t in shard.vocab]
-            if not ids:
-                continue
-            mask = None if weight_mask is None else weight_mask[offset:offset + shard.num_docs]
-            docs, raw = shard.search_unscaled(ids, k, mask)
-            all_docs.append(docs + offset)
-            all_scores.append(raw)
-        if not all_docs:
-            return np.zeros(0, np.int64), np.zeros(0, np.float32)
-        docs, raw = merge_top_k(all_docs, all_scores, k)
+        docs, raw = search_shards(self.shards, self.offsets, terms, k, weight_mask)
         return docs, raw * self.scale
 
     def warmup(self) -> None:
