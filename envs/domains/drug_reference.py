@@ -313,14 +313,17 @@ class DrugReference:
         return list(dict.fromkeys(out))
 
     def renal_thresholds(self) -> dict[str, list[float]]:
-        """metric ('crcl'/'egfr') -> the 'below X' limits of the drug-interaction renal tables' contraindicated tiers."""
+        """metric ('crcl'/'egfr') -> the 'below X' limits of the renal bands the drugs' US labels contraindicate
+        (the drug-interaction renal tables checked against each label: its logic.RENAL_LABEL_RULES)."""
+        from envs.domains.drug_interaction.logic import renal_contraindicated_below
+
         di = self._interaction_db()
         out: dict[str, set[float]] = {"crcl": set(), "egfr": set()}
         if di is not None:
             for profile in di[0].renal_profiles.values():
-                for tier in profile.tiers:
-                    if tier.adjustment_type == "contraindicated" and tier.max is not None:
-                        out.setdefault(profile.metric, set()).add(tier.max + 1)
+                below = renal_contraindicated_below(profile)
+                if below is not None:
+                    out.setdefault(profile.metric, set()).add(below)
         return {k: sorted(v) for k, v in out.items()}
 
 

@@ -270,10 +270,8 @@ def test_every_rare_disease_vignette_ranks_its_gold_in_the_top_three_of_generate
 
 
 # -- every generated task names its guideline ---------------------------------------------------------------
-# Every domain with a data build generates tasks and is checked here, a new one included, except
-# drug_interaction: its generated tasks do not yet name the label section of the rule they test.
-GENERATING_DOMAINS = [d for d in registry.list_domains() if (registry.DOMAINS_DIR / d / "build.py").is_file()
-                      and d != "drug_interaction"]
+# Every domain with a data build generates tasks and is checked here, a new one included.
+GENERATING_DOMAINS = [d for d in registry.list_domains() if (registry.DOMAINS_DIR / d / "build.py").is_file()]
 
 
 @pytest.mark.parametrize("domain", GENERATING_DOMAINS)

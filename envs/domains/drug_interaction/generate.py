@@ -51,6 +51,74 @@ def _prov(p: Provenance, records: str | None = None) -> dict[str, str]:
     return out
 
 
+ANSM_THESAURUS = "ANSM Thesaurus des interactions médicamenteuses (2020)"
+# What a task type's answer follows when its gold results name no rule, label or basis of their own.
+TYPE_SOURCES = {
+    "class_membership": f"{ANSM_THESAURUS}: the class members as the thesaurus lists them",
+    "brand_lookup": "drug-named-entity-recognition 2.0.9 vocabulary (DrugBank open vocabulary, MeSH): brand and "
+                    "synonym names of the generic",
+    "creatinine_clearance": "Cockcroft DW, Gault MH. Prediction of creatinine clearance from serum creatinine. "
+                            "Nephron 1976;16:31-41 (actual body weight; x0.85 for women)",
+    "allergy_conflict": "FDA labels, 4 CONTRAINDICATIONS (known hypersensitivity); AAAAI/ACAAI drug allergy practice "
+                        f"parameter update 2022 (Khan et al.); cross-reactive classes as {ANSM_THESAURUS} groups them",
+    "max_single_dose": "drugdose 0.1.2 emergency dose table (maximum single dose by route)",
+    "dose_check": "drugdose 0.1.2 emergency dose table (per-kg range and maximum single dose by route)",
+}
+NO_RULE = f"{ANSM_THESAURUS} and the US overlay (severity_overlay.json): no rule covers the drugs asked about"
+for _type in ("interaction_severity", "class_rule_severity", "non_drug_interaction", "patient_new_drug_severity",
+              "patient_contraindicated_combination", "patient_interacting_pairs", "safer_alternative"):
+    TYPE_SOURCES[_type] = NO_RULE
+
+
+def _rule_ids(results: list[Any]) -> list[str]:
+    """The interaction rules the gold results decide by: each pair's rules (check_interaction), the
+    pairs at the highest level (check_patient_interactions), in order, without repeats."""
+    out: list[str] = []
+    for r in results:
+        if not isinstance(r, dict):
+            continue
+        out += [rule["rule_id"] for rule in r.get("rules", []) if isinstance(rule, dict) and "rule_id" in rule]
+        pairs = [p for p in r.get("interacting_pairs", []) if isinstance(p, dict)
+                 and (not r.get("proposed_drug") or p.get("involves_proposed_drug"))]
+        if pairs:
+            top = max(SEVERITY_RANK[p["severity_level"]] for p in pairs)
+            out += [i for p in pairs if SEVERITY_RANK[p["severity_level"]] == top for i in p.get("rule_ids", [])]
+    return list(dict.fromkeys(out))
+
+
+def guideline_for(db: DrugInteractionDB, task_type: str, results: list[Any]) -> str:
+    """The label section, guideline or reference table a task's gold answer follows, read from the gold
+    tool results: a US overlay rule's evidence (also for the ANSM rule it re-rates), the ANSM thesaurus
+    rule, a renal or hepatic label rule, a pregnancy label section or the named package basis."""
+    cited: list[str] = []
+    reviewed = {a: r for r in db.interactions.values() if r.source == "us_overlay" for a in r.reviews}
+    ansm = []
+    for rid in _rule_ids(results):
+        rule = db.interactions.get(rid)
+        overlay = rule if rule is not None and rule.source == "us_overlay" else reviewed.get(rid)
+        if overlay is not None:
+            cited.append(f"{overlay.id}: {overlay.evidence}")
+        elif rule is not None:
+            ansm.append(rid)
+    if ansm:
+        cited.append(f"{ANSM_THESAURUS}, rule {', '.join(ansm)}")
+    for r in results:
+        if not isinstance(r, dict):
+            continue
+        if isinstance(r.get("label_rule"), dict):
+            cited.append(r["label_rule"]["source"])
+        elif "recommended_dose" in r and r.get("evidence"):
+            cited.append(f"open-medicine renal dosing table ({r['evidence']})")
+        if r.get("label_section"):
+            cited.append(r["label_section"])
+        elif isinstance(r.get("basis"), str) and not isinstance(r.get("label_rule"), dict):
+            cited.append(r["basis"] + (f"; {r['label_checked']}" if r.get("label_checked") else ""))
+    cited = list(dict.fromkeys(cited))
+    if not cited and task_type in TYPE_SOURCES:
+        cited.append(TYPE_SOURCES[task_type])
+    return "; ".join(cited)
+
+
 @dataclass
 class Spec:
     """A task before its answer is known: the gold calls and how to read the answer from them."""
@@ -399,8 +467,9 @@ class TaskGenerator:
         for kind, group in sorted(by_type.items()):
             for _, pid, drug_id in self.sample(sorted(group), 6):
                 ticket = (f"Renal dosing check for {pid}: {drug_id} is planned. Using {pid}'s renal function and the "
-                          f"open-medicine renal table, which adjustment applies? One of: no_adjustment, dose_reduction, "
-                          f"interval_extension, use_with_caution, contraindicated.")
+                          f"open-medicine renal table (its contraindicated bands checked against the US label), which "
+                          f"adjustment applies? One of: no_adjustment, dose_reduction, interval_extension, "
+                          f"use_with_caution, avoid, contraindicated.")
                 self.add(Spec(
                     id=f"di-gen-renal_adjustment_patient-{pid}-{_slug(drug_id)}", task_type="renal_adjustment_patient",
                     ticket=ticket, patient_id=pid,
@@ -419,7 +488,8 @@ class TaskGenerator:
             unit = "mL/min" if profile.metric == "crcl" else "mL/min/1.73 m2"
             name = "creatinine clearance" if profile.metric == "crcl" else "eGFR"
             letters = ["A", "B", "C", "D", "E"]
-            doses = list(dict.fromkeys(t.dose for t in tiers))
+            # the regimens as the tool reports them: a band the label does not contraindicate reads as the label says
+            doses = list(dict.fromkeys(t["dose"] for t in L.renal_label_tiers(profile)))
             if len(doses) < 2:
                 continue
             options = dict(zip(letters, doses))
@@ -590,13 +660,17 @@ class TaskGenerator:
                 raise RuntimeError(f"generated task {spec.id}: expected action {name}({args}) failed: {outcome.error}")
             results.append(outcome.result)
         answer = spec.answer(results)
+        guideline = guideline_for(self.db, spec.task_type, results)
+        if not guideline:
+            raise RuntimeError(f"generated task {spec.id}: its gold results name no label section or guideline")
         actions = [ExpectedAction(action_id=f"{i + 1}", name=name, arguments=args, compare_args=compare)
                    for i, (name, args, compare) in enumerate(spec.calls)]
         return Task(
             id=spec.id, domain="drug_interaction", ticket=spec.ticket, patient_id=spec.patient_id,
             description=TaskDescription(purpose=spec.category, difficulty=spec.difficulty, source=spec.source,
                                         category=spec.category, task_type=spec.task_type,
-                                        key_challenges=spec.challenges, provenance=spec.provenance),
+                                        key_challenges=spec.challenges,
+                                        provenance={**spec.provenance, "guideline": guideline}),
             evaluation_criteria=EvaluationCriteria(actions=actions, reward_basis=["ACTION", "ANSWER"]),
             options=spec.options, correct_answer=answer, answer_type=spec.answer_type,  # type: ignore[arg-type]
             answer_aliases=spec.aliases(answer) if spec.aliases else [],

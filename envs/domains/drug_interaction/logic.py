@@ -467,14 +467,91 @@ def ckd_epi_2021(patient: Patient) -> float:
     return round(egfr, 1)
 
 
+@dataclass(frozen=True)
+class RenalLabelRule:
+    """A drug's lowest renal band as its US label states it, where open-medicine's table calls the band
+    "contraindicated". `below`: the band is renal function < below (in the table's metric, which is the
+    label's). `level`: "contraindicated" only where the label's section 4 says so; "avoid" where the label
+    says not recommended / avoid or gives no renal contraindication (a guideline may advise against it)."""
+    metric: str
+    below: float
+    level: str
+    dose: str
+    label: str
+    statement: str
+
+
+# Every open-medicine tier marked "contraindicated" is checked here against the drug's US label; the
+# reward's severity-5 contraindication pattern reads `level`, not the package's word.
+RENAL_LABEL_RULES: dict[str, RenalLabelRule] = {
+    "metformin": RenalLabelRule(
+        "egfr", 30, "contraindicated", "Contraindicated (eGFR below 30 mL/min/1.73 m2)",
+        "Glucophage (metformin) USPI 4 CONTRAINDICATIONS (severe renal impairment: eGFR below 30 mL/min/1.73 m2) and "
+        "2 DOSAGE AND ADMINISTRATION (eGFR 30-45: initiation not recommended)",
+        "contraindicated below eGFR 30; starting it at eGFR 30-45 is not recommended"),
+    "sotalol": RenalLabelRule(
+        "crcl", 40, "contraindicated", "Contraindicated for AFIB/AFL (creatinine clearance below 40 mL/min)",
+        "Betapace AF / sotalol hydrochloride tablets USPI 4 CONTRAINDICATIONS (for AFIB/AFL: creatinine clearance "
+        "< 40 mL/min) and 2 DOSAGE AND ADMINISTRATION (dosing interval by creatinine clearance)",
+        "the formulary's regimen (80 mg twice daily, up to 160 mg) is the AFIB/AFL one, whose label contraindicates "
+        "creatinine clearance < 40 mL/min; for ventricular arrhythmias the label lengthens the interval instead"),
+    "lithium": RenalLabelRule(
+        "crcl", 30, "avoid", "Not recommended (severe renal impairment); avoid if possible",
+        "Lithium carbonate USPI 4 CONTRAINDICATIONS (hypersensitivity to an inactive ingredient only: no renal "
+        "contraindication), "
+        "2 DOSAGE AND ADMINISTRATION (CLcr 30-89 mL/min: start lower, titrate slowly) and 8 USE IN SPECIFIC "
+        "POPULATIONS (renal impairment: severe, CLcr < 30 mL/min, not recommended)",
+        "not recommended below creatinine clearance 30 mL/min; not a label contraindication"),
+    "methotrexate": RenalLabelRule(
+        "crcl", 15, "avoid", "Avoid (elimination reduced; if used, very low dose with close monitoring)",
+        "Methotrexate tablets USPI (2020) 4 CONTRAINDICATIONS (pregnancy in non-neoplastic disease, severe "
+        "hypersensitivity: no renal contraindication), boxed warning and 5 WARNINGS AND PRECAUTIONS (renal toxicity "
+        "and increased toxicity with renal impairment) and 8 USE IN SPECIFIC POPULATIONS (renal impairment)",
+        "elimination is reduced: monitor closely and reduce the dose or stop; the US label does not contraindicate "
+        "it by renal function"),
+    "spironolactone": RenalLabelRule(
+        "egfr", 30, "avoid", "Avoid initiating (eGFR below 30 mL/min/1.73 m2)",
+        "Aldactone (spironolactone) USPI 4 CONTRAINDICATIONS (hyperkalemia, Addison's disease, eplerenone: no renal "
+        "contraindication) and 2.2 Treatment of Heart Failure (eGFR 30-50: consider 25 mg every other day); "
+        "2022 AHA/ACC/HFSA heart failure guideline (MRA only with eGFR > 30 mL/min/1.73 m2 and potassium < 5.0)",
+        "no label contraindication by renal function; the heart failure guideline starts an MRA only above eGFR 30 "
+        "(hyperkalaemia risk)"),
+}
+
+
+def renal_label_tiers(profile: RenalProfile) -> list[dict]:
+    """The drug's renal tiers (highest band first) with its label rule applied: a tier inside the rule's
+    band takes the label's level and wording; the package's own are kept as `source_*`."""
+    rule = RENAL_LABEL_RULES.get(profile.drug_id)
+    out = []
+    for tier in profile.tiers:
+        row = tier.model_dump()
+        if (rule is not None and rule.metric == profile.metric and tier.max is not None and tier.max < rule.below
+                and tier.adjustment_type == "contraindicated"):
+            row.update(source_adjustment_type=tier.adjustment_type, source_dose=tier.dose,
+                       adjustment_type=rule.level, dose=rule.dose,
+                       label_rule={"source": rule.label, "statement": rule.statement})
+        out.append(row)
+    return out
+
+
+def renal_contraindicated_below(profile: RenalProfile) -> float | None:
+    """The renal function (profile's metric) below which the drug's label contraindicates it, else None."""
+    limits = [t["max"] + 1 for t in renal_label_tiers(profile)
+              if t["adjustment_type"] == "contraindicated" and t["max"] is not None]
+    return max(limits) if limits else None
+
+
 def renal_tier(profile: RenalProfile, value: float) -> dict:
-    """The tier whose lower bound is the highest one not above `value` (tiers cover 0 to infinity)."""
+    """The tier whose lower bound is the highest one not above `value` (tiers cover 0 to infinity), with
+    the drug's label rule applied (`renal_label_tiers`)."""
     if value < 0 or not math.isfinite(value):
         raise ValueError(f"renal function must be a non-negative number, got {value}")
-    for tier in profile.tiers:  # sorted by min, descending
-        if value >= tier.min:
-            return tier.model_dump()
-    return profile.tiers[-1].model_dump()
+    tiers = renal_label_tiers(profile)  # sorted by min, descending
+    for tier in tiers:
+        if value >= tier["min"]:
+            return tier
+    return tiers[-1]
 
 
 # The formulary's default convention (not a source fact): what a hepatic caution flag means for each

@@ -94,8 +94,9 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
         return out
 
     def _renal_thresholds(self) -> list[float]:
-        return sorted({t.max + 1 for r in self.db.renal_profiles.values() for t in r.tiers
-                       if t.adjustment_type == "contraindicated" and t.max is not None})
+        # only a band the drug's US label contraindicates (logic.RENAL_LABEL_RULES), not the package's word
+        limits = (L.renal_contraindicated_below(r) for r in self.db.renal_profiles.values())
+        return sorted({x for x in limits if x is not None})
 
     def normalise_drug(self, name: str) -> str | None:
         drug = self._drug(name)
@@ -145,10 +146,9 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
             return []
         out = []
         renal = self.db.renal_profiles.get(d.id)
-        if renal:
-            for tier in renal.tiers:
-                if tier.adjustment_type == "contraindicated" and tier.max is not None:
-                    out.append(f"{renal.metric} < {tier.max + 1:g}")
+        below = L.renal_contraindicated_below(renal) if renal else None
+        if below is not None:
+            out.append(f"{renal.metric} < {below:g}")
         # No hepatic label rule is a contraindication for every route and indication (logic.HepaticLabelRule),
         # and the default convention's "avoid or specialist review" is no label statement: no Child-Pugh
         # class is a contraindicating condition.

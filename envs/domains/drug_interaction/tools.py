@@ -348,6 +348,9 @@ class DrugInteractionTools(BaseDomainTools):
                "requires_tdm": profile.requires_tdm, "monitoring": profile.monitoring,
                "evidence": profile.source_description, "doi": profile.source_doi,
                "source": profile.provenance[0].model_dump()}
+        if "label_rule" in tier:  # the package's tier word differs from the US label's
+            out.update(label_rule=tier["label_rule"], source_adjustment_type=tier["source_adjustment_type"],
+                       source_recommended_dose=tier["source_dose"])
         if used != profile.metric:
             out["metric_note"] = (f"the label for {d.id} uses {profile.metric}; {used} was given and may differ "
                                   "in elderly, obese or malnourished patients")
