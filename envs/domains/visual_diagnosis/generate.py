@@ -18,6 +18,7 @@ import numpy as np
 from scipy import ndimage
 
 from envs.calculators import CALCULATORS
+from envs.coherence import indication_fits_age
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import render as R
 from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT
@@ -31,6 +32,13 @@ ORIENT_CT = "axial, viewed from the feet: the patient's right is on the image le
 INDICATION = {"normal": "pre-employment screening", "nodule": "chronic cough", "mass": "weight loss and haemoptysis",
               "consolidation": "fever and productive cough", "pleural effusion": "breathlessness",
               "pneumothorax": "sudden pleuritic chest pain", "cardiomegaly": "ankle swelling and orthopnoea"}
+# A normal radiograph past working age is a pre-operative film, not a pre-employment one (envs.coherence).
+OLDER_NORMAL_INDICATION = "pre-operative assessment"
+
+
+def _indication(kind: str, age: int) -> str:
+    indication = INDICATION.get(kind, "incidental finding")
+    return indication if indication_fits_age(indication, age) else OLDER_NORMAL_INDICATION
 
 
 def _patient(rng: random.Random, kind: str, smoker: bool | None = None) -> PatientInfo:
@@ -40,7 +48,7 @@ def _patient(rng: random.Random, kind: str, smoker: bool | None = None) -> Patie
     return PatientInfo(age=age, sex=rng.choice(["female", "male"]), history=rng.choice(["no relevant history", "hypertension",
                                                                                           "type 2 diabetes", "asthma", "COPD"]),
                        smoking_pack_years=pack, lung_cancer_risk="high" if smoker else "low",
-                       symptoms=[INDICATION.get(kind, "incidental finding")])
+                       symptoms=[_indication(kind, age)])
 
 
 def place(mask: np.ndarray, zone: str, r: float, rng: random.Random) -> tuple[float, float] | None:
@@ -113,9 +121,10 @@ def make_cxr(sid: str, rng: random.Random, kind: str, image_dir: Path, **kw) -> 
         if not cxr_agrees(out, spec, f):
             continue
         write_png(image_dir / f"{sid}.png", img)
+        patient = _patient(rng, kind)
         study = Study(study_id=sid, modality="CR", body_part="chest", view="PA", image_file=f"images/{sid}.png", width=R.SIZE,
-                      height=R.SIZE, pixel_spacing_mm=R.CXR_SPACING_MM, orientation=ORIENT_CXR, indication=INDICATION[kind],
-                      acquired="today", patient=_patient(rng, kind), provenance=PROVENANCE)
+                      height=R.SIZE, pixel_spacing_mm=R.CXR_SPACING_MM, orientation=ORIENT_CXR, indication=patient.symptoms[0],
+                      acquired="today", patient=patient, provenance=PROVENANCE)
         truth = {"finding": kind, "side": f["side"], "zone": f["zone"], "ctr": spec["ctr"], "diameter_mm": f.get("diameter_mm"),
                  "seed": seed, "centroid_px": [round(f["cx"], 1), round(f["cy"], 1)] if "cx" in f else None}
         return study, truth
