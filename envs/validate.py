@@ -132,6 +132,11 @@ def validate_task(task: Task, domain: str, toolkit_definitions: dict, *, replay:
     accuracy = report.reward_components.get("accuracy")
     if task.has_gold_answer and (accuracy is None or accuracy < 1.0 - 1e-9):
         report.problems.append(f"gold replay: accuracy {accuracy} < 1 for gold answer {task.correct_answer!r}")
+    # Accuracy reads the final DB hash only for a task without a gold answer; a task that has both must
+    # still leave the database in its expected state.
+    expected_hash = task.evaluation_criteria.expected_db_hash
+    if expected_hash and trajectory.db_hash_final != expected_hash:
+        report.problems.append(f"gold replay: final DB hash {trajectory.db_hash_final} != expected_db_hash {expected_hash}")
     return report
 
 

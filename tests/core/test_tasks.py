@@ -83,3 +83,20 @@ def test_validator_on_ward_domain():
     report = validate_task(bad, "ward", registry.get_environment("ward").toolkit.definitions)
     text = " | ".join(report.problems)
     assert "unknown argument 'oops'" in text and "no such tool" in text
+
+
+def test_validator_checks_the_final_database_of_a_task_with_a_gold_answer():
+    """A task with a gold answer and an expected final DB state: its gold replay must reach that state
+    (accuracy grades the answer only, so the validator checks the hash itself)."""
+    from envs.validate import gold_replay, validate_task
+
+    definitions = registry.get_environment("ward").toolkit.definitions
+    record = next(t for t in registry.get_tasks("ward") if t.id == "ward_record")
+    trajectory, _ = gold_replay(record, "ward")
+    right = record.model_copy(deep=True)
+    right.evaluation_criteria.expected_db_hash = trajectory.db_hash_final
+    assert validate_task(right, "ward", definitions).problems == []
+    wrong = record.model_copy(deep=True)
+    wrong.evaluation_criteria.expected_db_hash = "0" * 16
+    problems = validate_task(wrong, "ward", definitions).problems
+    assert problems == [f"gold replay: final DB hash {trajectory.db_hash_final} != expected_db_hash {'0' * 16}"]
