@@ -22,7 +22,7 @@ def train_undoing_failed_start(cfg, *, resume: bool = False, log: Callable[[str]
 
 
 def _train(args: argparse.Namespace) -> int:
-    from learner.train import config_from_args
+    from learner.train_args import config_from_args
 
     summary = train_undoing_failed_start(config_from_args(args), resume=args.resume)
     print(json.dumps({"steps": summary["steps"], "wall_s": round(summary["wall_s"], 1), "run_dir": summary["run_dir"],
@@ -91,7 +91,7 @@ def _plan(args: argparse.Namespace) -> int:
 
 def register(subparsers) -> None:
     """Add the training subcommands to the `hcgym` parser."""
-    from learner.train import build_arg_parser
+    from learner.train_args import build_arg_parser
 
     train = subparsers.add_parser("train", help="train a policy with GRPO / TT-OPD on local or remote Ray",
                                   description="Train from a run config (configs/*.yaml).")

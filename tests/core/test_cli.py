@@ -41,3 +41,15 @@ def test_tasks_import_reference(tmp_path, capsys):
 def test_errors_exit_2_with_a_message(capsys):
     assert main(["tasks", "import", "--format", "medqa-typo", "--domain", "ward", "--output", "x", "y"]) == 2
     assert "unknown format" in capsys.readouterr().err
+
+
+def test_building_the_command_line_does_not_import_the_training_stack():
+    """Every `hcgym` command builds the whole parser first: a command that trains nothing (tasks, kb,
+    view, serve) must not pay for importing torch, transformers and Ray (~4 s of CPU per process)."""
+    import subprocess
+    import sys
+
+    probe = ("import sys, envs.cli as cli; cli.build_parser(); "
+             "print(','.join(m for m in ('torch', 'transformers', 'ray', 'deepspeed') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "", f"building the hcgym parser imported {out.stdout.strip()}"

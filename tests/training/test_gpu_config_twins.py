@@ -142,7 +142,7 @@ def test_periodic_reset_schedule_never_runs_ema():
 def test_cpu_twin_flag_of_hcgym_train(twin_models, tmp_path):
     """`hcgym train --config ... --cpu-twin` loads the shipped config and applies the table; the run
     folder gets a `_cpu_twin` suffix, and the twin model is built once beside it (reused here)."""
-    from learner.train import build_arg_parser, config_from_args
+    from learner.train_args import build_arg_parser, config_from_args
 
     out = tmp_path / "runs" / "rehearsal"
     cached = out.parent / ".cpu_twin_models" / "qwen35_9b_ttopd" / "model"
