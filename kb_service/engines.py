@@ -286,13 +286,15 @@ def tantivy_schema():
 
 
 class TantivyBuilder:
-    def __init__(self, path: Path, heap_bytes: int = 256_000_000, threads: int | None = None) -> None:
+    def __init__(self, path: Path, heap_bytes: int = 256_000_000, threads: int | None = None,
+                 reuse: bool = False) -> None:
+        """`reuse`: add to the index committed at `path` (a resumed build) instead of a new one."""
         import tantivy
 
         from kb_service.analysis import build_analyzer
 
         path.mkdir(parents=True, exist_ok=True)
-        self.index = tantivy.Index(tantivy_schema(), path=str(path), reuse=False)
+        self.index = tantivy.Index(tantivy_schema(), path=str(path), reuse=reuse)
         self.index.register_tokenizer(TOKENIZER, build_analyzer())
         threads = threads or max(1, min(2, os.cpu_count() or 1))
         self.writer = self.index.writer(heap_size=heap_bytes, num_threads=threads)

@@ -27,6 +27,7 @@ import os
 import shutil
 import sqlite3
 import time
+from array import array
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -238,10 +239,14 @@ class BuildReport:
     inputs: list[dict] = field(default_factory=list)
     articles: int = 0
     seconds: dict[str, float] = field(default_factory=dict)
+    bm25_shards: dict | None = None
 
     def as_dict(self) -> dict:
-        return {"out": self.out, "n_passages": self.n_passages, "sources": self.sources, "inputs": self.inputs,
-                "articles": self.articles, "seconds": self.seconds}
+        out = {"out": self.out, "n_passages": self.n_passages, "sources": self.sources, "inputs": self.inputs,
+               "articles": self.articles, "seconds": self.seconds}
+        if self.bm25_shards is not None:
+            out["bm25_shards"] = self.bm25_shards
+        return out
 
 
 def _tqdm(enabled: bool, **kw):
@@ -253,19 +258,32 @@ def _tqdm(enabled: bool, **kw):
 def build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] | None = None,
              article_iter: Callable[[], Iterable[dict]] | None = None, resume: bool = True,
              progress: bool = True, batch_size: int = 2000, manifest_extra: dict | None = None,
-             echo: Callable[[str], None] = print) -> dict:
+             echo: Callable[[str], None] = print, shard_docs: int | None = None,
+             memory_budget_mb: int | None = None) -> dict:
     """Build (or resume building) a knowledge base at `out`; returns the summary dict.
 
     The build runs in `OUT.building/` and replaces `out` only when complete.
 
+    `shard_docs` / `memory_budget_mb`: build the bm25 index as shards (`kb_service.shards`) of at
+    most `shard_docs` passages (default `DEFAULT_SHARD_DOCS`), each cut small enough that the
+    build process's peak RSS stays under `memory_budget_mb` (interpreter and libraries
+    included); the index stage then commits shard by shard (and tantivy in eighths), so an
+    interrupted build resumes after the last commit. None of either: one index built in memory.
+
     Raises:
+        ValueError: naming `shard_docs` / `memory_budget_mb` when not a positive integer, or the
+            budget when it is below what the process already holds plus a minimal working set.
         DiskFullError: naming the staging folder when the disk fills; the passages committed so far
             stay there and a rerun (resume=True) continues after them.
     """
+    for name, value in (("shard_docs", shard_docs), ("memory_budget_mb", memory_budget_mb)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
     staging = Path(out).parent / (Path(out).name + ".building")
     try:
         return _build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=resume,
-                         progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo)
+                         progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo,
+                         shard_docs=shard_docs, memory_budget_mb=memory_budget_mb)
     except Exception as exc:
         full = as_disk_full(exc, staging)
         if full is None or (full is exc and full.hint):
@@ -289,10 +307,12 @@ def _committed_passages(staging: Path) -> int:
 
 def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] | None, article_iter,
               resume: bool, progress: bool, batch_size: int, manifest_extra: dict | None,
-              echo: Callable[[str], None]) -> dict:
+              echo: Callable[[str], None], shard_docs: int | None, memory_budget_mb: int | None) -> dict:
     out = Path(out)
     staging = out.parent / (out.name + ".building")
     t0 = time.perf_counter()
+    if memory_budget_mb is not None:  # fail before touching anything when the budget cannot work at all
+        _memory_plan(memory_budget_mb, lambda _s: None)
     if staging.exists() and not resume:
         shutil.rmtree(staging)
     staging.mkdir(parents=True, exist_ok=True)
@@ -308,7 +328,8 @@ def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path]
                 writer.close()
                 echo(f"[kb] input {inp.name} changed since the interrupted build; starting the build afresh")
                 return build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=False,
-                                progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo)
+                                progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo,
+                                shard_docs=shard_docs, memory_budget_mb=memory_budget_mb)
             report.inputs.append(_ingest_one(writer, inp, prog, progress, batch_size, echo))
         report.seconds["ingest"] = round(time.perf_counter() - t0, 1)
         n = writer.count()
@@ -334,8 +355,12 @@ def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path]
             report.seconds["articles"] = round(time.perf_counter() - t1, 1)
 
         t2 = time.perf_counter()
-        index_info = _build_indexes(writer, staging, n, progress, echo)
+        if shard_docs is None and memory_budget_mb is None:
+            index_info = _build_indexes(writer, staging, n, progress, echo)
+        else:
+            index_info = _build_indexes_sharded(writer, staging, n, progress, echo, shard_docs, memory_budget_mb)
         report.seconds["index"] = round(time.perf_counter() - t2, 1)
+        report.bm25_shards = index_info.get("bm25_shards")
         report.sources = writer.source_counts()
         provenance = _provenance_by_source(writer)
     finally:
@@ -463,6 +488,192 @@ def _build_indexes(writer, staging: Path, n: int, progress: bool, echo) -> dict:
     np.save(staging / "docmeta" / "category_ids.npy", category_ids)
     write_json(staging / "docmeta" / "names.json", {"sources": list(sources), "categories": list(categories)})
     return {"vocabulary": info["vocab"], "postings": info["postings"]}
+
+
+# Memory the index stage keeps for itself beyond the bm25 shard's working set and tantivy's heap:
+# a batch of rows read from the store, the analysed tokens of one passage, the per-shard filter
+# ids and allocator slack (measured peaks in docs/benchmarks.md, "KB scaling").
+INDEX_HEADROOM_BYTES = 24 << 20
+MIN_WORKING_BYTES = 32 << 20
+TANTIVY_MIN_HEAP_PER_THREAD = 15_000_000  # tantivy refuses a smaller arena per indexing thread
+INDEX_PROGRESS = "index.progress.json"
+
+
+def _memory_plan(memory_budget_mb: int | None, echo) -> dict:
+    """How the index stage spends a memory budget: the bm25 pass (one shard's working set) and the
+    tantivy pass (its indexing heap) run one after the other, each within what the budget leaves
+    above the memory this process already holds (measured now, after importing both engines)."""
+    if memory_budget_mb is None:
+        return {"bm25_bytes": None, "tantivy_heap": 256_000_000, "tantivy_threads": None, "batch": 2000}
+    import tantivy  # noqa: F401  (both engines' libraries count in what the process holds)
+    from bm25s.scoring import _select_idf_scorer  # noqa: F401
+
+    from kb_service.shards import process_rss_bytes, release_memory
+
+    release_memory()
+
+    base = process_rss_bytes()
+    budget = memory_budget_mb << 20
+    free = budget - base - INDEX_HEADROOM_BYTES
+    if free < MIN_WORKING_BYTES:
+        need = -(-(base + INDEX_HEADROOM_BYTES + MIN_WORKING_BYTES) >> 20)
+        raise ValueError(f"memory_budget_mb={memory_budget_mb} is too small: this build process already holds "
+                         f"{base >> 20} MB (interpreter, numpy, bm25s, tantivy, SQLite); give at least {need} MB")
+    threads = 1 if free < 4 * TANTIVY_MIN_HEAP_PER_THREAD * 2 else 2
+    # tantivy's resident memory runs to about twice its heap while it serialises a segment.
+    heap = int(min(256_000_000, max(TANTIVY_MIN_HEAP_PER_THREAD * threads + (1 << 20), free // 2)))
+    plan = {"bm25_bytes": int(free), "tantivy_heap": heap, "tantivy_threads": threads, "batch": 500}
+    echo(f"[kb] memory budget {memory_budget_mb} MB: {base >> 20} MB held before indexing; bm25 shards cut at "
+         f"~{free >> 20} MB of working set, tantivy heap {heap >> 20} MB on {threads} thread(s)")
+    return plan
+
+
+def _write_npy_parts(path: Path, parts: list[Path], key: str, dtype, n: int) -> None:
+    """Concatenate the `key` arrays of the .npz `parts` into one .npy at `path`, a part at a time."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": np.dtype(dtype).str, "fortran_order": False,
+                                                  "shape": (n,)})
+        written = 0
+        for part in parts:
+            with np.load(part) as z:
+                arr = z[key].astype(dtype, copy=False)
+            fh.write(arr.tobytes())
+            written += len(arr)
+    if written != n:
+        raise IngestError(f"{path}: the index parts hold {written} passages, the store {n}")
+    os.replace(tmp, path)
+
+
+def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, shard_docs: int | None,
+                           memory_budget_mb: int | None) -> dict:
+    """`_build_indexes` for a sharded bm25 index in bounded memory, committed as it goes.
+
+    Pass 1 feeds `ShardedBM25Builder` (each shard committed with its passages' source/category
+    ids); its `save` weighs the shards with the global statistics. Pass 2 feeds tantivy,
+    committing every eighth of the passages. ``index.progress.json`` records what is done, for
+    the same number of passages, so a rerun after a kill continues after the last commit of
+    the stage it was in.
+    """
+    from kb_service.analysis import analyze
+    from kb_service.engines import TantivyBuilder, write_json
+    from kb_service.shards import (DEFAULT_SHARD_DOCS, SHARDS_FILE, ShardedBM25Builder, kill_point,
+                                   peak_rss_bytes, process_rss_bytes, release_memory)
+
+    plan = _memory_plan(memory_budget_mb, echo)
+    context = {"passages": n, "shard_docs": shard_docs, "memory_budget_mb": memory_budget_mb}
+    prog_path = staging / INDEX_PROGRESS
+    try:
+        prog = json.loads(prog_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        prog = None
+    if not isinstance(prog, dict) or prog.get("context") != context:
+        prog = {"context": context, "bm25": None, "tantivy_rows": 0}
+        for sub in ("bm25", "tantivy", "docmeta", "docmeta.parts", "bm25.raw"):
+            shutil.rmtree(staging / sub, ignore_errors=True)
+        write_json(prog_path, prog)
+
+    bm25_dir, parts_dir = staging / "bm25", staging / "docmeta.parts"
+    if prog["bm25"] is None:
+        names: dict[str, dict[str, int]] = {"sources": {}, "categories": {}}
+        pending_src, pending_cat = array("h"), array("i")
+
+        def commit_meta(shard: int, offset: int, num_docs: int) -> None:
+            if len(pending_src) != num_docs:
+                raise RuntimeError(f"shard {shard}: {len(pending_src)} passages of filter ids for {num_docs} documents")
+            part = parts_dir / f"part-{shard:05d}.npz"
+            src = np.array(pending_src, dtype=np.int16)
+            cat = np.array(pending_cat, dtype=np.int32)
+            with open(part.with_suffix(".tmp"), "wb") as fh:
+                np.savez(fh, source_ids=src, category_ids=cat,
+                         names=np.array(json.dumps({k: list(v) for k, v in names.items()})))
+            os.replace(part.with_suffix(".tmp"), part)
+            del src, cat, pending_src[:], pending_cat[:]
+
+        builder = ShardedBM25Builder(staging / "bm25.raw", shard_docs or DEFAULT_SHARD_DOCS,
+                                     memory_bytes=plan["bm25_bytes"], resume=True, context=context,
+                                     on_commit=commit_meta, echo=echo)
+        start = builder.n_docs
+        if builder.fresh:
+            shutil.rmtree(parts_dir, ignore_errors=True)
+            shutil.rmtree(bm25_dir, ignore_errors=True)
+        else:
+            last = parts_dir / f"part-{builder.committed_shards - 1:05d}.npz"
+            if builder.committed_shards:
+                with np.load(last) as z:
+                    saved = json.loads(str(z["names"]))
+                names = {k: {name: i for i, name in enumerate(v)} for k, v in saved.items()}
+            for stale in parts_dir.glob("part-*"):
+                if int(stale.name[5:10]) >= builder.committed_shards:
+                    stale.unlink()
+            echo(f"[kb] bm25: resuming after {builder.committed_shards} committed shard(s) "
+                 f"({start:,} of {n:,} passages indexed)")
+        parts_dir.mkdir(parents=True, exist_ok=True)
+        sources, categories = names["sources"], names["categories"]
+        bar = _tqdm(progress, total=n, initial=start, unit=" passages", desc="index bm25s")
+        for rows in writer.iter_rows(batch=plan["batch"], after=start):
+            for _rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
+                sid = sources.setdefault(source, len(sources))
+                if sid > np.iinfo(np.int16).max:
+                    raise IngestError(f"too many distinct sources ({len(sources)}); sources name collections, "
+                                      f"not documents")
+                pending_src.append(sid)
+                pending_cat.append(categories.setdefault(category, len(categories)))
+                builder.add(analyze(f"{title}\n{content}" if title else content))
+            bar.update(len(rows))
+        bar.close()
+        if builder.n_docs != n:
+            raise IngestError(f"{writer.path}: the store gave {builder.n_docs} passages to index, it holds {n}")
+        info = builder.save(bm25_dir)
+        for f in bm25_dir.iterdir():  # files of a single index from an earlier, unsharded attempt
+            if f.is_file() and f.name != SHARDS_FILE:
+                f.unlink()
+        parts = sorted(parts_dir.glob("part-*.npz"))
+        (staging / "docmeta").mkdir(exist_ok=True)
+        _write_npy_parts(staging / "docmeta" / "source_ids.npy", parts, "source_ids", np.int16, n)
+        _write_npy_parts(staging / "docmeta" / "category_ids.npy", parts, "category_ids", np.int32, n)
+        write_json(staging / "docmeta" / "names.json", {"sources": list(sources), "categories": list(categories)})
+        shutil.rmtree(parts_dir, ignore_errors=True)
+        del builder
+        release_memory()
+        prog["bm25"] = info
+        write_json(prog_path, prog)
+    info = prog["bm25"]
+
+    done = int(prog["tantivy_rows"])
+    if done < n:
+        if done == 0:
+            shutil.rmtree(staging / "tantivy", ignore_errors=True)
+        else:
+            echo(f"[kb] tantivy: resuming after {done:,} committed passages")
+        every = max(1000, -(-n // 8))
+        tv = TantivyBuilder(staging / "tantivy", heap_bytes=plan["tantivy_heap"], threads=plan["tantivy_threads"],
+                            reuse=done > 0)
+        bar = _tqdm(progress, total=n, initial=done, unit=" passages", desc="index tantivy")
+        for rows in writer.iter_rows(batch=plan["batch"], after=done):
+            for rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
+                tv.add(rowid - 1, f"{title}\n{content}" if title else content, source, category)
+                if rowid % every == 0 and rowid < n:
+                    tv.writer.commit()
+                    prog["tantivy_rows"] = rowid
+                    write_json(prog_path, prog)
+                    echo(f"[kb] tantivy: passages 1-{rowid:,} committed (RSS {process_rss_bytes() >> 20} MB)")
+                    kill_point("tantivy", rowid // every)
+            bar.update(len(rows))
+        bar.close()
+        tv.close()
+        del tv
+        release_memory()
+        prog["tantivy_rows"] = n
+        write_json(prog_path, prog)
+    prog_path.unlink()
+    peak = peak_rss_bytes() >> 20
+    echo(f"[kb] indexes written ({info['vocab']} terms, {info['postings']} postings in {info['shards']} bm25 shards; "
+         f"peak RSS of this process {peak} MB" + (f", budget {memory_budget_mb} MB)" if memory_budget_mb else ")"))
+    shards = {"shard_docs": shard_docs or DEFAULT_SHARD_DOCS, "shards": info["shards"]}
+    if memory_budget_mb is not None:
+        shards["memory_budget_mb"] = memory_budget_mb
+    return {"vocabulary": info["vocab"], "postings": info["postings"], "bm25_shards": shards}
 
 
 def _provenance_by_source(writer) -> dict[str, list[dict]]:

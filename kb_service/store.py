@@ -115,9 +115,10 @@ class StoreWriter:
     def source_counts(self) -> dict[str, int]:
         return dict(self.conn.execute("SELECT source, count(*) FROM passages GROUP BY source ORDER BY source"))
 
-    def iter_rows(self, batch: int = 20_000) -> Iterator[list[tuple]]:
-        """Batches of (rowid, doc_id, source, title, content, category, dataset_name, prov_id) by rowid."""
-        last = 0
+    def iter_rows(self, batch: int = 20_000, after: int = 0) -> Iterator[list[tuple]]:
+        """Batches of (rowid, doc_id, source, title, content, category, dataset_name, prov_id) by rowid,
+        from the row after `after` (a resumed index build skips the rows it has committed)."""
+        last = after
         while True:
             rows = self.conn.execute(
                 f"SELECT {ROW_COLUMNS} FROM passages WHERE rowid > ? ORDER BY rowid LIMIT ?", (last, batch)

@@ -159,3 +159,66 @@ def test_merge_orders_by_the_kernels_sums_not_the_scaled_scores(tmp_path):
     ds, ss = s.search(["t"], 2)
     assert da.tolist() == [1, 0] and sa[0] == sa[1]  # equal scores, yet doc 1 first
     assert ds.tolist() == da.tolist() and ss.tolist() == sa.tolist()
+
+
+def test_float32_mean_matches_numpy_reading_a_chunk_at_a_time(tmp_path):
+    """The global average length, read from the shards' files in pieces, is numpy's own float32
+    mean of all lengths (what BM25Builder uses), bit for bit, whatever the piece size."""
+    from kb_service.shards import float32_mean
+
+    rng = np.random.default_rng(0)
+    arrays = [rng.integers(1, 600, n).astype(np.float32) for n in (1, 7, 130, 4099, 250_003, 1_000_000)]
+    parts = []
+    for i, a in enumerate(arrays):
+        np.save(tmp_path / f"{i}.npy", a)
+        parts.append((tmp_path / f"{i}.npy", len(a)))
+    whole = np.concatenate(arrays)
+    expect = float(whole.mean())
+    for chunk in (1000, 65_536, 1 << 22):
+        assert float32_mean(parts, chunk=chunk) == expect
+    # Not any sum of these: adding them in order (a float32 running sum) gives another value.
+    assert float(np.cumsum(whole, dtype=np.float32)[-1] / np.float32(len(whole))) != expect
+
+
+def test_terms_with_tabs_newlines_and_backslashes_merge_exactly(tmp_path):
+    """The shards' sorted term lists are tab-separated lines: terms holding tabs, newlines or
+    backslashes (escaped there) keep their own df and never merge with each other."""
+    odd = ["a\tb", "a\\tb", "a\nb", "a\\nb", "a\\", "a", "\\", "\t", "x\r\ny", "\u00e9\u2028z"]
+    docs = [[odd[(i * 3 + j) % len(odd)] for j in range(i % 5 + 1)] for i in range(60)]
+    a, s, info = build_both(tmp_path, docs, shard_docs=7)
+    assert info["vocab"] == len(a.vocab) == len(odd)
+    for t in odd:
+        assert s.df(t) == int(a.indptr[a.vocab[t] + 1] - a.indptr[a.vocab[t]]) > 0
+        assert_same(a, s, [t], 10)
+    assert_same(a, s, odd[:4], 60)
+
+
+def test_memory_bound_cuts_shards_by_their_working_set(tmp_path, monkeypatch):
+    """With `memory_bytes`, a shard ends when its estimated working set reaches the bound (here
+    the per-posting estimate is raised so that a small corpus needs several shards): shards of
+    varying sizes, results still exactly the single index's."""
+    import kb_service.shards as shards
+
+    monkeypatch.setattr(shards, "BYTES_PER_POSTING", 4000)
+    docs = synthetic_corpus(2000, seed=4)
+    single = BM25Builder()
+    bounded = ShardedBM25Builder(tmp_path / "raw", shard_docs=10**9, memory_bytes=shards.MIN_MEMORY_BYTES)
+    for toks in docs:
+        single.add(toks)
+        bounded.add(toks)
+    single.save(tmp_path / "single")
+    info = bounded.save(tmp_path / "sharded")
+    a, s = BM25Searcher(tmp_path / "single"), ShardedBM25Searcher(tmp_path / "sharded")
+    s.validate()
+    sizes = [sh.num_docs for sh in s.shards]
+    assert info["shards"] == len(sizes) >= 10 and len(set(sizes)) > 1 and sum(sizes) == 2000
+    # Each shard stayed under the bound: postings * 4000 + vocabulary * BYTES_PER_TERM < 8 MiB,
+    # but for the document that crossed it.
+    for spec in s.meta["shards"][:-1]:
+        assert 4000 * spec["postings"] + shards.BYTES_PER_TERM * spec["vocab"] < shards.MIN_MEMORY_BYTES + 4000 * 250
+    rng = random.Random(8)
+    vocab = list(a.vocab)
+    for _ in range(100):
+        assert_same(a, s, [rng.choice(vocab) for _ in range(rng.choice([1, 3, 8]))], rng.choice([1, 10, 50]))
+    with pytest.raises(ValueError, match="memory_bytes must be an integer of at least"):
+        ShardedBM25Builder(tmp_path / "raw2", memory_bytes=1000)

@@ -1,0 +1,178 @@
+"""A KB built within a memory budget: sharded, resumable after a kill, and ranking exactly as the
+index built in memory.
+
+One seeded corpus is built twice in subprocesses (so that each build's peak RSS is its own,
+read with wait4): once in memory (the single bm25 matrix) and once with
+``memory_budget_mb=BUDGET_MB``, the latter killed with SIGKILL at three commit points (a bm25
+shard, a weighted shard, a tantivy commit: `kb_service.shards.kill_point`) and resumed each time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import re
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kb_service.shards import KILL_ENV
+
+ROOT = Path(__file__).resolve().parents[2]
+BUDGET_MB = 190
+N_DOCS = 8_000
+SHARD_DOCS = 1_700
+
+BUILD = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from kb_service.ingest import build_kb, file_input
+budget = None if sys.argv[4] == "-" else int(sys.argv[4])
+shard_docs = None if sys.argv[5] == "-" else int(sys.argv[5])
+summary = build_kb([file_input(sys.argv[2])], sys.argv[3], progress=False, memory_budget_mb=budget,
+                   shard_docs=shard_docs, echo=print)
+print(json.dumps(summary))
+"""
+
+
+def _write_corpus(path: Path, seed: int = 7) -> list[str]:
+    """Passages of 75-225 words drawn from a Zipf vocabulary of 40,000 words, plus one rare token
+    each; 3 sources, 6 categories. Returns the vocabulary (for queries)."""
+    rng = np.random.default_rng(seed)
+    vocab = np.array([f"w{i:x}q" for i in range(40_000)], dtype=object)
+    weights = 1.0 / (np.arange(len(vocab)) + 2.7)
+    cdf = np.cumsum(weights / weights.sum())
+    with open(path, "w", encoding="utf-8") as fh:
+        for i in range(N_DOCS):
+            words = vocab[np.searchsorted(cdf, rng.random(int(rng.integers(75, 226))))].tolist()
+            fh.write(json.dumps({"doc_id": f"p{i}", "source": ("pubmed", "statpearls", "textbooks")[i % 3],
+                                 "title": f"{words[0]} {words[-1]}", "content": " ".join(words) + f" r{i}z",
+                                 "category": f"c{i % 6}", "dataset_name": "synthetic"}) + "\n")
+    return vocab.tolist()
+
+
+def _start(corpus: Path, out: Path, budget: int | None, shard_docs: int | None,
+           kill_at: str | None = None) -> subprocess.Popen:
+    env = {k: v for k, v in os.environ.items() if k != KILL_ENV}
+    if kill_at:
+        env[KILL_ENV] = kill_at
+    return subprocess.Popen([sys.executable, "-c", BUILD, str(ROOT), str(corpus), str(out),
+                             "-" if budget is None else str(budget), "-" if shard_docs is None else str(shard_docs)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
+
+
+def _finish(proc: subprocess.Popen) -> tuple[int, float, str]:
+    """(exit code, peak RSS in MB, output) of a build process: its own rusage, from wait4."""
+    output = proc.stdout.read()
+    _pid, status, usage = os.wait4(proc.pid, 0)
+    proc.stdout.close()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return proc.returncode, usage.ru_maxrss / 1024, output
+
+
+@pytest.fixture(scope="module")
+def builds(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("bounded")
+    corpus = tmp / "corpus.jsonl"
+    vocab = _write_corpus(corpus)
+    in_memory = _start(corpus, tmp / "memory", None, None)  # alongside the bounded builds (2 cores)
+    runs = {}
+    for kill_at in ("bm25-shard:1", "bm25-final:2", "tantivy:3", None):
+        runs[kill_at or "done"] = _finish(_start(corpus, tmp / "bounded", BUDGET_MB, SHARD_DOCS, kill_at))
+    runs["memory"] = _finish(in_memory)
+    return {"tmp": tmp, "vocab": vocab, "runs": runs}
+
+
+def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
+    runs = builds["runs"]
+    rc, peak_memory, out = runs["memory"]
+    assert rc == 0, out
+    # The corpus is one the in-memory build cannot build within the budget...
+    assert peak_memory > BUDGET_MB, (peak_memory, out)
+    for kill_at in ("bm25-shard:1", "bm25-final:2", "tantivy:3"):
+        rc, _peak, out = runs[kill_at]
+        assert rc == -9, f"the build was to be killed at {kill_at}; exit {rc}:\n{out}"
+    assert runs["done"][0] == 0, runs["done"][2]
+    # ... and every process of the bounded build, the killed ones included, stayed within it.
+    peaks = {k: round(v[1]) for k, v in runs.items() if k != "memory"}
+    assert max(peaks.values()) < BUDGET_MB, peaks
+    # Each resumed at the commit its predecessor was killed after, and did not redo it.
+    first = runs["bm25-shard:1"][2]
+    assert "bm25 shard 1: passages 1,701-3,400 committed" in first and "bm25 shard 2" not in first
+    second = runs["bm25-final:2"][2]
+    assert "bm25: resuming after 2 committed shard(s) (3,400 of 8,000 passages indexed)" in second
+    assert "bm25 shard 1:" not in second and "bm25 shard 2: passages 3,401-5,100 committed" in second
+    third = runs["tantivy:3"][2]
+    assert "bm25 shard 0 weighted" not in third and "bm25 shard 2 weighted" not in third
+    assert "bm25 shard 3 weighted" in third and "tantivy: passages 1-3,000 committed" in third
+    last = runs["done"][2]
+    assert "tantivy: resuming after 3,000 committed passages" in last and not re.search(r"bm25 shard \d", last)
+    summary = json.loads(last.strip().splitlines()[-1])
+    assert summary["n_passages"] == N_DOCS
+    assert summary["bm25_shards"] == {"shard_docs": SHARD_DOCS, "shards": 5, "memory_budget_mb": BUDGET_MB}
+
+
+def test_bounded_kb_ranks_exactly_as_the_in_memory_index(builds):
+    from kb_service.kb import KnowledgeBase
+    from kb_service.shards import ShardedBM25Searcher
+
+    tmp = builds["tmp"]
+    single, bounded = KnowledgeBase.open(tmp / "memory"), KnowledgeBase.open(tmp / "bounded")
+    assert isinstance(bounded.bm25, ShardedBM25Searcher) and len(bounded.bm25.shards) == 5
+    assert not (tmp / "bounded.building").exists()
+    # Every passage once: in the store, in the bm25 shards and in tantivy (no duplicates from the resumes).
+    with sqlite3.connect(f"file:{tmp / 'bounded' / 'passages.sqlite'}?mode=ro", uri=True) as db:
+        assert db.execute("SELECT count(*), count(DISTINCT doc_id) FROM passages").fetchone() == (N_DOCS, N_DOCS)
+    assert bounded.bm25.num_docs == N_DOCS and bounded.tantivy.num_docs == N_DOCS
+    assert bounded.bm25.meta["vocab"] == len(single.bm25.vocab)
+    assert bounded.sources == single.sources and bounded.categories == single.categories
+    assert (bounded._source_ids == single._source_ids).all()
+    assert (bounded._category_ids == single._category_ids).all()
+
+    rng = random.Random(3)
+    vocab = builds["vocab"]
+    hits = 0
+    for trial in range(150):
+        words = rng.sample(vocab[:200], rng.randint(0, 2)) + rng.sample(vocab, rng.randint(1, 5))
+        if trial % 4 == 0:
+            words.append(f"r{rng.randrange(N_DOCS)}z")  # a passage's own rare token
+        query = " ".join(words)
+        flt = [{}, {"source": "pubmed"}, {"category": "c2"}][trial % 3]
+        a, b = single.rank(query, k=10, **flt), bounded.rank(query, k=10, **flt)
+        assert [d for d, _ in a] == [d for d, _ in b], query
+        assert np.array([s for _, s in a], np.float32).tobytes() == np.array([s for _, s in b], np.float32).tobytes()
+        hits += len(a)
+        if trial % 10 == 0:  # the tantivy index, resumed after a kill: query syntax ranks alike
+            q = f'"{words[-1]}" OR {words[0]}'
+            ta, tb = single.search(q, k=20), bounded.search(q, k=20)
+            assert [p.score for p in ta] == [p.score for p in tb], q
+            # Equal scores come in segment order, which the commits change: compare them as sets,
+            # except the lowest score's group, which the cut at k may split differently.
+            for score in {p.score for p in ta} - {ta[-1].score}:
+                assert {p.doc_id for p in ta if p.score == score} == {p.doc_id for p in tb if p.score == score}, q
+    assert hits > 1000
+
+
+def test_budget_below_what_the_process_holds_is_refused(tmp_path, capsys):
+    import argparse
+
+    from kb_service.cli import register
+    from kb_service.ingest import build_kb, file_input
+
+    corpus = tmp_path / "c.jsonl"
+    corpus.write_text(json.dumps({"doc_id": "a", "source": "s", "content": "aspirin"}) + "\n")
+    with pytest.raises(ValueError, match=r"memory_budget_mb=20 is too small: this build process already holds \d+ MB"):
+        build_kb([file_input(corpus)], tmp_path / "kb", progress=False, memory_budget_mb=20, echo=lambda s: None)
+    assert not (tmp_path / "kb.building").exists()  # refused before ingesting
+    with pytest.raises(ValueError, match="memory_budget_mb must be a positive integer"):
+        build_kb([file_input(corpus)], tmp_path / "kb", memory_budget_mb=0)
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["kb", "build", str(corpus), "--out", str(tmp_path / "kb"), "--memory-budget-mb", "20"])
+    assert args.func(args) == 2
+    assert "--memory-budget-mb: memory_budget_mb=20 is too small" in capsys.readouterr().err
