@@ -119,8 +119,13 @@ class KnowledgeBase:
 
     # ---------------------------------------------------------------------------- opening
     @classmethod
-    def open(cls, path: str | Path | None = None, *, warmup: bool = True) -> "KnowledgeBase":
-        """Open the KB at `path` (default: the one `hcgym data build` writes). Fails loudly."""
+    def open(cls, path: str | Path | None = None, *, warmup: bool = True, bm25=None) -> "KnowledgeBase":
+        """Open the KB at `path` (default: the one `hcgym data build` writes). Fails loudly.
+
+        `bm25`: a searcher of this KB's bm25 index opened elsewhere (the KB service's shard actors,
+        `kb_service.service`), used instead of opening ``bm25/`` in this process; it is validated
+        like the local one.
+        """
         path = Path(path) if path is not None else default_kb_path()
         building = path.with_name(path.name + ".building").exists()
         if not path.exists():
@@ -167,7 +172,9 @@ class KnowledgeBase:
         if rows != n:
             raise _fail(KBCorruptError, path, f"has {rows} passages in passages.sqlite but the manifest says {n}")
         try:
-            if sharded:
+            if bm25 is not None:
+                pass
+            elif sharded:
                 from kb_service.shards import ShardedBM25Searcher
 
                 bm25 = ShardedBM25Searcher(path / "bm25")

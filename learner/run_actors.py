@@ -179,7 +179,7 @@ def start_kb_service(cfg: RunConfig):
         return None
     from kb_service.service import start_kb_service as start
 
-    return start(cfg.kb.replicas, cfg.kb.path, cfg.kb.name, cfg.kb.num_cpus)
+    return start(cfg.kb.replicas, cfg.kb.path, cfg.kb.name, cfg.kb.num_cpus, shards=cfg.kb.shards)
 
 
 class LearnerNodeLost(RuntimeError):

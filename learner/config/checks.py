@@ -182,6 +182,16 @@ def _local_path_problems(cfg: RunConfig) -> list[str]:
         problems.append(f"learner.reference_model_dir: {reference!r} is not a checkpoint folder with a config.json")
     if cfg.kb.path is not None and not Path(cfg.kb.path).expanduser().is_dir():
         problems.append(f"kb.path: {cfg.kb.path!r} is not a directory (build one with `hcgym kb build`)")
+    elif cfg.kb.service and cfg.kb.shards.actors:
+        from kb_service.kb import KBError, default_kb_path
+        from kb_service.shard_actors import ShardLayoutError, shard_groups
+
+        kb_path = Path(cfg.kb.path).expanduser() if cfg.kb.path is not None else default_kb_path()
+        if (kb_path / "manifest.json").is_file():  # a KB not built yet is reported when the service starts
+            try:
+                shard_groups(kb_path, cfg.kb.shards.actors)
+            except (KBError, ShardLayoutError) as exc:
+                problems.append(f"kb.shards.actors: {exc}")
     python = cfg.generator.python_executable
     if python not in (None, "auto"):
         path = Path(python).expanduser()
