@@ -396,45 +396,128 @@ def _is_generator_failure(exc: BaseException) -> bool:
     return isinstance(exc, (RayActorError, ActorDiedError, ActorUnavailableError, GeneratorBehindError))
 
 
+class GeneratorUnavailableError(RuntimeError):
+    """No generator came back within `restart_wait_s` after a request failed on one: the episode
+    ends failed and its group is dropped (and replaced by a new one), never trained on half-done."""
+
+
+class GeneratorDeadError(RuntimeError):
+    """Every generator is out and the ones that failed are dead for good (Ray will not restart them:
+    `generator.max_restarts` used up): no wait can help, so the run stops naming them."""
+
+
+def _actor_dead_for_good(handle) -> bool:
+    """Whether Ray's GCS lists the actor as DEAD (no restart coming), as opposed to RESTARTING.
+    Ray's public state API needs the dashboard, which a cluster may run without; the GCS table
+    it reads from is queried directly."""
+    from ray._private.state import actors
+
+    return actors(handle._actor_id.hex()).get("State") == "DEAD"
+
+
+@dataclass
+class GeneratorOutage:
+    """One generator out of scheduling: from the failure that took it out to its return with the
+    current weights (`back_at` None while it is still out). Times are `time.monotonic()`."""
+
+    index: int
+    down_at: float
+    back_at: float | None = None
+
+    @property
+    def seconds(self) -> float | None:
+        return None if self.back_at is None else self.back_at - self.down_at
+
+
 class GeneratorClient:
     """The agent loop's `generate` coroutine over a set of generator actors.
 
-    Sends each request to the generator with the fewest outstanding requests. A generator that
-    died (Ray restarts it with its initial weights) or holds weights older than the request's
-    `min_version` gets the latest published weights pushed and the request is retried: generation
-    is a pure function of (ids, weights, seed), so a retried turn changes nothing in the episode.
+    Sends each request to the available generator with the fewest outstanding requests. A generator
+    whose call fails because its actor died (Ray restarts it with its initial weights, on another
+    node when its node was lost) or because it holds weights older than the request's `min_version`
+    is taken out of scheduling; a probe waits until it answers again, pushes it the latest published
+    weights, and puts it back. The failed request is then sent again unchanged (same ids, seed and
+    sampling parameters) to an available generator: generation is a pure function of (ids, weights,
+    seed), so a retried turn changes nothing in the episode and the episode is not re-run for it.
+    While no generator is available a request waits, at most `restart_wait_s` from its failure (or
+    from its arrival, when every generator was already out); past that it raises
+    `GeneratorUnavailableError` and a warning names the generators and the wait. A generator Ray
+    will not restart (its `max_restarts` used up) is not waited for: when every generator is out
+    and all are dead, requests raise `GeneratorDeadError`.
 
     Args:
         handles: Generator actor handles (`generator_actor_class()` instances).
-        max_attempts: Tries per request across failures.
+        max_attempts: Failed calls per request at most; each retry goes to a generator that answered
+            again, so this bounds the restarts one request may meet (a request that keeps killing
+            its generator stops there), not the wait for one restart.
         sync_timeout_s: Limit for one weight push; a generator that misses it is named in the error.
+        weights_provider: Called for a weights ref when a restarted generator must catch up and none
+            was published (the collective transport sends weights without the object store).
+        restart_wait_s: How long a request waits for a failed generator to come back.
+        log: Where the warning goes.
+        poll_s: Pause between a probe's tries while its generator does not answer.
     """
 
     def __init__(self, handles: list, max_attempts: int = 5, sync_timeout_s: float = 120.0,
-                 weights_provider=None) -> None:
+                 weights_provider=None, restart_wait_s: float = 600.0, log: Callable[[str], None] = print,
+                 poll_s: float = 0.5) -> None:
         if not handles:
             raise ValueError("GeneratorClient needs at least one generator handle")
+        if restart_wait_s < 0:
+            raise ValueError(f"restart_wait_s must be >= 0, got {restart_wait_s}")
         self.handles = list(handles)
-        # Called for a weights ref when a restarted generator must catch up and none was published
-        # (the collective transport sends weights without the object store).
         self.weights_provider = weights_provider
         self.max_attempts = max_attempts
         self.sync_timeout_s = sync_timeout_s
+        self.restart_wait_s = restart_wait_s
+        self.log = log
+        self.poll_s = poll_s
         self.outstanding = [0] * len(handles)
+        self.available = [True] * len(handles)
         self.weights_ref = None   # latest published weights (an ObjectRef), None = initial weights
         self.version = 0
-        self.failures = 0         # requests that hit a dead or stale generator
-        self.resyncs = 0
-        self._locks: list[asyncio.Lock] | None = None
+        self.failures = 0         # calls that hit a dead or stale generator
+        self.resyncs = 0          # weight pushes to a generator that came back
+        self.gave_up = 0          # requests that waited `restart_wait_s` in vain
+        self.outages: list[GeneratorOutage] = []
+        self._probes: dict[int, asyncio.Task] = {}
+        self._warned: set[int] = set()   # generators out whose wait was already warned about
+        self._changed: asyncio.Condition | None = None   # notified when a generator comes back
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._probe_error: BaseException | None = None   # a probe's unexpected error, raised to requests
+        self.dead: set[int] = set()   # generators Ray will not restart
 
     def publish(self, weights_ref, version: int) -> None:
-        """Record the newest weights; `sync_all` pushes them, failed generators get them on retry."""
+        """Record the newest weights; `sync_all` pushes them, a returning generator gets them first."""
         self.weights_ref, self.version = weights_ref, int(version)
+
+    def name(self, index: int) -> str:
+        """`generator I (actor ID)`: how warnings and errors name a generator."""
+        actor_id = self.handles[index]._actor_id.hex()
+        return f"generator {index} (actor {actor_id})"
+
+    def metrics(self) -> dict[str, float]:
+        """Cumulative figures for `metrics.jsonl`."""
+        ended = [o.seconds for o in self.outages if o.back_at is not None]
+        return {"generator_gave_up": float(self.gave_up), "generator_outages": float(len(self.outages)),
+                "generator_outage_max_s": float(max(ended, default=0.0))}
+
+    def _state(self) -> asyncio.Condition:
+        # The client may be driven from a new event loop (a new `asyncio.run`): its condition and
+        # probes belong to the old one, so they are made again and generators still out re-probed.
+        loop = asyncio.get_running_loop()
+        if self._loop is not loop:
+            self._loop, self._changed, self._probes = loop, asyncio.Condition(), {}
+            for index, ok in enumerate(self.available):
+                if not ok:
+                    self._probes[index] = loop.create_task(self._probe(index))
+        return self._changed
 
     async def __call__(self, request: GenerationRequest) -> GenerationResult:
         last: BaseException | None = None
+        since: float | None = None   # the request's latest failure
         for _ in range(self.max_attempts):
-            index = min(range(len(self.handles)), key=lambda i: self.outstanding[i])
+            index, since = await self._pick(request, since, last)
             self.outstanding[index] += 1
             try:
                 return await self.handles[index].generate.remote(request)
@@ -443,48 +526,128 @@ class GeneratorClient:
                     raise
                 self.failures += 1
                 last = exc
+                since = time.monotonic()
+                self._take_out(index)
             finally:
                 self.outstanding[index] -= 1
-            await self._resync(index)
         raise RuntimeError(f"generate {request.request_id}: failed {self.max_attempts} times; last: {last!r}")
 
-    async def _resync(self, index: int) -> None:
-        if self._locks is None:
-            self._locks = [asyncio.Lock() for _ in self.handles]
-        async with self._locks[index]:
-            for _ in range(self.max_attempts):
-                try:
-                    current = await asyncio.wait_for(self.handles[index].version.remote(), self.sync_timeout_s)
-                    if current >= self.version:
-                        return
+    async def _pick(self, request: GenerationRequest, since: float | None,
+                    last: BaseException | None) -> tuple[int, float | None]:
+        """The available generator with the fewest outstanding requests, waiting while none is."""
+        changed = self._state()
+        if not any(self.available):
+            since = time.monotonic() if since is None else since
+            async with changed:
+                while not any(self.available):
+                    if self._probe_error is not None:
+                        raise self._probe_error
+                    if len(self.dead) == len(self.handles):
+                        names = ", ".join(self.name(i) for i in sorted(self.dead))
+                        raise GeneratorDeadError(f"generate {request.request_id}: {names} died and Ray will "
+                                                 f"not restart them (generator.max_restarts used up); last "
+                                                 f"error: {last!r}")
+                    left = since + self.restart_wait_s - time.monotonic()
+                    if left <= 0:
+                        raise self._give_up(request, since, last)
+                    try:
+                        await asyncio.wait_for(changed.wait(), left)
+                    except asyncio.TimeoutError:
+                        pass
+        index = min((i for i, ok in enumerate(self.available) if ok), key=lambda i: self.outstanding[i])
+        return index, since
+
+    def _give_up(self, request: GenerationRequest, since: float,
+                 last: BaseException | None) -> GeneratorUnavailableError:
+        self.gave_up += 1
+        waited = time.monotonic() - since
+        out = [i for i, ok in enumerate(self.available) if not ok]
+        names = ", ".join(self.name(i) for i in out)
+        cause = f"its last error: {last!r}" if last is not None else "every generator was out when it arrived"
+        message = (f"generate {request.request_id}: no generator came back within generator.restart_wait_s = "
+                   f"{self.restart_wait_s:g} s (waited {waited:.1f} s); out: {names}; {cause}")
+        if not set(out) <= self._warned:  # once per outage, not once per waiting request
+            self._warned.update(out)
+            self.log(f"[generator] warning: {names} did not answer for {waited:.1f} s after failing "
+                     f"(generator.restart_wait_s = {self.restart_wait_s:g}); the episodes waiting on it end failed "
+                     f"and their groups are replaced. Still waiting for it to come back.")
+        return GeneratorUnavailableError(message)
+
+    def _take_out(self, index: int) -> None:
+        if not self.available[index]:
+            return
+        self.available[index] = False
+        self.outages.append(GeneratorOutage(index, time.monotonic()))
+        self._probes[index] = asyncio.get_running_loop().create_task(self._probe(index))
+
+    async def _probe(self, index: int) -> None:
+        """Wait until generator `index` answers and holds the published weights, then schedule it again.
+        No limit of its own: Ray may bring the actor back after any time, and requests bound their wait."""
+        try:
+            back = await self._wait_back(index)
+        except Exception as exc:  # not a restart (a bug): the waiting requests raise it
+            self._probe_error = exc
+            back = False
+        if not back:
+            async with self._state():
+                self._state().notify_all()
+            return
+        changed = self._state()
+        async with changed:
+            self.available[index] = True
+            outage = next(o for o in reversed(self.outages) if o.index == index)
+            outage.back_at = time.monotonic()
+            if index in self._warned:
+                self._warned.discard(index)
+                self.log(f"[generator] {self.name(index)} is back after {outage.seconds:.1f} s")
+            changed.notify_all()
+
+    async def _wait_back(self, index: int) -> bool:
+        """True once the generator answers with the published weights; False when it is dead for good."""
+        handle = self.handles[index]
+        while True:
+            try:
+                current = await asyncio.wait_for(handle.version.remote(), self.sync_timeout_s)
+                if current < self.version:
                     ref = self.weights_ref
                     if ref is None and self.weights_provider is not None:
                         ref = self.weights_provider()
-                    if ref is None:
-                        return
-                    await asyncio.wait_for(self.handles[index].update_weights.remote(ref, self.version),
-                                           self.sync_timeout_s)
-                    self.resyncs += 1
-                    return
-                except Exception as exc:  # still restarting: wait and try again
-                    if not _is_generator_failure(exc) and not isinstance(exc, asyncio.TimeoutError):
-                        raise
-                    await asyncio.sleep(0.5)
+                    if ref is not None:
+                        current = await asyncio.wait_for(handle.update_weights.remote(ref, self.version),
+                                                         self.sync_timeout_s)
+                        self.resyncs += 1
+                # Checked again after the push: a newer version may have been published meanwhile
+                # (`sync_all` skips a generator that is out). No published weights: nothing to push.
+                if current >= self.version or (self.weights_ref is None and self.weights_provider is None):
+                    return True
+            except Exception as exc:  # still restarting: wait and try again
+                if not _is_generator_failure(exc) and not isinstance(exc, asyncio.TimeoutError):
+                    raise
+                from ray.exceptions import ActorDiedError
+
+                if isinstance(exc, ActorDiedError) and await asyncio.to_thread(_actor_dead_for_good, handle):
+                    self.dead.add(index)
+                    return False
+            await asyncio.sleep(self.poll_s)
 
     async def sync_all(self, weights_ref, version: int) -> float:
-        """Push new weights to every generator (in parallel); returns the seconds it took.
+        """Push new weights to every available generator (in parallel; one that is out gets them
+        from its probe when it comes back); returns the seconds it took.
 
         Raises:
             TimeoutError: naming the generators that did not confirm within `sync_timeout_s`.
         """
         self.publish(weights_ref, version)
         started = time.perf_counter()
-        tasks = [asyncio.ensure_future(self._push(i)) for i in range(len(self.handles))]
+        indices = [i for i, ok in enumerate(self.available) if ok]
+        tasks = [asyncio.ensure_future(self._push(i)) for i in indices]
+        if not tasks:
+            return time.perf_counter() - started
         done, pending = await asyncio.wait(tasks, timeout=self.sync_timeout_s)
         if pending:
             for task in pending:
                 task.cancel()
-            late = [i for i, t in enumerate(tasks) if t in pending]
+            late = [i for i, t in zip(indices, tasks) if t in pending]
             raise TimeoutError(f"weight sync to policy version {version}: generator(s) {late} did not confirm "
                                f"within {self.sync_timeout_s:.0f}s")
         for task in done:
@@ -497,5 +660,7 @@ class GeneratorClient:
         except Exception as exc:
             if not _is_generator_failure(exc):
                 raise
-            # Restarting: its next request fails with GeneratorBehindError and `_resync` catches up.
+            # Restarting: out of scheduling until its probe finds it back and catches it up.
             self.failures += 1
+            self._state()
+            self._take_out(index)

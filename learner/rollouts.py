@@ -16,7 +16,7 @@ from pathlib import Path
 
 from actors.agent_loop import AgentLoop, EpisodeSpec, PromptTooLongError
 from actors.env_actor import EnvActorLost, EnvPool, EpisodeLedger, run_episode
-from actors.generator import GeneratorClient
+from actors.generator import GeneratorClient, GeneratorUnavailableError
 from actors.types import RolloutSample
 from learner.batching import Group, mixed_outcomes, score_sample
 from learner.config import RunConfig
@@ -61,9 +61,10 @@ class Rollouts:
                     on_accepted: Callable[[Group], None] | None = None) -> Group:
         """Roll out group `seq`, score it, and call `on_accepted` (teacher submission) if it is kept.
 
-        Never raises: a lost env actor, an over-long prompt or an episode ended by an env error
-        (`metadata["env_error"]`, see actors/env_actor.py) marks the group failed (dropped and
-        logged); any other error is kept in `group.error` and surfaced by the consumer with its group.
+        Never raises: a lost env actor, an over-long prompt, a generator that did not come back
+        within `generator.restart_wait_s` or an episode ended by an env error (`metadata["env_error"]`,
+        see actors/env_actor.py) marks the group failed (dropped, logged, and replaced by a new
+        group); any other error is kept in `group.error` and surfaced by the consumer with its group.
         """
         cfg = self.cfg
         group = Group(seq=seq, task=task, admit_version=version)
@@ -83,7 +84,7 @@ class Rollouts:
             group.accepted = (not cfg.trainer.dynamic_sampling.enabled) or mixed_outcomes(samples, cfg)
             if group.accepted and on_accepted is not None:
                 on_accepted(group)
-        except (EnvActorLost, PromptTooLongError) as exc:
+        except (EnvActorLost, PromptTooLongError, GeneratorUnavailableError) as exc:
             group.failed = f"{type(exc).__name__}: {exc}"
         except Exception as exc:  # a bug: surfaced by the consumer with its group
             group.failed = f"{type(exc).__name__}: {exc}"

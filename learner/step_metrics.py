@@ -27,9 +27,11 @@ class StepTimes:
 def step_record(step: int, samples: list[RolloutSample], learner_metrics: dict[str, Any], batch_info: dict[str, float],
                 times: StepTimes, *, max_response_tokens: int, teacher_action: str, teacher_version: int,
                 generator_failures: int, episode_reruns: int, batch_groups: int,
-                teacher_sync: dict[str, float] | None = None) -> dict[str, Any]:
+                teacher_sync: dict[str, float] | None = None,
+                generator: dict[str, float] | None = None) -> dict[str, Any]:
     """The metrics of step `step` (REQUIRED_KEYS and more); `teacher_sync` adds the teacher's
-    cumulative weight-sync figures (`TeacherClient.sync_metrics`)."""
+    cumulative weight-sync figures (`TeacherClient.sync_metrics`), `generator` the generators'
+    cumulative outage figures (`GeneratorClient.metrics`)."""
     record: dict[str, Any] = {"step": step}
     record.update(rollout_metrics(samples, max_response_tokens))
     record.update({k: float(v) for k, v in learner_metrics.items()})
@@ -51,6 +53,7 @@ def step_record(step: int, samples: list[RolloutSample], learner_metrics: dict[s
         "batch_size_groups": float(batch_groups),
     })
     record.update(teacher_sync or {})
+    record.update(generator or {})
     record["teacher_action"] = TEACHER_ACTION_CODES[teacher_action]
     if "grad_norm" not in record:
         raise RuntimeError("learner.train_step returned no grad_norm")

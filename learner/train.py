@@ -138,7 +138,8 @@ class Trainer:
                             resources=dict(cfg.ray.env_resources) or None)
         self.gen_client = GeneratorClient(self.generators, cfg.generator.max_call_attempts,
                                           cfg.weight_sync.timeout_s,
-                                          weights_provider=lambda: self.learner.get_weights.remote())
+                                          weights_provider=lambda: self.learner.get_weights.remote(),
+                                          restart_wait_s=cfg.generator.restart_wait_s, log=self.log)
         self.scheduler = BatchScheduler(cfg.trainer, TaskSampler(train_refs, cfg.seed), self.log, self.counters)
         self.rollouts = Rollouts(cfg, loop, self.pool, self.gen_client, self.run_dir, self.log)
         if cfg.teacher.enabled:
@@ -227,7 +228,7 @@ class Trainer:
                              max_response_tokens=cfg.rollout.max_response_tokens, teacher_action=teacher_action,
                              teacher_version=self.teacher_client.version if self.teacher_client is not None else 0,
                              teacher_sync=self.teacher_client.sync_metrics() if self.teacher_client else {},
-                             generator_failures=self.gen_client.failures,
+                             generator_failures=self.gen_client.failures, generator=self.gen_client.metrics(),
                              episode_reruns=len(self.rollouts.ledger.lost_attempts), batch_groups=len(groups))
         self.sink.observe("response_length", [s.response_tokens for s in samples])
         self.sink.observe("episode_turns", [len(s.turns) for s in samples])
@@ -286,6 +287,7 @@ class Trainer:
         summary = {"steps": self.step, "wall_s": time.perf_counter() - started, "run_dir": str(self.run_dir),
                    "policy_dir": str(self.policy_dir), "counters": dict(self.counters),
                    "ledger": self.rollouts.ledger.balance(), "generator_failures": self.gen_client.failures,
+                   "generator": self.gen_client.metrics(),
                    "group_status": self.scheduler.status_counts(), "last_validation": self.rollouts.last_val}
         (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=1))
         return summary

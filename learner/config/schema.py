@@ -178,7 +178,18 @@ class GeneratorConfig(ConfigModel):
     num_cpus: float = Field(default=1.0, ge=0, description="CPUs Ray reserves per generator actor")
     num_gpus: float = Field(default=0.0, ge=0, description="GPUs Ray reserves per generator actor")
     max_restarts: int = Field(default=-1, ge=-1, description="Ray restarts per generator actor; -1 = unlimited")
-    max_call_attempts: int = Field(default=5, ge=1, description="retries of one generate call across restarts")
+    max_call_attempts: int = Field(default=5, ge=1, description="failed calls of one generate request at most; each "
+                                                             "retry goes to a generator that answered again, so "
+                                                             "this bounds the restarts one request meets, not the "
+                                                             "wait for one restart (generator.restart_wait_s)")
+    # A cross-node restart is the node's death being noticed, the actor scheduled elsewhere, its
+    # process started and the model loaded (GPU engines: weights plus warm-up).
+    restart_wait_s: float = Field(default=600.0, ge=0, description="seconds a generate request whose generator "
+                                                                   "died waits for a generator to come back "
+                                                                   "(Ray's restart, on another node when its node "
+                                                                   "was lost) before its episode ends failed and "
+                                                                   "its group is replaced (counted in "
+                                                                   "generator_gave_up, with a warning)")
     python_executable: str | None = Field(
         default="auto",
         description="interpreter of the generator actors (Ray runtime_env py_executable): a path, null = the "

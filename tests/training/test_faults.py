@@ -80,6 +80,9 @@ def test_training_survives_env_generator_and_teacher_deaths(ray_cluster, ward_po
     assert [r["step"] for r in read_metrics(cfg.output_dir)] == list(range(1, steps + 1))
     assert summary["ledger"]["reruns"] >= 1, "the killed env actor's episodes were not re-run"
     assert summary["generator_failures"] >= 1
+    # The killed generator was waited for: no request gave up, no group was replaced for it.
+    assert summary["generator"]["generator_gave_up"] == 0 and summary["generator"]["generator_outages"] >= 1
+    assert summary["counters"]["groups_failed"] == 0
     assert summary["counters"]["teacher_recoveries"] >= 1
     # Accounting: every episode completed once; every admitted group ended in exactly one state.
     ledger = summary["ledger"]
@@ -133,3 +136,55 @@ def test_collective_weight_sync_survives_a_teacher_death(ray_cluster, ward_polic
     for step in range(1, steps + 1):
         samples, extras = read_samples(tmp_path / "collective_faults" / "trajectories" / f"step_{step:06d}.parquet")
         assert all(extras[s.sample_id]["teacher_logprobs"] is not None for s in samples)
+
+
+def test_a_generator_back_too_late_fails_its_requests_naming_it_and_a_dead_one_stops_them(ray_cluster,
+                                                                                         ward_policy_dir):
+    """Past `generator.restart_wait_s` a request whose generator died raises GeneratorUnavailableError
+    naming the generator and the wait (its group is then replaced); one warning per outage, each
+    request that gave up counted. A generator Ray will not restart is not waited for:
+    GeneratorDeadError names it. (A generator back in time: test_node_loss.py and the test above.)"""
+    import asyncio
+
+    from actors.generator import (GenerationRequest, GeneratorClient, GeneratorDeadError, GeneratorUnavailableError,
+                                  start_generator_actors)
+    from modeling.model import ENDOFTEXT, IM_END, load_tokenizer
+
+    tokenizer = load_tokenizer(ward_policy_dir)
+    stop_ids = [tokenizer.convert_tokens_to_ids(IM_END), tokenizer.convert_tokens_to_ids(ENDOFTEXT)]
+    # A batch waits 2 s for company, so a request is surely on the actor when it is killed.
+    (actor,) = start_generator_actors("hf", ward_policy_dir, {}, stop_ids, 1, python_executable=None,
+                                      batch_wait_s=2.0, num_cpus=0, max_restarts=1)
+    logs: list[str] = []
+    # Far shorter than the actor's restart (a new worker process importing torch and loading the model).
+    client = GeneratorClient([actor], restart_wait_s=0.1, log=logs.append, poll_s=0.05)
+    prompt = tokenizer.encode("<|im_start|>assistant\n", add_special_tokens=False)
+
+    def calls(*names: str):
+        return asyncio.gather(*[client(GenerationRequest(request_id=n, prompt_ids=prompt, max_new_tokens=4, seed=7))
+                                for n in names], return_exceptions=True)
+
+    async def scenario():
+        await actor.version.remote()  # started
+        pending = asyncio.ensure_future(calls("a", "b"))
+        await asyncio.sleep(0.5)
+        ray_cluster.kill(actor, no_restart=False)  # Ray restarts it (max_restarts=1)
+        too_late = await pending
+        # Killed again while it restarts, now for good; a request arriving meanwhile is told at once.
+        client.restart_wait_s = 60.0
+        ray_cluster.kill(actor, no_restart=True)
+        started = time.monotonic()
+        dead = await calls("c")
+        return too_late, dead, time.monotonic() - started
+
+    too_late, dead, told_s = asyncio.run(scenario())
+    name = f"generator 0 (actor {actor._actor_id.hex()})"
+    assert all(isinstance(o, GeneratorUnavailableError) for o in too_late), too_late
+    assert all(name in str(o) and "restart_wait_s = 0.1 s" in str(o) for o in too_late), too_late[0]
+    warnings = [line for line in logs if "warning" in line]
+    assert len(warnings) == 1 and name in warnings[0] and "did not answer for" in warnings[0], logs
+    assert client.gave_up == 2 and client.metrics()["generator_gave_up"] == 2.0
+    (error,) = dead
+    assert isinstance(error, GeneratorDeadError) and name in str(error) and "will not restart" in str(error), error
+    assert told_s < 30 and client.dead == {0}, told_s
+    assert len(client.outages) == 1 and client.outages[0].back_at is None, client.outages
