@@ -12,10 +12,11 @@ then shared tools) and an optional safety context used by the reward.
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from envs.core.db import DB, DataFileError, read_text_file
 from envs.core.paths import data_dir
@@ -130,6 +131,36 @@ def read_policy(package_dir: Path) -> str:
 def write_split(path: Path, splits: dict[str, list[str]]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(splits, indent=1) + "\n", encoding="utf-8")
+
+
+def inputs_fingerprint(paths: Iterable[Path], *texts: str) -> str:
+    """SHA-256 over the bytes of the files a build reads (its code, authored data, the shared helpers it
+    runs) and `texts` (package versions, parameters): a changed input rebuilds."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(path.read_bytes())
+    for text in texts:
+        digest.update(text.encode())
+    return digest.hexdigest()
+
+
+def built_summary(out: Path, fingerprint: str) -> dict | None:
+    """What the last build in `out` recorded (`manifest.json`: `{"skipped": "up to date", **summary}`) when it
+    was built from inputs with this fingerprint and all its files are still there; else None (build again)."""
+    path = out / "manifest.json"
+    if not path.exists():
+        return None
+    manifest = json.loads(path.read_text())
+    if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest.get("files", [])):
+        return {"skipped": "up to date", **manifest["summary"]}
+    return None
+
+
+def write_manifest(out: Path, fingerprint: str, summary: dict, files: list[str], **extra: Any) -> None:
+    """Record a finished build in `out/manifest.json` (what `built_summary` reads): the inputs' fingerprint,
+    the summary, the files written, and `extra` entries (e.g. the packages' provenance)."""
+    manifest = {"fingerprint": fingerprint, "summary": summary, "files": files, **extra}
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
 
 
 class BuiltDomain:

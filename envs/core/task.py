@@ -184,6 +184,22 @@ def dump_tasks(tasks: list[Task], path: str | Path) -> None:
     Path(path).write_text(json.dumps(data, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
 
 
+def without_repeated_tickets(groups: dict[str, list[Task]], authored: list[Task]) -> dict[str, list[Task]]:
+    """`groups` of generated tasks without those whose ticket (case and white space folded) repeats an
+    authored task's or an earlier generated one's: the same question in two splits would leak a held-out
+    task into training."""
+    seen = {" ".join(t.ticket.lower().split()) for t in authored}
+    kept: dict[str, list[Task]] = {}
+    for group, items in groups.items():
+        kept[group] = []
+        for task in items:
+            key = " ".join(task.ticket.lower().split())
+            if key not in seen:
+                seen.add(key)
+                kept[group].append(task)
+    return kept
+
+
 def load_split(path: str | Path) -> dict[str, list[str]]:
     """`split_tasks.json`: {"train": [ids], "test": [ids], ...}."""
     path = Path(path)

@@ -18,7 +18,7 @@ from envs.domains.ehr_management import build as ehr_build  # noqa: E402
 from envs.domains.ehr_management import synthea  # noqa: E402
 from envs.domains.ehr_management.data_model import EHRDB, EHRPatient, MeasurementRecord  # noqa: E402
 from envs.domains.ehr_management.store import PatientStore, write_db  # noqa: E402
-from envs.domains.ehr_management.timeline_tasks import timeline_tasks  # noqa: E402
+from envs.domains.ehr_management.generate import timeline_tasks  # noqa: E402
 from envs.domains.ehr_management.tools import EHRTools  # noqa: E402
 
 OMOP = """

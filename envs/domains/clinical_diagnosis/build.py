@@ -23,7 +23,8 @@ from envs.core.db import DataFileError
 from envs.core.domain import write_split
 from envs.core.icd10 import ICD10Index, parse_tabular
 from envs.core.paths import domain_build_dir
-from envs.core.task import dump_tasks, load_tasks
+from envs.core import task as task_module
+from envs.core.task import dump_tasks, load_tasks, without_repeated_tickets
 from envs.data.registry import SOURCES, open_package
 
 from . import generate
@@ -46,7 +47,8 @@ def _stamp() -> str:
         h.update(f"{name}=={SOURCES[name].version};".encode())
     for path in sorted(AUTHORED.glob("*.json")) + [HERE / "tasks.json", HERE / "split_tasks.json", HERE / "generate.py", HERE / "hpo.py",
                                                    HERE / "labs.py", HERE / "build.py",
-                                                   Path(split_helpers.__file__), Path(icd10_module.__file__)]:
+                                                   Path(split_helpers.__file__), Path(icd10_module.__file__),
+                                                   Path(task_module.__file__)]:
         if path.exists():
             h.update(path.name.encode() + path.read_bytes())
     h.update(GENERATOR_VERSION.encode())
@@ -139,23 +141,8 @@ def build(offline: bool = False, force: bool = False) -> dict:
 
     # Generated tasks, de-duplicated against the authored tasks by normalised ticket
     authored = load_tasks(HERE / "tasks.json", domain=NAME)
-    groups = {
-        "rare": generate.rare_disease_tasks(hpo_index, COUNTS["rare"]),
-        "icd": generate.icd_coding_tasks(icd, COUNTS["icd"]),
-        "lab": generate.lab_interpretation_tasks(catalog, COUNTS["lab"]),
-    }
-    seen = {" ".join(t.ticket.lower().split()) for t in authored}
-    tasks = []
-    for group, items in groups.items():
-        kept = []
-        for task in items:
-            key = " ".join(task.ticket.lower().split())
-            if key in seen:
-                continue
-            seen.add(key)
-            kept.append(task)
-        groups[group] = kept
-        tasks += kept
+    groups = without_repeated_tickets(generate.generate(hpo_index, icd, catalog, COUNTS), authored)
+    tasks = [task for items in groups.values() for task in items]
     dump_tasks(tasks, out_dir / "tasks.json")
     ids = {g: [t.id for t in items] for g, items in groups.items()}
     splits = split_helpers.grouped_splits(ids, VALIDATION)

@@ -55,6 +55,16 @@ DDX_TOP = 3
 DDX_SOURCES = {"OMIM", "ORPHA", "DECIPHER"}  # generate_ddx scope "rare"
 
 
+def generate(hpo_index: PhenotypeIndex, icd: ICD10Index, catalog: LabCatalog, counts: dict[str, int]) -> dict[str, list[Task]]:
+    """The generated tasks by group: `counts["rare"]` rare-disease diagnoses, `counts["icd"]` ICD-10-CM
+    codings, `counts["lab"]` lab interpretations."""
+    return {
+        "rare": rare_disease_tasks(hpo_index, counts["rare"]),
+        "icd": icd_coding_tasks(icd, counts["icd"]),
+        "lab": lab_interpretation_tasks(catalog, counts["lab"]),
+    }
+
+
 def typical_phenotypes(index: PhenotypeIndex, did: str) -> list[tuple[str, float]]:
     """A disease's informative (IC >= 2) phenotypes annotated at least "frequent"."""
     return [(h, f) for h, f in index.diseases[did]["phenotypes"] if f is not None and f >= MIN_FEATURE_FREQUENCY and index.ic(h) >= 2.0]

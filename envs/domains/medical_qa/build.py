@@ -11,15 +11,13 @@ manifest of inputs lets a re-run skip when nothing changed.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import random
 from collections import Counter
 from pathlib import Path
 
 from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
-from envs.core.domain import write_split
+from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
@@ -37,56 +35,21 @@ SPLIT_SIZES = {"validation": 149, "test": 200}
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for name in ("generate.py", "build.py", "knowledge.py", "guideline_questions.json"):
-        h.update((HERE / name).read_bytes())
-    for shared in (R, split_helpers):  # the shared build helpers this build runs
-        h.update(Path(shared.__file__).read_bytes())
-    for p in PACKAGES:
-        h.update(f"{p}=={SOURCES[p].version}".encode())
-    h.update(json.dumps([COUNTS, SPLIT_SIZES, SEED]).encode())
-    return h.hexdigest()
+    files = [HERE / name for name in ("generate.py", "build.py", "knowledge.py", "guideline_questions.json")]
+    shared = [Path(module.__file__) for module in (R, split_helpers)]  # the shared build helpers this build runs
+    return inputs_fingerprint(files + shared, *(f"{p}=={SOURCES[p].version}" for p in PACKAGES),
+                              json.dumps([COUNTS, SPLIT_SIZES, SEED]))
 
 
 def _write_json(path: Path, data) -> None:
     path.write_text(json.dumps(data, ensure_ascii=False, sort_keys=True, separators=(",", ":")) + "\n", encoding="utf-8")
 
 
-def task_rng(task_kind: str) -> random.Random:
-    """Each task generator draws from its own seeded stream, so changing what one generator keeps or
-    drops (e.g. the rare-disease top-3 check) leaves every other generator's tasks unchanged."""
-    return random.Random(f"{SEED}:{task_kind}")
-
-
-def generate_tasks(kb: MedicalKnowledge, specs: list[dict]) -> list[dict]:
-    used_diseases: set[str] = set()
-    used_drugs: set[str] = set()
-    tasks: list[dict] = []
-    tasks += G.icd_tasks(kb, task_rng("icd"), COUNTS["icd_each"])
-    tasks += G.hpo_diagnosis_tasks(kb, task_rng("hpo_dx"), COUNTS["hpo_dx"], used_diseases)
-    tasks += G.hpo_feature_tasks(kb, task_rng("hpo_feature"), COUNTS["hpo_feature"], used_diseases)
-    tasks += G.hpo_inheritance_tasks(kb, task_rng("hpo_inheritance"), COUNTS["hpo_inheritance"], used_diseases)
-    tasks += G.drug_class_tasks(kb, task_rng("drug_class"), COUNTS["drug_class"], used_drugs)
-    tasks += G.class_member_tasks(kb, task_rng("class_member"), COUNTS["class_member"], used_drugs)
-    tasks += G.drug_moa_tasks(kb, task_rng("drug_moa"), COUNTS["drug_moa"], used_drugs)
-    tasks += G.brand_tasks(kb, task_rng("brand"), COUNTS["brand"], used_drugs)
-    tasks += G.guideline_tasks(kb, specs, task_rng("guideline"))
-    tasks += G.calculator_tasks(task_rng("calculator"), COUNTS["calc_each"])
-    ids = Counter(t["id"] for t in tasks)
-    dupes = [i for i, c in ids.items() if c > 1]
-    if dupes:
-        raise ValueError(f"medical_qa: duplicate generated task ids {dupes[:5]}")
-    return tasks
-
-
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
-    manifest_path = out / "manifest.json"
     fingerprint = _fingerprint()
-    if not force and manifest_path.exists():
-        manifest = json.loads(manifest_path.read_text())
-        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest.get("files", [])):
-            return {"skipped": "up to date", **manifest["summary"]}
+    if not force and (done := built_summary(out, fingerprint)) is not None:
+        return done
     out.mkdir(parents=True, exist_ok=True)
     archives = {p: open_package(SOURCES[p], offline=offline) for p in PACKAGES}
     icd = R.parse_icd10cm(archives["simple-icd-10-cm"])
@@ -103,7 +66,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
         _write_json(out / name, data)
     kb = MedicalKnowledge(icd, hpo, drugs, guidelines, interactions["pairs"], interactions["source"])
     specs = json.loads((HERE / "guideline_questions.json").read_text(encoding="utf-8"))
-    tasks = generate_tasks(kb, specs)
+    tasks = G.generate(kb, specs, COUNTS, SEED)
     for t in tasks:
         Task.model_validate(t)
     splits = split_helpers.proportional_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
@@ -114,8 +77,6 @@ def build(offline: bool = False, force: bool = False) -> dict:
     summary = {"tasks": len(tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
                "splits": {k: len(v) for k, v in splits.items()}, "icd_codes": len(icd["codes"]),
                "hpo_diseases": len(hpo["diseases"]), "drugs": len(drugs), "guideline_sections": len(guidelines)}
-    manifest = {"fingerprint": fingerprint, "summary": summary,
-                "files": [*files, "tasks.json", "split_tasks.json", "db.json"],
-                "packages": {p: SOURCES[p].provenance for p in PACKAGES}}
-    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_manifest(out, fingerprint, summary, [*files, "tasks.json", "split_tasks.json", "db.json"],
+                   packages={p: SOURCES[p].provenance for p in PACKAGES})
     return summary

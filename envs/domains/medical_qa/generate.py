@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import random
 import re
-from collections import defaultdict
+from collections import Counter, defaultdict
 from typing import Any, Callable
 
 from envs.calculators import CALCULATORS
@@ -606,4 +606,33 @@ def calculator_tasks(rng: random.Random, per_calculator: int) -> list[dict]:
                                                 "reference": result.reference[:200]},
                                           actions=[action(name, args, [], f"compute the {label} from the vignette values")],
                                           metadata={"calculator": name, "arguments": args, "value": value}))
+    return tasks
+
+
+def task_rng(seed: int, task_kind: str) -> random.Random:
+    """Each task generator draws from its own seeded stream, so changing what one generator keeps or
+    drops (e.g. the rare-disease top-3 check) leaves every other generator's tasks unchanged."""
+    return random.Random(f"{seed}:{task_kind}")
+
+
+def generate(kb: MedicalKnowledge, specs: list[dict], counts: dict[str, int], seed: int) -> list[dict]:
+    """Every generated task: `counts` per task generator (`guideline_questions.json` specs for the guideline
+    questions), each generator drawing from its own stream of `seed`."""
+    used_diseases: set[str] = set()
+    used_drugs: set[str] = set()
+    tasks: list[dict] = []
+    tasks += icd_tasks(kb, task_rng(seed, "icd"), counts["icd_each"])
+    tasks += hpo_diagnosis_tasks(kb, task_rng(seed, "hpo_dx"), counts["hpo_dx"], used_diseases)
+    tasks += hpo_feature_tasks(kb, task_rng(seed, "hpo_feature"), counts["hpo_feature"], used_diseases)
+    tasks += hpo_inheritance_tasks(kb, task_rng(seed, "hpo_inheritance"), counts["hpo_inheritance"], used_diseases)
+    tasks += drug_class_tasks(kb, task_rng(seed, "drug_class"), counts["drug_class"], used_drugs)
+    tasks += class_member_tasks(kb, task_rng(seed, "class_member"), counts["class_member"], used_drugs)
+    tasks += drug_moa_tasks(kb, task_rng(seed, "drug_moa"), counts["drug_moa"], used_drugs)
+    tasks += brand_tasks(kb, task_rng(seed, "brand"), counts["brand"], used_drugs)
+    tasks += guideline_tasks(kb, specs, task_rng(seed, "guideline"))
+    tasks += calculator_tasks(task_rng(seed, "calculator"), counts["calc_each"])
+    ids = Counter(t["id"] for t in tasks)
+    dupes = [i for i, c in ids.items() if c > 1]
+    if dupes:
+        raise ValueError(f"medical_qa: duplicate generated task ids {dupes[:5]}")
     return tasks

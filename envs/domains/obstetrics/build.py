@@ -10,14 +10,13 @@ the drug. Deterministic; skipped when the manifest of inputs is unchanged.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections import Counter
 from pathlib import Path
 
 from envs import coherence
 from envs.core import splits as split_helpers
-from envs.core.domain import write_split
+from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
@@ -32,14 +31,11 @@ SPLIT_SIZES = {"validation": 6, "test": 26}
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for name in ("build.py", "generate.py", "ctg.py", "rules.py", "data_model.py", "formulary.json", "patients_authored.json"):
-        h.update((HERE / name).read_bytes())
-    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
-    h.update(Path(coherence.__file__).read_bytes())  # the shared tables the generator draws from (symptom words)
-    for p in PACKAGES:
-        h.update(f"{p}=={SOURCES[p].version}".encode())
-    return h.hexdigest()
+    files = [HERE / name for name in ("build.py", "generate.py", "ctg.py", "rules.py", "data_model.py", "formulary.json",
+                                      "patients_authored.json")]
+    # the shared split assignment, and the shared tables the generator draws from (symptom words)
+    shared = [Path(split_helpers.__file__), Path(coherence.__file__)]
+    return inputs_fingerprint(files + shared, *(f"{p}=={SOURCES[p].version}" for p in PACKAGES))
 
 
 def _formulary(offline: bool) -> dict[str, ObstetricDrug]:
@@ -63,12 +59,9 @@ def _formulary(offline: bool) -> dict[str, ObstetricDrug]:
 
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
-    manifest_path = out / "manifest.json"
     fingerprint = _fingerprint()
-    if not force and manifest_path.exists():
-        manifest = json.loads(manifest_path.read_text())
-        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
-            return {"skipped": "up to date", **manifest["summary"]}
+    if not force and (done := built_summary(out, fingerprint)) is not None:
+        return done
     out.mkdir(parents=True, exist_ok=True)
     patients, tasks = G.generate(SEED)
     authored = [Patient.model_validate(p) for p in json.loads((HERE / "patients_authored.json").read_text(encoding="utf-8"))]
@@ -86,7 +79,6 @@ def build(offline: bool = False, force: bool = False) -> dict:
     summary = {"patients": len(all_patients), "tasks": len(tasks),
                "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
                "splits": {k: len(v) for k, v in splits.items()}}
-    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"],
-                "packages": {p: SOURCES[p].provenance for p in PACKAGES}}
-    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"],
+                   packages={p: SOURCES[p].provenance for p in PACKAGES})
     return summary

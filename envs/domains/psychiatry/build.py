@@ -11,7 +11,6 @@ Deterministic; skipped when the manifest of inputs is unchanged.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections import Counter
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 from envs import coherence
 from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
-from envs.core.domain import write_split
+from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
@@ -34,25 +33,17 @@ SPLIT_SIZES = {"validation": 20, "test": 28}
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for name in ("build.py", "generate.py", "instruments.py", "data_model.py", "formulary.json", "interaction_rules.json",
-                 "patients_authored.json"):
-        h.update((HERE / name).read_bytes())
-    for shared in (R, split_helpers, coherence):  # the shared build helpers and tables this build uses
-        h.update(Path(shared.__file__).read_bytes())
-    for p in PACKAGES:
-        h.update(f"{p}=={SOURCES[p].version}".encode())
-    return h.hexdigest()
+    files = [HERE / name for name in ("build.py", "generate.py", "instruments.py", "data_model.py", "formulary.json",
+                                      "interaction_rules.json", "patients_authored.json")]
+    shared = [Path(module.__file__) for module in (R, split_helpers, coherence)]  # the shared build helpers and tables it uses
+    return inputs_fingerprint(files + shared, *(f"{p}=={SOURCES[p].version}" for p in PACKAGES))
 
 
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
-    manifest_path = out / "manifest.json"
     fingerprint = _fingerprint()
-    if not force and manifest_path.exists():
-        manifest = json.loads(manifest_path.read_text())
-        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
-            return {"skipped": "up to date", **manifest["summary"]}
+    if not force and (done := built_summary(out, fingerprint)) is not None:
+        return done
     out.mkdir(parents=True, exist_ok=True)
     formulary_spec = json.loads((HERE / "formulary.json").read_text(encoding="utf-8"))["drugs"]
     rules_spec = json.loads((HERE / "interaction_rules.json").read_text(encoding="utf-8"))["rules"]
@@ -83,7 +74,6 @@ def build(offline: bool = False, force: bool = False) -> dict:
                "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
                "splits": {k: len(v) for k, v in splits.items()}, "icd10_mental_codes": len(mental),
                "formulary_with_fda_class": sum(1 for d in formulary.values() if d.fda_classes)}
-    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"],
-                "packages": {p: SOURCES[p].provenance for p in PACKAGES}}
-    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"],
+                   packages={p: SOURCES[p].provenance for p in PACKAGES})
     return summary

@@ -10,13 +10,12 @@ on a fresh database. Deterministic; skipped when the inputs are unchanged.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections import Counter
 from pathlib import Path
 
 from envs.core import splits as split_helpers
-from envs.core.domain import write_split
+from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.domains.radiology_report import generate as G
@@ -30,11 +29,9 @@ SPLIT_SIZES = {"validation": 10, "test": 32}
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for name in ("build.py", "generate.py", "tools.py", "data_model.py", "templates.json", "studies_authored.json", "tasks.json"):
-        h.update((HERE / name).read_bytes())
-    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
-    return h.hexdigest()
+    files = [HERE / name for name in ("build.py", "generate.py", "tools.py", "data_model.py", "templates.json",
+                                      "studies_authored.json", "tasks.json")]
+    return inputs_fingerprint(files + [Path(split_helpers.__file__)])  # + the shared split assignment
 
 
 def expected_hash(db: RadiologyDB, task: dict) -> str:
@@ -49,12 +46,9 @@ def expected_hash(db: RadiologyDB, task: dict) -> str:
 
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
-    manifest_path = out / "manifest.json"
     fingerprint = _fingerprint()
-    if not force and manifest_path.exists():
-        manifest = json.loads(manifest_path.read_text())
-        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
-            return {"skipped": "up to date", **manifest["summary"]}
+    if not force and (done := built_summary(out, fingerprint)) is not None:
+        return done
     out.mkdir(parents=True, exist_ok=True)
     templates = {k: ReportTemplate(key=k, **v) for k, v in json.loads((HERE / "templates.json").read_text())["templates"].items()}
     studies, tasks = G.generate(SEED, {k: t.critical_categories for k, t in templates.items()})
@@ -75,6 +69,5 @@ def build(offline: bool = False, force: bool = False) -> dict:
     summary = {"studies": len(all_studies), "tasks": len(tasks),
                "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
                "splits": {k: len(v) for k, v in splits.items()}}
-    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"]}
-    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"])
     return summary

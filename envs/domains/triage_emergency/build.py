@@ -15,7 +15,8 @@ from pathlib import Path
 from envs.core import splits as split_helpers
 from envs.core.domain import write_split
 from envs.core.paths import domain_build_dir
-from envs.core.task import dump_tasks, load_tasks
+from envs.core import task as task_module
+from envs.core.task import dump_tasks, load_tasks, without_repeated_tickets
 from envs.data.registry import SOURCES, open_package
 
 from . import generate
@@ -30,7 +31,7 @@ VALIDATION = {"handbook": 5, "vignette": 4, "calculator": 7}  # + 4 authored in 
 def _stamp() -> str:
     h = hashlib.sha256(f"medeval-harness=={SOURCES['medeval-harness'].version};v1".encode())
     for path in [HERE / "authored" / "patients.json", HERE / "tasks.json", HERE / "split_tasks.json",
-                 HERE / "generate.py", HERE / "build.py", Path(split_helpers.__file__)]:
+                 HERE / "generate.py", HERE / "build.py", Path(split_helpers.__file__), Path(task_module.__file__)]:
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
 
@@ -52,23 +53,10 @@ def build(offline: bool = False, force: bool = False) -> dict:
     db = TriageDB.model_validate({"patients": patients})
     db.dump(out_dir / "db.json")
 
-    groups = {
-        "handbook": generate.esi_handbook_tasks(cases, source.provenance),
-        "vignette": generate.esi_vignette_tasks(COUNTS["vignette"]),
-        "calculator": generate.calculator_tasks(COUNTS["calculator_per_kind"]),
-    }
+    generated = generate.generate(cases, source.provenance, COUNTS)
     authored_tasks = load_tasks(HERE / "tasks.json", domain=NAME)
-    seen = {" ".join(t.ticket.lower().split()) for t in authored_tasks}
-    tasks = []
-    for group, items in groups.items():
-        kept = []
-        for t in items:
-            key = " ".join(t.ticket.lower().split())
-            if key not in seen:
-                seen.add(key)
-                kept.append(t)
-        groups[group] = kept
-        tasks += kept
+    groups = without_repeated_tickets(generated, authored_tasks)
+    tasks = [t for items in groups.values() for t in items]
     dump_tasks(tasks, out_dir / "tasks.json")
     splits = split_helpers.grouped_splits({g: [t.id for t in v] for g, v in groups.items()}, VALIDATION, seed=37)
     write_split(out_dir / "split_tasks.json", splits)

@@ -30,6 +30,16 @@ from envs.core.task import Task
 T0 = "2025-03-01T13:50"
 
 
+def generate(cases: list[dict], source: dict, counts: dict[str, int]) -> dict[str, list[Task]]:
+    """The generated tasks by group: one per handbook case (`source`: the package's provenance),
+    `counts["vignette"]` ESI vignettes and `counts["calculator_per_kind"]` vignettes per calculator."""
+    return {
+        "handbook": esi_handbook_tasks(cases, source),
+        "vignette": esi_vignette_tasks(counts["vignette"]),
+        "calculator": calculator_tasks(counts["calculator_per_kind"]),
+    }
+
+
 def handbook_patient(case: dict) -> dict:
     """A medeval-harness case -> an EDPatient record (nothing from the case's notes or rules leaks)."""
     inp = case["input"]

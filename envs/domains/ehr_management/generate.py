@@ -1,6 +1,13 @@
-"""Tasks over the Synthea timelines, with exact oracles.
+"""The EHR domain's generated tasks, with exact oracles: `generate(db, scenarios, icd)` returns them by group.
 
-Each generator picks a patient and a question deterministically (sorted candidates, seeded RNG,
+- ICU-record tasks over the authored ICU patients (`icu_tasks`): lab trends, SOFA per ICU day, APACHE II,
+  NEWS2 at a charted time, admission ICD-10-CM coding, vasopressor hours; the oracle is the tool's result
+  on a fresh copy of the patient's chart.
+- The authored order-management workflows (`authored/workflows.json`, `workflow_tasks`), with the final
+  database hash of a gold replay where every write is determined.
+- Questions over the Synthea timelines (`timeline_tasks`), below.
+
+Each timeline generator picks a patient and a question deterministically (sorted candidates, seeded RNG,
 no patient used twice), states the gold tool call, runs it on that patient's built record and reads
 the gold answer from the result, so the oracle is exactly what the tool returns to the agent:
 
@@ -18,16 +25,21 @@ the gold answer from the result, so the oracle is exactly what the tool returns 
 
 from __future__ import annotations
 
+import json
 import random
 from collections import Counter
 from datetime import date, timedelta
+from pathlib import Path
 from typing import Callable
 
+from envs.core.icd10 import ICD10Index
 from envs.core.task import Task
 
 from .data_model import EHRDB, EHRPatient
 
+AUTHORED = Path(__file__).parent / "authored"
 LETTERS = "ABCD"
+ICU_LETTERS = "ABCDE"
 COUNTS = {"condition_count": 60, "first_diagnosis": 60, "active_med_count": 30, "active_med_choice": 30,
           "exposure_count": 30, "visits": 40, "procedures": 40, "measurement_count": 20}
 MONTHS = ("January", "February", "March", "April", "May", "June", "July", "August", "September", "October",
@@ -256,3 +268,168 @@ def timeline_tasks(patients: list[EHRPatient], clock: str, seed: int = 71,
     pick("procedures", lambda p: bool(p.procedures), procedures)
     pick("measurement_count", lambda p: bool(p.measurements), measurement_count)
     return groups
+
+
+def generate(db: EHRDB, scenarios: dict[str, dict], icd: ICD10Index) -> dict[str, list[Task]]:
+    """Every generated task of the domain by group: the ICU-record tasks, the authored workflows and the
+    Synthea timeline questions."""
+    groups = icu_tasks(db, scenarios, icd)
+    groups["workflow"] = workflow_tasks(db)
+    groups.update(timeline_tasks([p for p in db.patients.values() if p.source == "synthea"], db.clock))
+    return groups
+
+
+def _chart_tools(db: EHRDB, pid: str):
+    """Tools over a fresh copy of one patient's chart (what an episode of that patient sees)."""
+    from .tools import EHRTools
+
+    one = EHRDB(patients={pid: db.patients[pid]}, clock=db.clock, next_order_number=db.next_order_number)
+    return EHRTools(EHRDB.model_validate_json(one.model_dump_json()))
+
+
+def _icu_act(aid: str, name: str, args: dict, compare: list[str]) -> dict:
+    return {"action_id": aid, "name": name, "arguments": args, "compare_args": compare}
+
+
+# The score definition or coding standard each generated task type's gold follows.
+GUIDELINES = {
+    "news2_from_record": "National Early Warning Score 2 (Royal College of Physicians, London 2017)",
+    "sofa_from_record": "SOFA score (Vincent et al., Intensive Care Med 1996;22:707-710)",
+    "apache_from_record": "APACHE II (Knaus et al., Crit Care Med 1985;13:818-829)",
+    "lab_trend": "arithmetic from the charted results (first, last, delta, extremes, least-squares slope); no clinical guideline",
+    "icd10_admission_coding": "ICD-10-CM tabular list and Official Guidelines for Coding and Reporting (CMS/NCHS), principal diagnosis",
+    "admission_summary": "the admission's charted record (diagnoses, stays, results); no clinical guideline",
+}
+
+
+def _icu_task(tid: str, kind: str, ticket: str, answer: str, answer_type: str, actions: list[dict], pid: str,
+              tol: float | None = None, unit: str | None = None, options: dict | None = None, **extra) -> Task:
+    return Task(id=tid, ticket=ticket, correct_answer=answer, answer_type=answer_type, answer_tolerance=tol,
+                answer_unit=unit, options=options, patient_id=pid,
+                description={"purpose": kind.replace("_", " "), "difficulty": "medium", "source": "ehr_authored_icu",
+                             "category": kind, "task_type": kind,
+                             "provenance": {"patients": "authored synthetic ICU scenarios", "oracle": "computed from the record",
+                                            "guideline": GUIDELINES[kind]}},
+                evaluation_criteria={"actions": actions, "reward_basis": ["ACTION", "ANSWER"]}, **extra)
+
+
+def _searchable(icd, text: str, code: str) -> str:
+    """The longest leading part of the diagnosis text that ICD-10-CM search matches (else the
+    code's category title, e.g. British spellings such as "necrotising")."""
+    words = text.replace(",", " ").split()
+    for n in range(len(words), 0, -1):
+        query = " ".join(words[:n])
+        if icd.search(query, 1):
+            return query
+    return icd.items[code[:3]]["desc"]
+
+
+def icu_tasks(db: EHRDB, scenarios: dict[str, dict], icd: ICD10Index, seed: int = 53) -> dict[str, list[Task]]:
+    """Tasks over the authored ICU patients: lab trends, SOFA per ICU day, APACHE II, NEWS2, admission coding, vasopressor hours."""
+    rng = random.Random(seed)
+    groups: dict[str, list[Task]] = {k: [] for k in ("trend", "sofa", "apache", "news2", "icd", "summary")}
+    for pid in sorted(scenarios):
+        patient = db.patients[pid]
+        kit = _chart_tools(db, pid)
+        adm = patient.admissions[0]
+        tests = sorted({e.test for e in adm.lab_events})
+        for test in rng.sample(tests, 6):
+            tr = kit.get_lab_trend(pid, test)
+            q = rng.choice(["delta", "direction", "max"])
+            act = [_icu_act("trend", "get_lab_trend", {"patient_id": pid, "test": test}, ["patient_id", "test"])]
+            if q == "delta":
+                groups["trend"].append(_icu_task(f"ehr_trend_{pid}_{test}_delta", "lab_trend",
+                    f"For patient {pid}'s current admission, what is the change in {test.replace('_', ' ')} from the first to "
+                    f"the last result ({tr['unit']})? Give last minus first.", f"{tr['delta']:g}", "numeric", act, pid,
+                    tol=max(0.011, abs(tr['delta']) * 0.005), unit=tr["unit"]))
+            elif q == "direction":
+                groups["trend"].append(_icu_task(f"ehr_trend_{pid}_{test}_dir", "lab_trend",
+                    f"Over patient {pid}'s current admission, is the {test.replace('_', ' ')} rising, falling or stable "
+                    f"(least-squares slope, and a change of more than 10% from the first value)?", tr["direction"],
+                    "category", act, pid))
+            else:
+                groups["trend"].append(_icu_task(f"ehr_trend_{pid}_{test}_max", "lab_trend",
+                    f"What was the highest {test.replace('_', ' ')} recorded during patient {pid}'s current admission "
+                    f"({tr['unit']})?", f"{tr['max']:g}", "numeric", act, pid, tol=1e-6, unit=tr["unit"]))
+        icu_in = adm.icu_stays[0].intime
+        from datetime import datetime, timedelta
+
+        for day in range(3):
+            start = (datetime.strptime(icu_in, "%Y-%m-%dT%H:%M") + timedelta(hours=24 * day)).strftime("%Y-%m-%dT%H:%M")
+            sofa = kit.calculate_sofa(pid, window_start=start, window_hours=24)
+            groups["sofa"].append(_icu_task(f"ehr_sofa_{pid}_d{day + 1}", "sofa_from_record",
+                f"Compute patient {pid}'s SOFA score for ICU day {day + 1} (the 24 hours from {start}), using the worst "
+                f"recorded value of each organ system in that window. Answer with the total.", str(sofa["score"]),
+                "numeric", [_icu_act("sofa", "calculate_sofa", {"patient_id": pid, "window_start": start, "window_hours": 24},
+                                 ["patient_id", "window_start"])], pid, tol=0, unit="points"))
+        ap = kit.calculate_apache2(pid)
+        groups["apache"].append(_icu_task(f"ehr_apache_{pid}", "apache_from_record",
+            f"Compute patient {pid}'s APACHE II score from the first 24 hours of the ICU stay (worst values). "
+            f"Answer with the total.", str(ap["score"]), "numeric",
+            [_icu_act("apache", "calculate_apache2", {"patient_id": pid}, ["patient_id"])], pid, tol=0, unit="points"))
+        # NEWS2 scores spontaneous breathing and ACVPU consciousness (RCP 2017): not a score for a patient on
+        # invasive ventilation, so only vital sets charted off the ventilator are asked about (envs.coherence).
+        times = [v.time for v in adm.vital_events
+                 if not any(w.start <= v.time and (w.end is None or v.time < w.end) for w in adm.ventilation if w.mode == "invasive")]
+        for at in rng.sample(times, min(3, len(times))):
+            news = kit.calculate_news2(pid, at_time=at)
+            groups["news2"].append(_icu_task(f"ehr_news2_{pid}_{at.replace(':', '').replace('-', '')}", "news2_from_record",
+                f"What was patient {pid}'s NEWS2 score from the vital signs charted at {at}?", str(news["score"]),
+                "numeric", [_icu_act("news2", "calculate_news2", {"patient_id": pid, "at_time": at}, ["patient_id", "at_time"])],
+                pid, tol=0, unit="points"))
+        code = scenarios[pid]["icd10"]
+        sibs = [c for c in icd.siblings(code) if icd.items[c]["billable"]]
+        if len(sibs) < 3:
+            block = icd.items[code]["block"]
+            sibs = [c for c, it in icd.items.items() if it["billable"] and it["block"] == block and c != code]
+        opts = rng.sample(sorted(sibs), 3) + [code]
+        rng.shuffle(opts)
+        groups["icd"].append(_icu_task(f"ehr_icd_{pid}", "icd10_admission_coding",
+            f"Patient {pid}'s current admission is for \"{adm.admission_diagnosis}\". Which ICD-10-CM code is the "
+            f"principal diagnosis? Record it with assign_icd10_code and answer with the option letter.",
+            ICU_LETTERS[opts.index(code)], "choice",
+            [_icu_act("lookup", "lookup_icd10", {"query": _searchable(icd, adm.admission_diagnosis, code)}, []),
+             _icu_act("assign", "assign_icd10_code", {"patient_id": pid, "icd10_code": code}, ["patient_id", "icd10_code"])],
+            pid, options={ICU_LETTERS[i]: f"{c} {icd.items[c]['desc']}" for i, c in enumerate(opts)}))
+        summ = kit.summarize_admission(pid)
+        groups["summary"].append(_icu_task(f"ehr_summary_{pid}", "admission_summary",
+            f"From patient {pid}'s record, how many hours of vasopressor or inotrope infusion has the patient received "
+            f"so far in this admission (record clock {db.clock})?", f"{summ['vasopressor_hours']:g}", "numeric",
+            [_icu_act("summary", "summarize_admission", {"patient_id": pid}, ["patient_id"])], pid, tol=0.1, unit="hours"))
+    return groups
+
+
+def workflow_tasks(db: EHRDB) -> list[Task]:
+    """The authored order-management workflows, with the expected final database hash from a gold replay."""
+    from .tools import EHRTools
+
+    specs = json.loads((AUTHORED / "workflows.json").read_text(encoding="utf-8"))["workflows"]
+    out = []
+    for spec in specs:
+        # The episode database holds the task's patient only (environment.open_chart).
+        patient = db.patients[spec["patient_id"]]
+        kit = EHRTools(EHRDB.model_validate_json(
+            EHRDB(patients={spec["patient_id"]: patient}, clock=db.clock, next_order_number=db.next_order_number).model_dump_json()))
+        for a in spec["actions"]:
+            getattr(kit, a["name"])(**a["arguments"])
+        answer = spec["answer"]
+        if answer.startswith("="):  # a value read from the record by a tool call: "=tool:key"
+            tool, key = answer[1:].split(":")
+            call = next(a for a in spec["actions"] if a["name"] == tool)
+            answer = f"{getattr(_chart_tools(db, spec['patient_id']), tool)(**call['arguments'])[key]:g}"
+        writes_free_text = any(a["name"] in ("write_clinical_note", "place_order", "order_medication", "escalate_care")
+                               for a in spec["actions"])
+        crit = {"actions": spec["actions"], "nl_assertions": spec["nl_assertions"],
+                "reward_basis": ["ACTION", "ANSWER", "NL_ASSERTION"] + ([] if writes_free_text else ["DB"])}
+        if not writes_free_text:
+            crit["expected_db_hash"] = kit.db.content_hash()
+        out.append(Task(id=spec["id"], ticket=spec["ticket"], correct_answer=answer, answer_type=spec["answer_type"],
+                        answer_tolerance=spec.get("tolerance"), answer_unit=spec.get("unit"), patient_id=spec["patient_id"],
+                        emergency=spec.get("emergency"),
+                        description={"purpose": "EHR order-management workflow", "difficulty": "hard", "source": "authored",
+                                     "category": "workflow", "task_type": "order_workflow",
+                                     "provenance": {"origin": "authored", "license": "project", "guideline": spec["guideline"]}},
+                        evaluation_criteria=crit,
+                        # what a complete gold submission states with its answer (envs.validate.gold_replay)
+                        metadata={"gold_reasoning": spec["gold_reasoning"]} if spec.get("gold_reasoning") else {}))
+    return out
