@@ -41,16 +41,34 @@ def read_text_file(path: str | Path, what: str) -> str:
                             f"offset {exc.start}); re-save it as UTF-8") from None
 
 
-def read_json_file(path: str | Path, what: str) -> Any:
+def _refuse_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    seen: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in seen:
+            raise _RepeatedKey(key)
+        seen[key] = value
+    return seen
+
+
+class _RepeatedKey(ValueError):
+    pass
+
+
+def read_json_file(path: str | Path, what: str, *, refuse_repeated_keys: bool = False) -> Any:
     """Parse a JSON data file; every failure names the file (and the line and column of a syntax error).
 
+    `refuse_repeated_keys`: an object with the same key twice is an error (JSON keeps the last one
+    silently), for hand-written files where the repeat is a mistake.
+
     Raises:
-        DataFileError: see `read_text_file`, plus invalid JSON, nesting too deep to parse, or a
-            number too long to convert (Python's int limit).
+        DataFileError: see `read_text_file`, plus invalid JSON, nesting too deep to parse, a
+            number too long to convert (Python's int limit), or a repeated key.
     """
     text = read_text_file(path, what)
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_refuse_repeats if refuse_repeated_keys else None)
+    except _RepeatedKey as exc:
+        raise DataFileError(f"{path}: {what} repeats the key {exc.args[0]!r} in one object") from None
     except json.JSONDecodeError as exc:
         raise DataFileError(f"{path}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
     except RecursionError:

@@ -16,6 +16,7 @@ from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.visual_diagnosis import build as vis_build
 from envs.domains.visual_diagnosis import png
+from envs.domains.visual_diagnosis.case_schema import load_cases, placeholders
 
 registry.DOMAINS.setdefault("visual_diagnosis", "envs.domains.visual_diagnosis.environment")
 
@@ -184,6 +185,12 @@ def test_tasks_counts_splits_images(tasks):
         assert t.has_gold_answer and t.evaluation_criteria.actions
     for t in authored:
         assert len(t.evaluation_criteria.actions) >= 2 and len(t.evaluation_criteria.nl_assertions) >= 2
+    # every authored case file's case is built, with its file's guideline and no placeholder left unfilled
+    guideline = {case.id: g for case, g in load_cases()}
+    assert sorted(t.id for t in authored) == sorted(guideline)
+    for t in authored:
+        assert t.description.provenance["guideline"] == guideline[t.id]
+        assert not placeholders([t.correct_answer, t.answer_aliases, [a.arguments for a in t.evaluation_criteria.actions]]), t.id
 
 
 def test_no_held_out_leaks(tasks):

@@ -5,19 +5,18 @@
 Renders every study to `images/<study_id>.png` (numpy + the minimal PNG writer), keeps a study
 only when the pixel analysis recovers its specification, writes `db.json` (studies, reference
 archive, glossary of signs), `tasks.json` and `split_tasks.json`. All inputs are ours (seeded
-code, `signs.json`, `studies_authored.json`); deterministic; skipped when unchanged.
+code, `signs.json`, the authored cases `cases/*.json`); deterministic; skipped when unchanged.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 from collections import Counter
 from pathlib import Path
 
 from envs.core import splits as split_helpers
-from envs.core.domain import write_split
+from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
 from envs.core.paths import domain_build_dir
 from envs.core.task import Task
 from envs.domains.visual_diagnosis import generate as G
@@ -30,28 +29,22 @@ SPLIT_SIZES = {"validation": 37, "test": 60}
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for name in ("build.py", "generate.py", "render.py", "analysis.py", "png.py", "data_model.py", "signs.json", "authored.py"):
-        h.update((HERE / name).read_bytes())
-    h.update(Path(split_helpers.__file__).read_bytes())  # the shared split assignment
-    return h.hexdigest()
+    files = [HERE / name for name in ("build.py", "generate.py", "render.py", "analysis.py", "png.py", "data_model.py",
+                                      "signs.json", "case_schema.py")]
+    cases = sorted((HERE / "cases").glob("*.json"))  # the authored cases
+    return inputs_fingerprint(files + cases + [Path(split_helpers.__file__)])  # + the shared split assignment
 
 
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
-    manifest_path = out / "manifest.json"
     fingerprint = _fingerprint()
-    if not force and manifest_path.exists():
-        manifest = json.loads(manifest_path.read_text())
-        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest["files"]):
-            return {"skipped": "up to date", **manifest["summary"]}
+    if not force and (done := built_summary(out, fingerprint)) is not None:
+        return done
     if (out / "images").exists():
         shutil.rmtree(out / "images")
     out.mkdir(parents=True, exist_ok=True)
     studies, archive, tasks = G.generate(SEED, out)
-    from envs.domains.visual_diagnosis import authored
-
-    a_studies, a_tasks = authored.build_authored(out)
+    a_studies, a_tasks = G.authored(out)
     all_studies = {s.study_id: s for s in [*studies, *a_studies]}
     if len(all_studies) != len(studies) + len(a_studies):
         raise ValueError("visual_diagnosis: duplicate study ids")
@@ -69,6 +62,5 @@ def build(offline: bool = False, force: bool = False) -> dict:
     summary = {"studies": len(all_studies), "images": len(list((out / "images").glob("*.png"))), "archive_cases": len(archive),
                "tasks": len(all_tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in all_tasks).items())),
                "splits": {k: len(v) for k, v in splits.items()}}
-    manifest = {"fingerprint": fingerprint, "summary": summary, "files": ["db.json", "tasks.json", "split_tasks.json"]}
-    manifest_path.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"])
     return summary

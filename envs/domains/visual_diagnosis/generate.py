@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import random
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from scipy import ndimage
@@ -21,6 +21,7 @@ from envs.calculators import CALCULATORS
 from envs.coherence import indication_fits_age
 from envs.domains.visual_diagnosis import analysis as A
 from envs.domains.visual_diagnosis import render as R
+from envs.domains.visual_diagnosis.case_schema import CASES_DIR, Case, ChestCT, Radiograph, fill, load_cases, placeholders
 from envs.domains.imaging_guidelines import KNOWN_MALIGNANCY_ALIASES, KNOWN_MALIGNANCY_GUIDELINE, KNOWN_MALIGNANCY_MANAGEMENT
 from envs.domains.visual_diagnosis.data_model import ArchivedCase, PatientInfo, Study
 from envs.domains.visual_diagnosis.png import write_png
@@ -452,8 +453,7 @@ def generate(seed: int, build_dir: Path) -> tuple[list[Study], dict[str, Archive
         before = round(now - change, 1)
         s, truth, prior = make_ct(sid, rng, image_dir, [("solid", now)], prior_plan=[before])
         studies += [s, prior]
-        n_now, n_before = truth["nodules"][0], truth["prior_nodules"][0]
-        delta = round((n_now["long_mm"] + n_now["short_mm"]) / 2 - (n_before["long_mm"] + n_before["short_mm"]) / 2, 1)
+        delta = mean_change_mm(truth)
         ticket = _intro(s) + f" Compare with the prior CT ({prior.study_id}, 12 months ago). By how many millimetres has the nodule's mean diameter changed (negative if smaller)?"
         tasks.append(task_dict(f"vis_ct_growth_{sid}", ticket, s, build_dir, answer=f"{delta:.1f}", answer_type="numeric", unit="mm",
                                tolerance=1.0, task_type="ct_interval_change",
@@ -461,3 +461,101 @@ def generate(seed: int, build_dir: Path) -> tuple[list[Study], dict[str, Archive
                                category="nodule surveillance", metadata={"truth": truth}))
     archive = make_archive(rng, 9)
     return studies, archive, tasks
+
+
+# -- authored workflows ------------------------------------------------------------------------------
+AUTHORED_SEED = 2024
+AUTHORED_PROVENANCE = {"source": "authored", "license": "project (ours)"}
+AUTHORED_PURPOSE = "Authored image-interpretation workflow: analyse, measure, compare, retrieve, record and act."
+
+
+def mean_change_mm(truth: dict) -> float:
+    """The first nodule's mean diameter now minus on the prior (mm, 1 decimal)."""
+    now, before = truth["nodules"][0], truth["prior_nodules"][0]
+    return round((now["long_mm"] + now["short_mm"]) / 2 - (before["long_mm"] + before["short_mm"]) / 2, 1)
+
+
+def _cxr_with_cardiomegaly(sid: str, rng: random.Random, image_dir: Path, image: Radiograph,
+                           patient: PatientInfo, indication: str) -> tuple[Study, dict]:
+    """A radiograph with the case's finding and cardiomegaly, kept when the analysis finds both (in that
+    order) on the right side and the CTR within 0.02."""
+    for _ in range(40):
+        seed = rng.randint(0, 10 ** 9)
+        spec, _ = cxr_spec(image.finding, rng, seed, side=image.side, zone=image.zone)
+        spec["ctr"] = round(rng.uniform(0.57, 0.62), 4)
+        img, _ = R.render_cxr(spec, seed)
+        out = A.analyze_cxr(img, R.CXR_SPACING_MM)
+        if [x["finding"] for x in out["findings"]] == [image.finding, "cardiomegaly"] and out["findings"][0]["side"] == image.side \
+                and abs(out["cardiothoracic_ratio"] - spec["ctr"]) <= 0.02:
+            write_png(image_dir / f"{sid}.png", img)
+            study = Study(study_id=sid, modality="CR", body_part="chest", view="PA", image_file=f"images/{sid}.png", width=R.SIZE,
+                          height=R.SIZE, pixel_spacing_mm=R.CXR_SPACING_MM, orientation=ORIENT_CXR, indication=indication,
+                          acquired="today", patient=patient, provenance=AUTHORED_PROVENANCE)
+            return study, {"finding": image.finding, "side": image.side, "ctr": spec["ctr"]}
+    raise RuntimeError(f"could not render {sid}: {image.finding} with cardiomegaly that analyses as designed")
+
+
+def _image_values(case: Case, truth: dict, patient: PatientInfo) -> dict[str, Callable[[], Any]]:
+    """The values a case's placeholders may name (`case_schema.VALUES`), each computed when named."""
+    image = case.image
+    if isinstance(image, Radiograph):
+        centroid = truth.get("centroid_px")
+        return {"cardiothoracic_ratio": lambda: truth["ctr"], "lesion_diameter_mm": lambda: truth["diameter_mm"],
+                "lesion_x": lambda: int(round(centroid[0])), "lesion_y": lambda: int(round(centroid[1]))}
+    first = image.nodules[0]
+    return {"first_nodule_side": lambda: truth["nodules"][0]["side"], "mean_diameter_change_mm": lambda: mean_change_mm(truth),
+            "fleischner_recommendation": lambda: CALCULATORS["fleischner_recommendation"](
+                nodule_type=first.type, size_mm=first.mean_mm, multiple=len(image.nodules) > 1,
+                risk=patient.lung_cancer_risk).category}
+
+
+def authored(build_dir: Path, folder: Path = CASES_DIR) -> tuple[list[Study], list[dict]]:
+    """The studies and tasks of the authored cases (`cases/*.json`), rendered and verified like the
+    generated ones; a comparison with a prior keeps the measured change as its truth."""
+    rng = random.Random(AUTHORED_SEED)
+    image_dir = build_dir / "images"
+    studies: list[Study] = []
+    tasks: list[dict] = []
+    for case, guideline in load_cases(folder):
+        p, image = case.patient, case.image
+        patient = PatientInfo(age=p.age, sex=p.sex, history=p.history, smoking_pack_years=p.pack_years,
+                              lung_cancer_risk="high" if p.pack_years >= 10 else "low", symptoms=list(p.symptoms),
+                              known_malignancy=p.known_malignancy)
+        own = {"patient": patient, "indication": case.indication, "provenance": AUTHORED_PROVENANCE}
+        if isinstance(image, Radiograph) and image.with_cardiomegaly:
+            study, rendered = _cxr_with_cardiomegaly(case.study_id, rng, image_dir, image, patient, case.indication)
+            studies.append(study)
+        elif isinstance(image, Radiograph):
+            study, rendered = make_cxr(case.study_id, rng, image.finding, image_dir, side=image.side, zone=image.zone)
+            studies.append(study := study.model_copy(update=own))
+        else:
+            study, rendered, prior = make_ct(case.study_id, rng, image_dir, [(n.type, n.mean_mm) for n in image.nodules],
+                                             smoker=p.pack_years >= 10, prior_plan=image.prior_mean_mm)
+            studies.append(study := study.model_copy(update=own))
+            if prior is not None:
+                studies.append(prior.model_copy(update={"patient": patient, "provenance": AUTHORED_PROVENANCE}))
+        truth = {"delta_mm": mean_change_mm(rendered)} if isinstance(image, ChestCT) and image.prior_mean_mm is not None else rendered
+        offered = {**_image_values(case, rendered, patient), "known_malignancy_management": lambda: KNOWN_MALIGNANCY_MANAGEMENT,
+                   "known_malignancy_aliases": lambda: KNOWN_MALIGNANCY_ALIASES}
+        values = {name: offered[name]() for name in placeholders([case.answer, case.answer_aliases,
+                                                                  [a.arguments for a in case.actions]])}
+        actions = [act(a.name, fill(a.arguments, values), a.compare_args) for a in case.actions]
+        t: dict[str, Any] = {
+            "id": case.id, "ticket": case.ticket, "correct_answer": fill(case.answer, values), "answer_type": case.answer_type,
+            "image_path": str(build_dir / study.image_file),
+            "description": {"purpose": AUTHORED_PURPOSE, "difficulty": "hard", "source": "authored", "category": case.category,
+                            "task_type": "workflow", "provenance": {**AUTHORED_PROVENANCE, "guideline": guideline}},
+            "evaluation_criteria": {"actions": actions, "nl_assertions": case.assertions,
+                                    "reward_basis": ["ACTION", "ANSWER", "NL_ASSERTION"]},
+            "metadata": {"study_id": study.study_id, "truth": truth,
+                         **({"gold_reasoning": case.gold_reasoning} if case.gold_reasoning else {})},
+        }
+        for key, value in (("answer_unit", case.answer_unit), ("answer_tolerance", case.answer_tolerance),
+                           ("options", case.options), ("emergency", case.emergency)):
+            if value is not None:
+                t[key] = value
+        aliases = fill(case.answer_aliases, values)
+        if aliases:
+            t["answer_aliases"] = aliases
+        tasks.append(t)
+    return studies, tasks
