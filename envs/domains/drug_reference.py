@@ -315,16 +315,11 @@ class DrugReference:
     def renal_thresholds(self) -> dict[str, list[float]]:
         """metric ('crcl'/'egfr') -> the 'below X' limits of the renal bands the drugs' US labels contraindicate
         (the drug-interaction renal tables checked against each label: its logic.RENAL_LABEL_RULES)."""
-        from envs.domains.drug_interaction.logic import renal_contraindicated_below
-
         di = self._interaction_db()
-        out: dict[str, set[float]] = {"crcl": set(), "egfr": set()}
+        out: dict[str, list[float]] = {"crcl": [], "egfr": []}
         if di is not None:
-            for profile in di[0].renal_profiles.values():
-                below = renal_contraindicated_below(profile)
-                if below is not None:
-                    out.setdefault(profile.metric, set()).add(below)
-        return {k: sorted(v) for k, v in out.items()}
+            out.update(di[1].renal_contraindication_limits())
+        return out
 
 
 _ROUTES = {"iv": "intravenous", "im": "intramuscular", "sc": "subcutaneous", "sq": "subcutaneous", "po": "oral",

@@ -94,9 +94,17 @@ class DrugInteractionSafetyContext(BaseSafetyContext):
         return out
 
     def _renal_thresholds(self) -> list[float]:
-        # only a band the drug's US label contraindicates (logic.RENAL_LABEL_RULES), not the package's word
-        limits = (L.renal_contraindicated_below(r) for r in self.db.renal_profiles.values())
-        return sorted({x for x in limits if x is not None})
+        return sorted({x for limits in self.renal_contraindication_limits().values() for x in limits})
+
+    def renal_contraindication_limits(self) -> dict[str, list[float]]:
+        """metric ('crcl'/'egfr') -> the 'below X' limits of the renal bands the drugs' US labels
+        contraindicate (logic.RENAL_LABEL_RULES), not the renal table's own word."""
+        out: dict[str, set[float]] = {}
+        for profile in self.db.renal_profiles.values():
+            below = L.renal_contraindicated_below(profile)
+            if below is not None:
+                out.setdefault(profile.metric, set()).add(below)
+        return {metric: sorted(limits) for metric, limits in out.items()}
 
     def normalise_drug(self, name: str) -> str | None:
         drug = self._drug(name)
