@@ -1,7 +1,9 @@
 """Sequence packing on CPU: the learner's forward + backward of one micro-batch, padded vs packed.
 
 A micro-batch of 8 sequences, with a long-tail length mix (most short, two long) and with an even one, on a
-tiny Qwen3 model (hidden 64, 2 layers) and on a wider one (hidden 256, 4 layers), through
+tiny Qwen3 model (hidden 64, 2 layers), on a wider one (hidden 256, 4 layers) and on the Qwen3.5 twin
+(hidden 128, one Gated DeltaNet linear-attention layer and one full-attention layer; packed, the
+linear-attention layer runs each sequence on its own), through
 `modeling.model.token_stats` (the learner's forward: LM head on the trained positions only) and its
 backward. Packed, the decoder runs on the real tokens only, but attention under sdpa takes a dense
 block-diagonal [N, N] mask over the whole packed row; padded, each row attends over its own [T, T].
@@ -19,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from modeling.model import build_tiny_model, load_policy, pad_batch, token_stats, train_tokenizer
+from modeling.model import build_tiny_model, build_twin_model, load_policy, pad_batch, token_stats, train_tokenizer
 
 MIXES = {"long tail": [96, 128, 160, 192, 256, 384, 1024, 2048],  # two long episodes among short ones
          "even": [480, 496, 512, 512, 512, 528, 528, 544]}         # little padding to remove
@@ -46,6 +48,8 @@ def main() -> None:
                                                   num_attention_heads=4, num_key_value_heads=2, head_dim=64)}
     models = {name: load_policy(build_tiny_model(root / name.split()[0], tok, seed=0, **size))[0]
               for name, size in sizes.items()}
+    models["Qwen3.5 twin (hidden 128, linear + full attention)"] = load_policy(
+        build_twin_model("qwen3_5", root / "qwen3_5", tok, seed=0))[0]
     print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, sdpa attention, median of {ROUNDS}")
     for mix, lengths in MIXES.items():
         generator = torch.Generator().manual_seed(0)

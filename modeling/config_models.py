@@ -163,8 +163,8 @@ class LearnerConfig(ConfigModel):
                                     "only (sequences packed into one row, position ids restarting per sequence); "
                                     "'auto': always with a varlen attention kernel (flash attention), else a micro-batch "
                                     "whose packed attention area N^2 is at most its padded B*T^2 (a dense block mask "
-                                    "covers the whole packed row); a model with recurrent layers (Qwen3.5's linear "
-                                    "attention) always runs padded")
+                                    "covers the whole packed row); recurrent layers (Qwen3.5's linear attention) run "
+                                    "each packed sequence on its own, so no state crosses sequences")
     loss: LossConfig = Field(default_factory=LossConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
     deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)

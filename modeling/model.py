@@ -489,10 +489,19 @@ def _decoder_and_head(model):
 
 
 #: Layer kinds whose attention is masked per token pair, so a block-diagonal mask (or a varlen
-#: kernel) keeps packed sequences apart. Recurrent layers (Qwen3.5's Gated DeltaNet
-#: "linear_attention") carry a state along the row: transformers' CPU kernels ignore sequence
-#: boundaries, so a packed row would leak one sequence's state into the next.
+#: kernel) keeps packed sequences apart.
 PACKABLE_LAYER_TYPES = frozenset({"full_attention", "sliding_attention"})
+
+#: Recurrent layer kinds that run packed rows one sequence per row (`_run_linear_attention_per_sequence`).
+#: Qwen3.5's Gated DeltaNet ("linear_attention", module `linear_attn`) carries a recurrent state and
+#: a causal conv1d window along the row, and transformers' CPU path cannot be told where sequences
+#: end (transformers 5.19, models/qwen3_5/modeling_qwen3_5.py): the layer passes `cu_seq_lens_q` on
+#: as `cu_seqlens` to the delta rule only (lines 625, 638), never to the conv (line 580); the torch
+#: fallbacks `causal_conv1d_fn` (line 260) and `torch_chunk_gated_delta_rule` (line 291) declare no
+#: `seq_idx` / `cu_seqlens`, and the kernel wrapper drops every argument an implementation does not
+#: declare (integrations/hub_kernels.py, `use_kernel_func_from_hub_with_fallback`). A packed row
+#: through them as they are leaks each sequence's state and last conv inputs into the next.
+PER_SEQUENCE_LAYER_TYPES = {"linear_attention": "linear_attn"}
 
 
 #: Attention implementations that run packed sequences as variable-length batches (no dense mask).
@@ -520,13 +529,64 @@ def packs_sequences(setting: bool | str, model, attention_mask: torch.Tensor) ->
 def packing_unsupported(model) -> str | None:
     """Why `model` cannot run packed sequences (`token_stats(packed=True)`), or None when it can."""
     config = model.config.get_text_config() if hasattr(model.config, "get_text_config") else model.config
-    recurrent = sorted(set(getattr(config, "layer_types", None) or ()) - PACKABLE_LAYER_TYPES)
+    layer_types = list(getattr(config, "layer_types", None) or ())
+    recurrent = sorted(set(layer_types) - PACKABLE_LAYER_TYPES - set(PER_SEQUENCE_LAYER_TYPES))
     if recurrent:
         return (f"{type(model).__name__} has {'/'.join(recurrent)} layers, whose state would cross from one "
                 f"packed sequence into the next; run it padded")
-    if _decoder_and_head(model)[0] is None:
+    decoder = _decoder_and_head(model)[0]
+    if decoder is None:
         return f"{type(model).__name__} has no separate decoder to run on the packed tokens"
+    for kind, attribute in PER_SEQUENCE_LAYER_TYPES.items():
+        wanted = layer_types.count(kind)
+        found = len(_per_sequence_modules(decoder, attribute))
+        if wanted and found != wanted:
+            return (f"{type(model).__name__} has {wanted} {kind} layers but {found} '{attribute}' modules to run "
+                    f"one sequence per row; run it padded")
     return None
+
+
+def _per_sequence_modules(decoder, attribute: str) -> list[torch.nn.Module]:
+    """The decoder layers' `attribute` submodules (Qwen3.5: each linear-attention layer's `linear_attn`)."""
+    return [getattr(layer, attribute) for layer in getattr(decoder, "layers", ()) if hasattr(layer, attribute)]
+
+
+def _run_linear_attention_per_sequence(module: torch.nn.Module) -> None:
+    """Make `module` (a Gated DeltaNet) honour `cu_seq_lens_q` on a packed row: the row's sequences are
+    laid out one per row (right-padded, with their padding mask) for one call of its own forward,
+    and its output packed back. The recurrent state and the conv window then start from zero at every
+    sequence start, exactly as in the padded pass (the padding's inputs are zeroed). These layers
+    compute on padding (linear in its length); the attention, MLP, norms and LM head do not. One call
+    per layer, as padded: ZeRO-3 gathers the same parameters in the same order on every rank however
+    many sequences each packs. Without `cu_seq_lens_q` (generation, padded batches) it runs unchanged.
+    Set on the instance, and the boundaries travel in the layer's kwargs, so a gradient-checkpointing
+    recompute, DeepSpeed's module hooks and copies of the model see the same computation. Idempotent."""
+    if getattr(module, "_runs_per_sequence", False):
+        return
+    whole = module.forward
+
+    def forward(hidden_states, cache_params=None, attention_mask=None, **kwargs):
+        bounds = kwargs.pop("cu_seq_lens_q", None)
+        if bounds is None:
+            return whole(hidden_states, cache_params=cache_params, attention_mask=attention_mask, **kwargs)
+        if hidden_states.shape[0] != 1 or cache_params is not None or attention_mask is not None:
+            raise ValueError(f"{type(module).__name__}: cu_seq_lens_q needs one packed row [1, N, H] without a cache "
+                             f"or padding mask; got hidden_states {tuple(hidden_states.shape)}, cache "
+                             f"{cache_params is not None}, mask {attention_mask is not None}")
+        for key in ("cu_seq_lens_k", "max_length_q", "max_length_k"):
+            kwargs.pop(key, None)
+        device = hidden_states.device
+        lengths = bounds.diff().long().to(device)
+        rows = torch.arange(lengths.numel(), device=device).repeat_interleave(lengths)
+        cols = torch.arange(hidden_states.shape[1], device=device) - bounds[:-1].long().to(device).repeat_interleave(lengths)
+        mask = torch.zeros((lengths.numel(), int(lengths.max())), dtype=torch.long, device=device)
+        mask[rows, cols] = 1
+        # Out of place: gradients reach the packed hidden states.
+        padded = hidden_states.new_zeros((*mask.shape, hidden_states.shape[-1])).index_put((rows, cols), hidden_states[0])
+        return whole(padded, attention_mask=mask, **kwargs)[rows, cols].unsqueeze(0)
+
+    module.forward = forward
+    module._runs_per_sequence = True
 
 
 def _decoder_hidden(decoder, input_ids: torch.Tensor, attention_mask: torch.Tensor, position_ids: torch.Tensor,
@@ -536,14 +596,27 @@ def _decoder_hidden(decoder, input_ids: torch.Tensor, attention_mask: torch.Tens
     Packed, the rows' real tokens run as one sequence [1, N] whose position ids restart at each
     row and with no attention mask: transformers then masks attention block-diagonally (its
     packed-sequence detection; a varlen kernel under flash attention), so a token attends only to
-    its own row's earlier tokens, as in the padded pass. Padding positions come back as zeros
-    (no prediction reads them).
+    its own row's earlier tokens, as in the padded pass. A decoder with recurrent layers
+    (`PER_SEQUENCE_LAYER_TYPES`) also gets the rows' boundaries as transformers' varlen kwargs
+    (`cu_seq_lens_q/k`, `max_length_q/k`), from which those layers lay each sequence out in a row of its own.
+    Padding positions come back as zeros (no prediction reads them).
     """
     if not packed:
         return decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
     real = attention_mask.bool()
+    boundaries = {}
+    per_sequence = [module for attribute in PER_SEQUENCE_LAYER_TYPES.values()
+                    for module in _per_sequence_modules(decoder, attribute)]
+    if per_sequence:
+        for module in per_sequence:
+            _run_linear_attention_per_sequence(module)
+        lengths = real.sum(-1)
+        lengths = lengths[lengths > 0]
+        cu = F.pad(lengths.cumsum(0), (1, 0)).to(torch.int32)
+        longest = int(lengths.max())
+        boundaries = {"cu_seq_lens_q": cu, "cu_seq_lens_k": cu, "max_length_q": longest, "max_length_k": longest}
     flat = decoder(input_ids=input_ids[real].unsqueeze(0), attention_mask=None,
-                   position_ids=position_ids[real].unsqueeze(0), use_cache=False).last_hidden_state[0]
+                   position_ids=position_ids[real].unsqueeze(0), use_cache=False, **boundaries).last_hidden_state[0]
     out = flat.new_zeros((*input_ids.shape, flat.shape[-1]))
     return out.index_put(real.nonzero(as_tuple=True), flat)  # out of place: gradients reach `flat`
 

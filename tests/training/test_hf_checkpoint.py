@@ -340,10 +340,12 @@ def test_generator_torch_learner_and_teacher_agree_before_and_after_a_step(twin_
 @pytest.mark.ray
 @pytest.mark.parametrize("family", ["qwen3_5", "llama_tied"])
 def test_zero3_two_ranks_agree_with_generator_and_teacher(ray_cluster, twin_root, family):
+    """Packed forwards under ZeRO-3 (gathered parameters, Qwen3.5's linear-attention layers run once per
+    sequence) against the generator's incremental log-probs, before and after a step."""
     from learner.learner_actor import Learner
 
     model_dir = twin_root / family
-    learner = Learner(_learner_cfg("deepspeed"), str(model_dir))
+    learner = Learner(_learner_cfg("deepspeed", pack_sequences=True), str(model_dir))
     try:
         assert_components_agree(model_dir, learner, family)
     finally:
@@ -423,10 +425,12 @@ def test_save_sharded_checkpoint_checks_names_and_sft_output_loads(twin_root, tm
 
 
 @pytest.mark.parametrize("family", TWIN_FAMILIES)
-def test_packed_forwards_equal_the_padded_ones_or_are_refused(twin_root, family):
+def test_packed_forwards_equal_the_padded_ones(twin_root, family):
     """Rows of unequal length packed into one sequence (position ids restarting per row, no decoder
-    position on padding): log-probs, entropies and gradients equal the padded pass's within 1e-5.
-    Qwen3.5's linear-attention layers would carry state across rows: packing is refused by name."""
+    position on padding): log-probs, entropies and gradients (also under gradient checkpointing, whose
+    backward recomputes the layers) equal the padded pass's within 1e-5. Qwen3.5's linear-attention
+    layers run each packed sequence on its own: a recurrent state or conv window carried over from
+    the previous row would move the next row's values far beyond 1e-5."""
     from modeling.model import load_policy, pad_batch, packing_unsupported, token_stats
 
     model, _ = load_policy(twin_root / family)
@@ -434,23 +438,41 @@ def test_packed_forwards_equal_the_padded_ones_or_are_refused(twin_root, family)
     ids, mask = pad_batch([torch.randint(5, 900, (n,), generator=generator).tolist() for n in (37, 5, 64, 1, 20)], 0)
     trained = mask.clone()
     trained[:, :3] = 0
-    if family == "qwen3_5":
-        assert "linear_attention layers" in packing_unsupported(model)
-        with pytest.raises(ValueError, match="packed sequences: .*linear_attention"):
-            token_stats(model, ids, mask, packed=True)
-        return
     assert packing_unsupported(model) is None
     for positions in (None, trained > 0):
         padded = token_stats(model, ids, mask, with_entropy=True, positions=positions)
         packed = token_stats(model, ids, mask, with_entropy=True, positions=positions, packed=True)
         assert torch.allclose(padded.logprobs, packed.logprobs, atol=1e-5)
         assert torch.allclose(padded.entropy, packed.entropy, atol=1e-5)
-    grads = []
-    for packed in (False, True):
-        model.zero_grad()
-        token_stats(model, ids, mask, positions=trained > 0, packed=packed).logprobs.sum().backward()
-        grads.append([p.grad.clone() for p in model.parameters() if p.grad is not None])
-    assert all(torch.allclose(a, b, atol=1e-5) for a, b in zip(*grads))
+    model.train()
+    for checkpointing in (False, True):
+        if checkpointing:
+            model.gradient_checkpointing_enable({"use_reentrant": False})
+        grads = []
+        for packed in (False, True):
+            model.zero_grad()
+            token_stats(model, ids, mask, positions=trained > 0, packed=packed).logprobs.sum().backward()
+            grads.append([p.grad.clone() for p in model.parameters() if p.grad is not None])
+        assert grads[0] and all(torch.allclose(a, b, atol=1e-5) for a, b in zip(*grads))
+    model.gradient_checkpointing_disable()
+    model.eval()
     # A row's statistics do not depend on its neighbours: alone it gives the same values as packed.
     alone = token_stats(model, ids[2:3, :64], mask[2:3, :64], packed=True).logprobs
     assert torch.allclose(alone, token_stats(model, ids, mask, packed=True).logprobs[2:3, :64], atol=1e-5)
+
+
+def test_packing_is_refused_by_name_for_recurrent_layers_without_a_per_sequence_path():
+    """LFM2's short-conv layers ("conv") carry a conv window along the row and have no per-sequence
+    path here: packing them is refused, naming the layer kind."""
+    import transformers
+
+    from modeling.model import packing_unsupported, packs_sequences, token_stats
+
+    config = transformers.Lfm2Config(vocab_size=64, hidden_size=32, intermediate_size=64, num_hidden_layers=2,
+                                     num_attention_heads=2, num_key_value_heads=1, full_attn_idxs=[1])
+    model = transformers.Lfm2ForCausalLM(config).eval()
+    ids, mask = torch.randint(3, 64, (2, 6)), torch.ones(2, 6, dtype=torch.long)
+    assert "conv layers" in packing_unsupported(model)
+    assert not packs_sequences(True, model, mask)
+    with pytest.raises(ValueError, match="packed sequences: .*conv layers"):
+        token_stats(model, ids, mask, packed=True)
