@@ -64,7 +64,10 @@ def test_context_facts(open_env):
     assert not any(c.startswith(("egfr <", "crcl <")) for c in conditions)
     septic = open_env("EHR-003").safety_context
     assert septic.patient_allergies("EHR-003") == ["penicillin"]
-    assert {"egfr < 30", "crcl < 30"} <= set(septic.patient_conditions("EHR-003"))
+    # the renal limits are those a US label contraindicates (metformin eGFR < 30, sotalol CrCl < 40); lithium's
+    # CrCl < 30 band is "not recommended" in its label, no contraindicating condition
+    assert {"egfr < 30", "crcl < 40"} <= set(septic.patient_conditions("EHR-003"))
+    assert "crcl < 30" not in septic.patient_conditions("EHR-003")
     assert ctx.normalise_drug("heparin sc") == "heparin" and ctx.normalise_drug("furosemide iv") == "furosemide"
     assert ctx.interaction("lisinopril", "spironolactone")[0] in ("major", "moderate")
 
