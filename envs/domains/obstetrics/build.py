@@ -11,14 +11,12 @@ the drug. Deterministic; skipped when the manifest of inputs is unchanged.
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 
 from envs import coherence
 from envs.core import splits as split_helpers
-from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
+from envs.core.domain import inputs_fingerprint, skip_if_built, write_manifest, write_task_dicts
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
 from envs.domains.obstetrics import generate as G
 from envs.domains.obstetrics.data_model import DrugInteraction, ObstetricDrug, ObstetricsDB, Patient
@@ -60,9 +58,8 @@ def _formulary(offline: bool) -> dict[str, ObstetricDrug]:
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     fingerprint = _fingerprint()
-    if not force and (done := built_summary(out, fingerprint)) is not None:
+    if (done := skip_if_built(out, fingerprint, force)) is not None:
         return done
-    out.mkdir(parents=True, exist_ok=True)
     patients, tasks = G.generate(SEED)
     authored = [Patient.model_validate(p) for p in json.loads((HERE / "patients_authored.json").read_text(encoding="utf-8"))]
     all_patients = {p.patient_id: p for p in [*patients, *authored]}
@@ -71,14 +68,8 @@ def build(offline: bool = False, force: bool = False) -> dict:
     interactions = [DrugInteraction(**i) for i in json.loads((HERE / "formulary.json").read_text(encoding="utf-8"))["interactions"]]
     db = ObstetricsDB(today=G.TODAY.isoformat(), patients=all_patients, formulary=_formulary(offline), interactions=interactions)
     db.dump(out / "db.json")
-    for t in tasks:
-        Task.model_validate(t)
     splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
-    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
-    write_split(out / "split_tasks.json", splits)
-    summary = {"patients": len(all_patients), "tasks": len(tasks),
-               "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
-               "splits": {k: len(v) for k, v in splits.items()}}
+    summary = {"patients": len(all_patients), **write_task_dicts(out, tasks, splits)}
     write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"],
                    packages={p: SOURCES[p].provenance for p in PACKAGES})
     return summary

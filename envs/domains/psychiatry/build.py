@@ -12,15 +12,13 @@ Deterministic; skipped when the manifest of inputs is unchanged.
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 
 from envs import coherence
 from envs.data import reference_parsers as R
 from envs.core import splits as split_helpers
-from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
+from envs.core.domain import inputs_fingerprint, skip_if_built, write_manifest, write_task_dicts
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.data.registry import SOURCES, open_package
 from envs.domains.psychiatry import generate as G
 from envs.domains.psychiatry.data_model import FormularyDrug, InteractionRule, Patient, PsychiatryDB
@@ -42,9 +40,8 @@ def _fingerprint() -> str:
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     fingerprint = _fingerprint()
-    if not force and (done := built_summary(out, fingerprint)) is not None:
+    if (done := skip_if_built(out, fingerprint, force)) is not None:
         return done
-    out.mkdir(parents=True, exist_ok=True)
     formulary_spec = json.loads((HERE / "formulary.json").read_text(encoding="utf-8"))["drugs"]
     rules_spec = json.loads((HERE / "interaction_rules.json").read_text(encoding="utf-8"))["rules"]
     archives = {p: open_package(SOURCES[p], offline=offline) for p in PACKAGES}
@@ -65,14 +62,8 @@ def build(offline: bool = False, force: bool = False) -> dict:
     db = PsychiatryDB(patients=all_patients, formulary=formulary, interaction_rules=[InteractionRule(**r) for r in rules_spec],
                       icd10_mental=mental)
     db.dump(out / "db.json")
-    for t in tasks:
-        Task.model_validate(t)
     splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
-    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
-    write_split(out / "split_tasks.json", splits)
-    summary = {"patients": len(all_patients), "tasks": len(tasks),
-               "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
-               "splits": {k: len(v) for k, v in splits.items()}, "icd10_mental_codes": len(mental),
+    summary = {"patients": len(all_patients), **write_task_dicts(out, tasks, splits), "icd10_mental_codes": len(mental),
                "formulary_with_fda_class": sum(1 for d in formulary.values() if d.fda_classes)}
     write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"],
                    packages={p: SOURCES[p].provenance for p in PACKAGES})

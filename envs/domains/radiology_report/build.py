@@ -11,13 +11,11 @@ on a fresh database. Deterministic; skipped when the inputs are unchanged.
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 
 from envs.core import splits as split_helpers
-from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
+from envs.core.domain import inputs_fingerprint, skip_if_built, write_manifest, write_task_dicts
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.domains.radiology_report import generate as G
 from envs.domains.radiology_report.data_model import RadiologyDB, ReportTemplate, Study
 from envs.domains.radiology_report.tools import RadiologyTools
@@ -47,9 +45,8 @@ def expected_hash(db: RadiologyDB, task: dict) -> str:
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     fingerprint = _fingerprint()
-    if not force and (done := built_summary(out, fingerprint)) is not None:
+    if (done := skip_if_built(out, fingerprint, force)) is not None:
         return done
-    out.mkdir(parents=True, exist_ok=True)
     templates = {k: ReportTemplate(key=k, **v) for k, v in json.loads((HERE / "templates.json").read_text())["templates"].items()}
     studies, tasks = G.generate(SEED, {k: t.critical_categories for k, t in templates.items()})
     authored = [Study.model_validate(s) for s in json.loads((HERE / "studies_authored.json").read_text(encoding="utf-8"))]
@@ -62,12 +59,7 @@ def build(offline: bool = False, force: bool = False) -> dict:
         if t["description"]["task_type"] == "report_workflow":
             t["evaluation_criteria"]["expected_db_hash"] = expected_hash(db, t)
             t["evaluation_criteria"]["reward_basis"] = [*t["evaluation_criteria"]["reward_basis"], "DB"]
-        Task.model_validate(t)
     splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
-    (out / "tasks.json").write_text(json.dumps(tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
-    write_split(out / "split_tasks.json", splits)
-    summary = {"studies": len(all_studies), "tasks": len(tasks),
-               "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in tasks).items())),
-               "splits": {k: len(v) for k, v in splits.items()}}
+    summary = {"studies": len(all_studies), **write_task_dicts(out, tasks, splits)}
     write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"])
     return summary

@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections import Counter
 from pathlib import Path
 
 from envs.core import splits as split_helpers
-from envs.core.domain import built_summary, inputs_fingerprint, write_manifest, write_split
+from envs.core.domain import inputs_fingerprint, skip_if_built, write_manifest, write_task_dicts
 from envs.core.paths import domain_build_dir
-from envs.core.task import Task
 from envs.domains.visual_diagnosis import generate as G
 from envs.domains.visual_diagnosis.data_model import ImagingSign, Study, VisualDB
 
@@ -38,11 +36,10 @@ def _fingerprint() -> str:
 def build(offline: bool = False, force: bool = False) -> dict:
     out = domain_build_dir(NAME)
     fingerprint = _fingerprint()
-    if not force and (done := built_summary(out, fingerprint)) is not None:
+    if (done := skip_if_built(out, fingerprint, force)) is not None:
         return done
     if (out / "images").exists():
         shutil.rmtree(out / "images")
-    out.mkdir(parents=True, exist_ok=True)
     studies, archive, tasks = G.generate(SEED, out)
     a_studies, a_tasks = G.authored(out)
     all_studies = {s.study_id: s for s in [*studies, *a_studies]}
@@ -50,17 +47,11 @@ def build(offline: bool = False, force: bool = False) -> dict:
         raise ValueError("visual_diagnosis: duplicate study ids")
     signs = {k: ImagingSign(term=k, **v) for k, v in json.loads((HERE / "signs.json").read_text())["signs"].items()}
     VisualDB(studies=all_studies, archive=archive, signs=signs).dump(out / "db.json")
-    for t in [*tasks, *a_tasks]:
-        Task.model_validate(t)
     splits = split_helpers.round_robin_type_splits(tasks, SPLIT_SIZES, SEED, NAME)
     ids = [t["id"] for t in a_tasks]
     splits["train"] = sorted(splits["train"] + [i for k, i in enumerate(ids) if k % 3 != 1])
     splits["test"] = sorted(splits["test"] + [i for k, i in enumerate(ids) if k % 3 == 1])
-    all_tasks = [*tasks, *a_tasks]
-    (out / "tasks.json").write_text(json.dumps(all_tasks, ensure_ascii=False, indent=1) + "\n", encoding="utf-8")
-    write_split(out / "split_tasks.json", splits)
     summary = {"studies": len(all_studies), "images": len(list((out / "images").glob("*.png"))), "archive_cases": len(archive),
-               "tasks": len(all_tasks), "by_type": dict(sorted(Counter(t["description"]["task_type"] for t in all_tasks).items())),
-               "splits": {k: len(v) for k, v in splits.items()}}
+               **write_task_dicts(out, [*tasks, *a_tasks], splits)}
     write_manifest(out, fingerprint, summary, ["db.json", "tasks.json", "split_tasks.json"])
     return summary
