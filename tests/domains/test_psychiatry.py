@@ -99,7 +99,10 @@ def test_screen_bipolar_tool(tk):
 
 def test_interactions(tk):
     out = use(tk, "check_psych_med_interactions", patient_id="PSY-008", proposed_drug="Zoloft")
-    assert out["highest_severity"] == "contraindicated" and out["interactions"][0]["rule"] == "PIR-01"
+    assert out["highest_severity"] == "contraindicated"
+    # tranylcypromine is not in the drug_interaction database: the psychiatry rule grades it (Parnate 4.1)
+    parnate = use(tk, "check_psych_med_interactions", medications=["tranylcypromine", "sertraline"])
+    assert parnate["highest_severity"] == "contraindicated" and parnate["interactions"][0]["rule"] == "PIR-01"
     li = use(tk, "check_psych_med_interactions", patient_id="PSY-003")
     assert li["highest_severity"] == "major" and {"lithium", "ibuprofen"} == set(li["interactions"][0]["drugs"])
     # a triptan with an SNRI: the labels ask for observation (Imitrex 5, Cymbalta 7), an MAO-A inhibitor is
@@ -111,6 +114,80 @@ def test_interactions(tk):
     assert none["highest_severity"] == "none" and none["interactions"] == []
     with pytest.raises(ToolError, match="not in the psychiatry formulary"):
         use(tk, "check_psych_med_interactions", patient_id="PSY-003", proposed_drug="unobtainium")
+
+
+@pytest.fixture(scope="module")
+def psych_db(built):
+    from envs.domains.psychiatry.data_model import PsychiatryDB
+    from envs.core.paths import domain_build_dir
+
+    return PsychiatryDB.load(domain_build_dir("psychiatry") / "db.json")
+
+
+def test_one_interaction_scale_with_drug_interaction(built, psych_db):
+    """Every formulary pair the drug_interaction domain grades gets the same severity here (the reward's
+    safety context and the tool); the serotonergic pairs are the case that differed (PIR-03 'major' against
+    the Ultram 7 'moderate' of overlay US-006)."""
+    import itertools
+
+    from envs.domains.drug_reference import DrugReference, load_formulary
+    from envs.domains.psychiatry.safety import PsychiatrySafetyContext
+
+    reference = DrugReference(load_formulary())  # the live drug_interaction database, not the psychiatry build's copy
+    ctx = PsychiatrySafetyContext(lambda: psych_db)
+    graded = differ = 0
+    mismatches = []
+    for a, b in itertools.combinations(sorted(psych_db.formulary), 2):
+        theirs = reference.interaction(a, b)
+        if theirs is None:
+            continue
+        graded += 1
+        ours = ctx.interaction(a, b)
+        if ours is None or ours[0] != theirs[0]:
+            mismatches.append((a, b, ours and ours[0], theirs[0], theirs[1][:40]))
+    assert reference.status == "drug_interaction database loaded", reference.status
+    assert graded > 200 and not mismatches, mismatches[:10]
+    assert ctx.interaction("sertraline", "tramadol")[0] == "moderate" == reference.interaction("sertraline", "tramadol")[0]
+
+
+def test_interaction_controls_and_the_tool_agree(tk, psych_db):
+    from envs.domains.psychiatry.safety import PsychiatrySafetyContext
+
+    ctx = PsychiatrySafetyContext(lambda: psych_db)
+    # SSRI + MAOI stays contraindicated on both sides of the boundary (ANSM for phenelzine, Parnate 4.1 for tranylcypromine)
+    assert ctx.interaction("sertraline", "phenelzine")[0] == "contraindicated"
+    assert ctx.interaction("Zoloft", "Parnate")[0] == "contraindicated"
+    assert ctx.interaction("lithium", "ibuprofen")[0] == "major"
+    assert ctx.interaction("sertraline", "atorvastatin") is None
+    tram = use(tk, "check_psych_med_interactions", medications=["sertraline", "Ultram"])
+    assert tram["highest_severity"] == "moderate" and [f["rule"] for f in tram["interactions"]] == ["US-006"]
+    # a pair only psychiatry grades: two serotonergic antidepressants, monitored (Zoloft 5, Serotonin Syndrome), not avoided
+    assert use(tk, "check_psych_med_interactions", medications=["sertraline", "trazodone"])["highest_severity"] == "moderate"
+    assert ctx.interaction("ziprasidone", "citalopram")[0] == "contraindicated"  # Geodon 4
+
+
+def test_interaction_rules_cite_their_source_and_each_applies(psych_db):
+    """Each PIR rule names a label section or a guideline; 'contraindicated' only with a section 4 citation;
+    and each still grades a formulary pair the drug_interaction domain does not (no rule shadowed everywhere)."""
+    import itertools
+    import re
+
+    from envs.domains.psychiatry import interactions as IX
+
+    section = re.compile(r"\b\d{1,2}(?:\.\d+)? [A-Z][A-Za-z ]{5,}|CONTRAINDICATIONS|Drug Safety Communication|Medical Eligibility Criteria")
+    labelled = IX.label_index(psych_db.label_graded_pairs)
+    groups = {n: d.groups for n, d in psych_db.formulary.items()}
+    used = collections.Counter()
+    for a, b in itertools.combinations(sorted(psych_db.formulary), 2):
+        if IX.pair_key(a, b) not in labelled:
+            used.update(r.id for r in psych_db.interaction_rules if IX.rule_matches(r, set(groups[a]), set(groups[b])))
+    for rule in psych_db.interaction_rules:
+        assert section.search(rule.reference), (rule.id, rule.reference)
+        if rule.severity == "contraindicated":
+            assert re.search(r"\b4(?:\.\d)? |CONTRAINDICATIONS", rule.reference), rule.id
+        assert used[rule.id], f"{rule.id} grades no pair: the drug_interaction domain grades all its pairs"
+    # and the generated interaction golds are what the tool's grading gives
+    assert IX.pair_severity(IX.pair_findings("sertraline", "tramadol", groups, psych_db.interaction_rules, labelled)) == "moderate"
 
 
 def test_order_lab_result_appears_only_after_ordering(tk):

@@ -152,6 +152,15 @@ class InteractionRule(StrictModel):
     reference: str
 
 
+class LabelGradedPair(StrictModel):
+    """A formulary pair as the drug_interaction domain grades it (computed at build time, `interactions.py`)."""
+    a: str
+    b: str
+    severity: Literal["contraindicated", "major", "moderate", "minor"]
+    rule: str = Field(description="the drug_interaction rule id that sets the level (US-0xx, US-Rxx, ANSM-xxxx)")
+    summary: str
+
+
 class MSERecord(StrictModel):
     patient_id: str
     appearance: str
@@ -206,7 +215,7 @@ class FollowUp(StrictModel):
     purpose: str
 
 
-REFERENCE_FIELDS = ("patients", "formulary", "interaction_rules", "icd10_mental")
+REFERENCE_FIELDS = ("patients", "formulary", "interaction_rules", "label_graded_pairs", "icd10_mental")
 STATE_FIELDS = ("mse_records", "safety_plans", "escalations", "diagnoses", "lab_orders", "follow_ups")
 
 
@@ -220,6 +229,8 @@ class PsychiatryDB(ForkableDB):
     patients: dict[str, Patient]
     formulary: dict[str, FormularyDrug]
     interaction_rules: list[InteractionRule]
+    label_graded_pairs: list[LabelGradedPair] = Field(
+        description="the drug_interaction domain's severity of each formulary pair it grades; these pairs are not graded by interaction_rules")
     icd10_mental: dict[str, str] = Field(description="billable ICD-10-CM chapter 5 (F) codes -> description")
     mse_records: list[MSERecord] = Field(default_factory=list)
     safety_plans: list[SafetyPlan] = Field(default_factory=list)

@@ -3,8 +3,8 @@
 Each generated patient carries one assessment scenario: a completed form on file or an interview
 in which the clinician asks the instrument's questions verbatim and the patient answers with the
 instrument's own response options, so the item scores are unambiguous. The gold answer of every
-task is computed by the instrument (`envs.calculators`, MDQ rule in `instruments.py`) or by the
-interaction rule table on the same inputs.
+task is computed by the instrument (`envs.calculators`, MDQ rule in `instruments.py`) or by
+`interactions.pair_findings`, which the interaction tool also uses.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ from envs.coherence import (
     SEX_SPECIFIC_DRUGS, living_fits_age, occupation_fits_age, setting_fits_reason, stressor_fits_occupation,
 )
 from envs.domains.psychiatry import instruments as I
+from envs.domains.psychiatry import interactions as IX
 from envs.domains.psychiatry.data_model import (
-    CAGEAnswers, CIWAObservation, CSSRSAnswers, LabResult, Medication, MDQAnswers, Patient, PsychHistory,
-    SocialHistory, SymptomReports, Utterance,
+    CAGEAnswers, CIWAObservation, CSSRSAnswers, InteractionRule, LabelGradedPair, LabResult, Medication, MDQAnswers,
+    Patient, PsychHistory, SocialHistory, SymptomReports, Utterance,
 )
 
 FIRST_F = ["Maria", "Aisha", "Hannah", "Chloe", "Priya", "Lucia", "Grace", "Mei", "Fatima", "Olivia", "Sofia", "Amara",
@@ -49,7 +50,9 @@ GUIDELINES = {
     "mdq_screen": "Mood Disorder Questionnaire (Hirschfeld et al., Am J Psychiatry 2000;157:1873-1875)",
     "epds_band": "Edinburgh Postnatal Depression Scale (Cox, Holden & Sagovsky, Br J Psychiatry 1987;150:782-786)",
     "ciwa_band": "CIWA-Ar (Sullivan et al., Br J Addict 1989;84:1353-1357)",
-    "psych_med_interaction": "US prescribing information (FDA labels) of the interacting drugs, as recorded per rule in interaction_rules.json",
+    "psych_med_interaction": "the drug_interaction domain's grade of the pair (US label overlay rule naming its label section, "
+                             "else the ANSM thesaurus); for pairs it does not grade, the label section or guideline each "
+                             "rule of interaction_rules.json cites",
 }
 
 
@@ -388,7 +391,7 @@ INTERACTION_SCENARIOS = [
     (["tranylcypromine"], "methylphenidate"), (["naltrexone"], "oxycodone"), (["lithium"], "ibuprofen"),
     (["lithium"], "lisinopril"), (["lithium"], "hydrochlorothiazide"), (["lithium"], "losartan"),
     (["sertraline"], "tramadol"), (["citalopram"], "ondansetron"), (["lorazepam"], "oxycodone"),
-    (["valproic acid"], "lamotrigine"), (["bupropion"], "tramadol"), (["escitalopram"], "linezolid"),
+    (["valproic acid"], "lamotrigine"), (["bupropion"], "tramadol"), (["mirtazapine"], "linezolid"),
     (["quetiapine"], "carbamazepine"), (["disulfiram"], "metronidazole"), (["fluoxetine"], "aripiprazole"),
     (["paroxetine"], "aripiprazole"), (["sertraline"], "atorvastatin"), (["lithium"], "propranolol"),
     (["olanzapine"], "metformin"), (["lamotrigine"], "levothyroxine"), (["carbamazepine"], "ethinyl estradiol"),
@@ -396,7 +399,8 @@ INTERACTION_SCENARIOS = [
 ]
 
 
-def med_interaction(pid: str, rng: random.Random, scenario: tuple[list[str], str], rules: list, formulary: dict) -> tuple[Patient, list[dict]]:
+def med_interaction(pid: str, rng: random.Random, scenario: tuple[list[str], str], rules: list[InteractionRule], formulary: dict,
+                    label_pairs: dict) -> tuple[Patient, list[dict]]:
     current, proposed = scenario
     # A drug labelled for one sex (a combined hormonal contraceptive) comes with a patient of that sex and, for a
     # contraceptive, of reproductive age (envs.coherence.SEX_SPECIFIC_DRUGS).
@@ -405,15 +409,9 @@ def med_interaction(pid: str, rng: random.Random, scenario: tuple[list[str], str
     p = _base_patient(pid, rng, sex=sex, age=(19, 45) if sex == "female" else (19, 78), complaint="medication review", history=(
         f"Stable on {', '.join(current)}. A new prescription of {proposed} is being considered by another clinician."))
     p.medications = [Medication(name=d, dose_mg=rng.choice([10, 20, 50, 100, 300]), frequency="daily") for d in current]
-    worst = "none"
-    order = {"none": 0, "minor": 1, "moderate": 2, "major": 3, "contraindicated": 4}
-    for d in current:
-        ga, gb = set(formulary[d]["groups"]), set(formulary[proposed]["groups"])
-        for r in rules:
-            hit = (r["group_a"] in ga and r["group_a"] in gb) if r["group_b"] is None else \
-                (r["group_a"] in ga and r["group_b"] in gb) or (r["group_a"] in gb and r["group_b"] in ga)
-            if hit and order[r["severity"]] > order[worst]:
-                worst = r["severity"]
+    groups = {d: formulary[d]["groups"] for d in [*current, proposed]}
+    findings = [f for d in current for f in IX.pair_findings(d, proposed, groups, rules, label_pairs)]
+    worst = IX.pair_severity(findings)
     actions = [act("check_psych_med_interactions", {"patient_id": pid, "proposed_drug": proposed}, ["patient_id", "proposed_drug"])]
     ticket = _intro(p) + f" Current medication: {', '.join(current)}. " + _pick(rng, [
         f"Another clinician wants to start {proposed}. What is the highest interaction severity this would create "
@@ -424,14 +422,18 @@ def med_interaction(pid: str, rng: random.Random, scenario: tuple[list[str], str
         "(contraindicated / major / moderate / minor / none)."])
     return p, [task_dict(f"psy_ddi_{pid}", ticket, answer=worst, answer_type="category", task_type="psych_med_interaction",
                          patient_id=pid, actions=actions, category="psychopharmacology",
-                         metadata={"current": current, "proposed": proposed})]
+                         metadata={"current": current, "proposed": proposed,
+                                   "rules": sorted({f["rule"] for f in findings if f["severity"] == worst})})]
 
 
 PLAN = [("phq9_form", 18), ("phq9_interview", 18), ("gad7", 16), ("cssrs3", 9), ("cssrs2", 8), ("cssrs1", 5), ("cssrs0", 3),
         ("audit_c", 12), ("mdq", 12), ("epds", 10), ("ciwa", 10), ("ddi", 26)]
 
 
-def generate(seed: int, rules: list[dict], formulary: dict) -> tuple[list[Patient], list[dict]]:
+def generate(seed: int, rules: list[InteractionRule], formulary: dict, label_pairs: list[LabelGradedPair]) -> tuple[list[Patient], list[dict]]:
+    """Patients and tasks; interaction golds grade pairs as `interactions.pair_findings` does (the
+    drug_interaction domain's level in `label_pairs` first, else the authored rules)."""
+    label_index = IX.label_index(label_pairs)
     rng = random.Random(seed)
     patients: list[Patient] = []
     tasks: list[dict] = []
@@ -445,7 +447,8 @@ def generate(seed: int, rules: list[dict], formulary: dict) -> tuple[list[Patien
             if kind.startswith("cssrs"):
                 p, ts = cssrs(pid, rng, int(kind[-1]))
             elif kind == "ddi":
-                p, ts = med_interaction(pid, rng, INTERACTION_SCENARIOS[i % len(INTERACTION_SCENARIOS)], rules, formulary)
+                p, ts = med_interaction(pid, rng, INTERACTION_SCENARIOS[i % len(INTERACTION_SCENARIOS)], rules, formulary,
+                                        label_index)
             else:
                 p, ts = makers[kind](pid, rng, i)
             patients.append(p)

@@ -1,5 +1,6 @@
 """What the safety reward needs to know about the psychiatry world: the patients' medications and
-allergies, drug names and classes from the formulary, and the interaction rules."""
+allergies, drug names and classes from the formulary, and interactions graded as the tool grades them
+(`interactions.pair_findings`: the drug_interaction domain's level where it grades the pair)."""
 
 from __future__ import annotations
 
@@ -7,13 +8,14 @@ from typing import Callable
 
 from envs.rewards.safety import BaseSafetyContext
 
+from . import interactions as IX
 from .data_model import PsychiatryDB
 
 # Rule groups -> the class names the reward's duplication check understands.
 GROUP_CLASSES = {"ssri": "ssris", "snri": "snris", "maoi": "maois", "benzodiazepine": "benzodiazepines", "opioid": "opioids",
                  "nsaid": "nsaids", "ace_inhibitor": "ace inhibitors", "arb": "arbs", "antipsychotic": "antipsychotics",
                  "tca": "tricyclic antidepressants", "lithium": "lithium"}
-SEVERITY_ORDER = {"minor": 1, "moderate": 2, "major": 3, "contraindicated": 4}
+SEVERITY_ORDER = IX.SEVERITY_ORDER
 
 
 class PsychiatrySafetyContext(BaseSafetyContext):
@@ -60,13 +62,9 @@ class PsychiatrySafetyContext(BaseSafetyContext):
         a, b = self.normalise_drug(drug_a), self.normalise_drug(drug_b)
         if not a or not b or a == b:
             return None
-        ga, gb = set(db.formulary[a].groups), set(db.formulary[b].groups)
-        best = None
-        for rule in db.interaction_rules:
-            if rule.group_b is None:
-                hit = rule.group_a in ga and rule.group_a in gb
-            else:
-                hit = (rule.group_a in ga and rule.group_b in gb) or (rule.group_a in gb and rule.group_b in ga)
-            if hit and (best is None or SEVERITY_ORDER[rule.severity] > SEVERITY_ORDER[best.severity]):
-                best = rule
-        return (best.severity, f"{best.name}: {best.mechanism}") if best else None
+        groups = {a: db.formulary[a].groups, b: db.formulary[b].groups}
+        findings = IX.pair_findings(a, b, groups, db.interaction_rules, IX.label_index(db.label_graded_pairs))
+        if not findings:
+            return None
+        worst = max(findings, key=lambda f: SEVERITY_ORDER[f["severity"]])
+        return worst["severity"], f"{worst['rule']} {worst['name']}: {worst['mechanism']}"

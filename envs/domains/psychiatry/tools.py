@@ -16,11 +16,12 @@ from envs.calculators import CALCULATORS
 from envs.core.common_tools import BaseDomainTools
 from envs.core.tools import ToolError, ToolType, is_tool
 from envs.domains.psychiatry import instruments as I
+from envs.domains.psychiatry import interactions as IX
 from envs.domains.psychiatry.data_model import (
     DiagnosisRecord, Escalation, FollowUp, LabOrder, MSERecord, Patient, PsychiatryDB, SafetyPlan,
 )
 
-SEVERITY_ORDER = {"none": 0, "minor": 1, "moderate": 2, "major": 3, "contraindicated": 4}
+SEVERITY_ORDER = IX.SEVERITY_ORDER
 ESCALATION_LEVELS = ("emergency psychiatric evaluation", "inpatient psychiatric admission", "crisis team",
                      "1:1 constant observation", "emergency medical evaluation", "urgent outpatient psychiatry")
 INSTRUMENTS = ("phq9", "gad7", "epds", "audit_c", "mdq", "cage", "cssrs", "ciwa")
@@ -329,6 +330,9 @@ class PsychiatryTools(BaseDomainTools):
                                      proposed_drug: str | None = None) -> dict:
         """Check psychotropic interactions (serotonin syndrome, lithium toxicity, QT, CNS depression, ...) among drugs.
 
+        A pair the drug_interaction reference grades (US label overlay, else ANSM thesaurus) gets that grade;
+        other pairs get the psychiatry rules (PIR-xx) between the drugs' groups.
+
         Args:
             patient_id: Patient whose current medications are included.
             medications: Drug names (generic or brand) to check; added to the patient's list if both are given.
@@ -353,19 +357,13 @@ class PsychiatryTools(BaseDomainTools):
         proposed = self._resolve_drug(proposed_drug) if proposed_drug else None
         if proposed_drug and proposed is None:
             raise ToolError(f"proposed_drug {proposed_drug!r} is not in the psychiatry formulary")
+        groups = {name: drug.groups for name, drug in self.db.formulary.items()}
+        label_pairs = IX.label_index(self.db.label_graded_pairs)
         found = []
         for a, b in itertools.combinations(sorted(resolved), 2):
             if proposed and proposed not in (a, b):
                 continue
-            ga, gb = set(self.db.formulary[a].groups), set(self.db.formulary[b].groups)
-            for rule in self.db.interaction_rules:
-                if rule.group_b is None:
-                    hit = rule.group_a in ga and rule.group_a in gb
-                else:
-                    hit = (rule.group_a in ga and rule.group_b in gb) or (rule.group_a in gb and rule.group_b in ga)
-                if hit:
-                    found.append({"drugs": [a, b], "rule": rule.id, "name": rule.name, "severity": rule.severity,
-                                  "mechanism": rule.mechanism, "management": rule.management, "reference": rule.reference})
+            found += IX.pair_findings(a, b, groups, self.db.interaction_rules, label_pairs)
         worst = max((SEVERITY_ORDER[f["severity"]] for f in found), default=0)
         return {"checked": sorted(resolved), "proposed_drug": proposed, "not_in_formulary": unknown,
                 "interactions": found, "highest_severity": next(k for k, v in SEVERITY_ORDER.items() if v == worst)}
