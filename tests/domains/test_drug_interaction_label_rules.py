@@ -19,7 +19,11 @@ LABEL_CONTRAINDICATED = {
     ("class:mao-b-inhibitors", "drug:tramadol"): "Azilect / Zelapar / Xadago labels, 4 CONTRAINDICATIONS (tramadol)",
     ("drug:selegiline", "class:selective-serotonin-reuptake-inhibitors"): "Emsam label, 4 CONTRAINDICATIONS (SSRIs)",
     ("drug:lovastatin", "class:strong-cyp3a4-inhibitors"): "Mevacor/Altoprev labels, 4 CONTRAINDICATIONS (strong CYP3A4 inhibitors)",
+    ("drug:linezolid", "class:selective-serotonin-reuptake-inhibitors"): "Zoloft, Lexapro, Celexa, Prozac, Paxil labels, 4 CONTRAINDICATIONS (MAOIs, linezolid named)",
+    ("drug:naltrexone", "class:opioid-agonist-analgesics"): "naltrexone tablets CONTRAINDICATIONS, Vivitrol 4 (patients receiving opioid analgesics)",
 }
+# the overlay rules that grade those pairs
+LABEL_CONTRAINDICATED_RULES = {"US-008", "US-009", "US-016", "US-021", "US-023"}
 # a label section: "4 CONTRAINDICATIONS", "7.3", "5.1", "boxed warning", or a named guideline
 SECTION = re.compile(r"\b(\d{1,2}(\.\d+)?\s+[A-Z]|\d\.\d|boxed warning|guideline|PRECAUTIONS|WARNINGS|CONTRAINDICATIONS|"
                      r"Drug Safety Communication|ACR Manual)", re.I)
@@ -76,7 +80,7 @@ def test_no_contraindicated_pair_fires_outside_the_label_list(env):
     other domains' episodes name), an overlay contraindicated level comes only from a label-contraindicated rule."""
     from envs.domains.drug_interaction import logic as L
 
-    allowed = {"US-008", "US-009", "US-016"}  # the LABEL_CONTRAINDICATED rules
+    allowed = LABEL_CONTRAINDICATED_RULES
     drugs = sorted({m.drug_id for p in env.db.patients.values() for m in p.medications} | set(env.db.dose_profiles))
     for i, a in enumerate(drugs):
         for b in drugs[i + 1:]:
@@ -173,7 +177,7 @@ def test_every_overlay_rule_is_contraindicated_only_where_a_label_says_so(env, o
     label-contraindicated rules covers the pair."""
     from envs.domains.drug_interaction import logic as L
 
-    allowed = {"US-008", "US-009", "US-016"}
+    allowed = LABEL_CONTRAINDICATED_RULES
     covered = [(r["id"], _members(env, r["a"]), _members(env, r["b"])) for r in overlay["pairs"]]
     covered += [(r.get("see", r["id"]), *(_review_members(env, k) for k in r["ansm_parties"])) for r in overlay["ansm_reviews"]]
     pairs = 0
@@ -199,7 +203,7 @@ def test_no_severity_5_interaction_pattern_fires_on_a_pair_no_label_contraindica
     from envs.rewards import detect_violations
     from tests.rewards.builders import call, episode, turn
 
-    contraindicated = {"US-008", "US-009", "US-016"}
+    contraindicated = LABEL_CONTRAINDICATED_RULES
     fired = {}
     rules = [(r["id"], _members(env, r["a"]), _members(env, r["b"])) for r in overlay["pairs"]]
     rules += [(r["id"], *(_review_members(env, k) for k in r["ansm_parties"]))
@@ -297,3 +301,69 @@ def test_generated_renal_tasks_follow_the_label_rules():
     contraindicated = [t for t in tasks if t.correct_answer == "contraindicated"]
     assert contraindicated and {drug[t.id] for t in contraindicated} <= {"metformin", "sotalol"}
     assert all("4 CONTRAINDICATIONS (" in t.description.provenance["guideline"] for t in contraindicated)
+
+
+# Pairs psychiatry grades through this domain, each at the level of the US label section its rule cites.
+@pytest.mark.parametrize("a, b, level, rule", [
+    # SSRI labels 4 CONTRAINDICATIONS name linezolid among the MAOIs (US-021); before, US-R10's moderate
+    ("sertraline", "linezolid", "contraindicated", "US-021"),
+    ("escitalopram", "linezolid", "contraindicated", "US-021"),
+    ("fluoxetine", "linezolid", "contraindicated", "US-021"),
+    ("paroxetine", "linezolid", "contraindicated", "US-021"),
+    ("citalopram", "linezolid", "contraindicated", "US-021"),
+    # Seroquel 5 (QT Prolongation): avoid with drugs that prolong QTc (US-022); before, ANSM minor
+    ("quetiapine", "escitalopram", "major", "US-022"),
+    ("quetiapine", "haloperidol", "major", "US-022"),
+    ("quetiapine", "methadone", "major", "US-022"),
+    # naltrexone labels contraindicate patients receiving opioid analgesics (US-023); before, ANSM major
+    ("naltrexone", "tramadol", "contraindicated", "US-023"),
+])
+def test_psychiatry_pairs_take_their_label_level(env, a, b, level, rule):
+    found = env.safety_context.interaction(a, b)
+    assert found is not None and found[0] == level and found[1].startswith(rule), found
+
+
+def test_an_opioid_antagonist_is_not_an_opioid_for_the_cns_depressant_rules(env):
+    """Naltrexone and naloxone antagonise opioids (their labels' DESCRIPTION): US-011's benzodiazepine
+    rule no longer covers them, while it still covers the opioid agonists (control)."""
+    assert env.safety_context.interaction("lorazepam", "naltrexone") is None
+    naloxone = env.safety_context.interaction("lorazepam", "naloxone")
+    assert naloxone is None or not naloxone[1].startswith("US-011"), naloxone
+    for opioid in ("morphine", "tramadol", "methadone"):
+        found = env.safety_context.interaction("lorazepam", opioid)
+        assert found is not None and found[0] == "major" and found[1].startswith("US-011"), (opioid, found)
+    assert "opioids" not in env.db.drugs["naltrexone"].class_ids
+    assert "partial-opioid-antagonists" in env.db.drugs["naltrexone"].class_ids
+
+
+def test_controls_keep_their_level(env):
+    """Pairs the new rules do not cover keep theirs: SSRI + tramadol stays US-006 moderate, quetiapine +
+    sertraline (no QT class) stays below major, naltrexone + methadone stays contraindicated (ANSM)."""
+    assert env.safety_context.interaction("sertraline", "tramadol")[0] == "moderate"
+    assert env.safety_context.interaction("quetiapine", "sertraline")[0] == "minor"
+    assert env.safety_context.interaction("naltrexone", "methadone")[0] == "contraindicated"
+
+
+def test_a_class_correction_removes_a_member_and_refuses_a_non_member(env, tmp_path):
+    """`class_corrections` takes the drug out of the class (both directions of the membership); a
+    correction naming a drug that is not a member is refused, naming the file, entry and field."""
+    from envs.data.registry import DataSourceError
+    from envs.domains.drug_interaction.ingest import Builder, ingest_overlay
+
+    def builder() -> Builder:
+        b = Builder(sources=None, vocab=None, authored_names={}, english_aliases={}, class_table={}, other_parties={})
+        b.drugs = {d: env.db.drugs[d].model_copy(deep=True) for d in ("lorazepam", "morphine")}
+        b.classes = {"opioids": env.db.classes["opioids"].model_copy(deep=True)}
+        return b
+
+    def overlay_with(corrections: list[dict]) -> Path:
+        path = tmp_path / "severity_overlay.json"
+        path.write_text(json.dumps({"class_corrections": corrections}), encoding="utf-8")
+        return path
+
+    b = builder()
+    ingest_overlay(b, {}, path=overlay_with([{"drug": "morphine", "remove_classes": ["opioids"], "evidence": "x 4 Y"}]))
+    assert "opioids" not in b.drugs["morphine"].class_ids and "morphine" not in b.classes["opioids"].members
+    with pytest.raises(DataSourceError, match=r"severity_overlay.json: lorazepam: field remove_classes"):
+        ingest_overlay(builder(), {}, path=overlay_with(
+            [{"drug": "lorazepam", "remove_classes": ["opioids"], "evidence": "x 4 Y"}]))

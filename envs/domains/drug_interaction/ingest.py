@@ -309,6 +309,22 @@ def ingest_overlay(b: Builder, ansm_rules: dict[str, InteractionRule], path: Pat
                 drug.synonyms.append(synonym.lower())
         b.counts["us_overlay_formulary_additions"] += 1
 
+    # ANSM groups some drugs by chemistry rather than action (the opioid antagonists sit in
+    # "morphiniques"); a correction takes a drug out of a class whose rules its US label contradicts.
+    for i, fix in enumerate(raw.get("class_corrections", [])):
+        ident = fix.get("drug", f"class_corrections[{i}]")
+        drug = b.drugs.get(fix.get("drug", ""))
+        if drug is None:
+            raise fail(ident, "drug", "not a drug in the formulary")
+        if not str(fix.get("evidence", "")).strip():
+            raise fail(ident, "evidence", "name the label section")
+        for cid in fix.get("remove_classes", []):
+            if cid not in drug.class_ids:
+                raise fail(ident, "remove_classes", f"{drug.id!r} is not a member of {cid!r}")
+            drug.class_ids.remove(cid)
+            b.classes[cid].members.remove(drug.id)
+        b.counts["us_overlay_class_corrections"] += 1
+
     def side(ident: str, fieldname: str, spec: dict) -> Party:
         if not isinstance(spec, dict) or len(spec) != 1 or not ({"drug", "class"} & set(spec)):
             raise fail(ident, fieldname, 'expected {"drug": id} or {"class": ANSM class id}')
