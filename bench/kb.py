@@ -515,16 +515,23 @@ def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None =
         import resource
 
         limit = lambda: resource.setrlimit(resource.RLIMIT_AS, (cap_bytes, cap_bytes))  # noqa: E731
-    proc = subprocess.Popen([sys.executable, __file__, "--worker-build", engine, str(corpus), str(index)],
-                            stdout=subprocess.PIPE, env=env, preexec_fn=limit)
-    out = proc.stdout.read()
-    _pid, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
+    # Started through a small launcher that measures it: Linux counts in a child's ru_maxrss the
+    # high-water mark of the process it was started from (here this one, with the corpus
+    # generator's vocabulary), so measured from here every build would peak at least at ours.
+    launch = ("import json, os, subprocess, sys\nproc = subprocess.Popen(sys.argv[1:])\n"
+              "_pid, status, usage = os.wait4(proc.pid, 0)\n"
+              "print(json.dumps({'rc': os.waitstatus_to_exitcode(status), 'maxrss_kb': usage.ru_maxrss}))\n")
+    proc = subprocess.Popen([sys.executable, "-c", launch, sys.executable, __file__, "--worker-build", engine,
+                             str(corpus), str(index)], stdout=subprocess.PIPE, env=env, preexec_fn=limit)
+    out, _ = proc.communicate()
+    lines = out.decode().strip().splitlines()
+    measured = json.loads(lines[-1]) if lines and lines[-1].startswith("{\"rc\"") else {"rc": proc.returncode}
+    proc.returncode = measured["rc"] or proc.returncode
     if proc.returncode != 0:
         raise RuntimeError(f"building {engine} failed (exit {proc.returncode}"
                            + (f"; address space capped at {cap_bytes / 1024 ** 3:.1f} GB)" if cap_bytes else ")"))
-    res = json.loads(out.decode().strip().splitlines()[-1])
-    res["peak_rss_gb"] = usage.ru_maxrss / 1024 ** 2
+    res = json.loads(lines[-2])
+    res["peak_rss_gb"] = measured["maxrss_kb"] / 1024 ** 2
     res["disk_gb"] = sum(f.stat().st_size for f in index.rglob("*") if f.is_file()) / 1024 ** 3
     return res
 

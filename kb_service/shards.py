@@ -131,18 +131,25 @@ def _read_npy_range(path: Path, start: int, count: int) -> np.ndarray:
 
 def float32_mean(parts: list[tuple[Path, int]], chunk: int = 1 << 20) -> float:
     """The mean of the float32 arrays in `parts` ((.npy path, length), in order) taken as one array,
-    equal bit for bit to ``np.concatenate(arrays).mean()``, reading at most `chunk` values at a time.
+    equal bit for bit to ``np.concatenate(arrays).mean()``, reading at most `chunk` values at a time:
+    `float32_sum`, then the same division as `np.mean` (tests/kb/test_shards.py compares them)."""
+    total = float32_sum(parts, chunk)
+    return float(total.dtype.type(total / np.intp(sum(n for _, n in parts))))  # np.mean's own division
+
+
+def float32_sum(parts: list[tuple[Path, int]], chunk: int = 1 << 20) -> np.float32:
+    """``np.add.reduce(np.concatenate(arrays))`` of the float32 arrays in `parts`, bit for bit,
+    reading at most `chunk` values at a time.
 
     numpy sums a contiguous float32 array pairwise: halves cut at a multiple of 8 below the
     middle, recursively, down to blocks it adds itself. This follows the same cuts and lets numpy
-    add every piece of at most `chunk` values, so the float32 sum is numpy's own; then the same
-    division as `np.mean` (tests/kb/test_shards.py compares them)."""
+    add every piece of at most `chunk` values, so the float32 sum is numpy's own."""
     if chunk < 8:
         raise ValueError(f"chunk must be at least 8 values, got {chunk}")
     starts = np.cumsum([0] + [n for _, n in parts])
     total_n = int(starts[-1])
     if total_n == 0:
-        raise ValueError("the mean of zero values is undefined")
+        raise ValueError("no values to sum: the parts are empty")
 
     def read(lo: int, n: int) -> np.ndarray:
         out = []
@@ -164,8 +171,7 @@ def float32_mean(parts: list[tuple[Path, int]], chunk: int = 1 << 20) -> float:
         half -= half % 8
         return np.float32(pairwise(lo, half) + pairwise(lo + half, n - half))
 
-    total = pairwise(0, total_n)
-    return float(total.dtype.type(total / np.intp(total_n)))  # np.mean's own division
+    return pairwise(0, total_n)
 
 
 def _escape(term: str) -> str:

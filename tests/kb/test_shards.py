@@ -164,10 +164,11 @@ def test_merge_orders_by_the_kernels_sums_not_the_scaled_scores(tmp_path):
 def test_float32_mean_matches_numpy_reading_a_chunk_at_a_time(tmp_path):
     """The global average length, read from the shards' files in pieces, is numpy's own float32
     mean of all lengths (what BM25Builder uses), bit for bit, whatever the piece size."""
-    from kb_service.shards import float32_mean
+    from kb_service.shards import float32_mean, float32_sum
 
     rng = np.random.default_rng(0)
-    arrays = [rng.integers(1, 600, n).astype(np.float32) for n in (1, 7, 130, 4099, 250_003, 1_000_000)]
+    # Fractional values: every partial sum rounds, so any other cut than numpy's shows.
+    arrays = [(rng.random(n) * 600).astype(np.float32) for n in (1, 7, 130, 4099, 250_003, 1_000_000)]
     parts = []
     for i, a in enumerate(arrays):
         np.save(tmp_path / f"{i}.npy", a)
@@ -175,9 +176,14 @@ def test_float32_mean_matches_numpy_reading_a_chunk_at_a_time(tmp_path):
     whole = np.concatenate(arrays)
     expect = float(whole.mean())
     for chunk in (1000, 65_536, 1 << 22):
+        assert float32_sum(parts, chunk=chunk).tobytes() == np.add.reduce(whole).tobytes()
         assert float32_mean(parts, chunk=chunk) == expect
-    # Not any sum of these: adding them in order (a float32 running sum) gives another value.
-    assert float(np.cumsum(whole, dtype=np.float32)[-1] / np.float32(len(whole))) != expect
+    # Not any sum of these: the obvious streaming sum (numpy's sum of each 65,536-value piece,
+    # added in order) is another value, and so is its mean.
+    blocked = np.float32(0)
+    for i in range(0, len(whole), 65_536):
+        blocked = np.float32(blocked + np.add.reduce(whole[i:i + 65_536]))
+    assert blocked != np.add.reduce(whole) and float(np.float32(blocked / np.float32(len(whole)))) != expect
 
 
 def test_terms_with_tabs_newlines_and_backslashes_merge_exactly(tmp_path):
