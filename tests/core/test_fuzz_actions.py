@@ -154,8 +154,13 @@ CALL_FORMATS = ["hermes", "fenced", "json_object", "json_list", "openai", "tool_
 
 
 def gold_calls(env: HealthcareGymEnv) -> list[tuple[str, dict]]:
-    """The expected calls of the domain's tasks (names and arguments), as seeds for valid calls."""
-    return [(a.name, dict(a.arguments)) for task in env.tasks for a in task.evaluation_criteria.actions]
+    """The calls of the domain's gold solutions, as seeds for valid calls: each task's expected calls and
+    the submission of its gold answer (without these, a successful submit depends on the schema branch
+    drawing valid `submit_answer` arguments, which derandomized draws over a changed task set can miss)."""
+    calls = [(a.name, dict(a.arguments)) for task in env.tasks for a in task.evaluation_criteria.actions]
+    calls += [("submit_answer", {"answer": str(task.correct_answer)}) for task in env.tasks
+              if task.correct_answer not in (None, "")]
+    return calls
 
 
 @st.composite

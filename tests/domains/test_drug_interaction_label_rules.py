@@ -21,9 +21,11 @@ LABEL_CONTRAINDICATED = {
     ("drug:lovastatin", "class:strong-cyp3a4-inhibitors"): "Mevacor/Altoprev labels, 4 CONTRAINDICATIONS (strong CYP3A4 inhibitors)",
     ("drug:linezolid", "class:selective-serotonin-reuptake-inhibitors"): "Zoloft, Lexapro, Celexa, Prozac, Paxil labels, 4 CONTRAINDICATIONS (MAOIs, linezolid named)",
     ("drug:naltrexone", "class:opioid-agonist-analgesics"): "naltrexone tablets CONTRAINDICATIONS, Vivitrol 4 (patients receiving opioid analgesics)",
+    ("drug:linezolid", "drug:venlafaxine"): "Effexor XR label, 4 CONTRAINDICATIONS (MAOIs, linezolid named)",
+    ("drug:linezolid", "drug:duloxetine"): "Cymbalta label, 4 CONTRAINDICATIONS (MAOIs, linezolid named)",
 }
 # the overlay rules that grade those pairs
-LABEL_CONTRAINDICATED_RULES = {"US-008", "US-009", "US-016", "US-021", "US-023"}
+LABEL_CONTRAINDICATED_RULES = {"US-008", "US-009", "US-016", "US-021", "US-023", "US-024", "US-025"}
 # a label section: "4 CONTRAINDICATIONS", "7.3", "5.1", "boxed warning", or a named guideline
 SECTION = re.compile(r"\b(\d{1,2}(\.\d+)?\s+[A-Z]|\d\.\d|boxed warning|guideline|PRECAUTIONS|WARNINGS|CONTRAINDICATIONS|"
                      r"Drug Safety Communication|ACR Manual)", re.I)
@@ -311,6 +313,9 @@ def test_generated_renal_tasks_follow_the_label_rules():
     ("fluoxetine", "linezolid", "contraindicated", "US-021"),
     ("paroxetine", "linezolid", "contraindicated", "US-021"),
     ("citalopram", "linezolid", "contraindicated", "US-021"),
+    # SNRI labels 4 CONTRAINDICATIONS name linezolid as well (US-024, US-025); before, US-R10's moderate
+    ("venlafaxine", "linezolid", "contraindicated", "US-024"),
+    ("duloxetine", "linezolid", "contraindicated", "US-025"),
     # Seroquel 5 (QT Prolongation): avoid with drugs that prolong QTc (US-022); before, ANSM minor
     ("quetiapine", "escitalopram", "major", "US-022"),
     ("quetiapine", "haloperidol", "major", "US-022"),
