@@ -341,6 +341,32 @@ def test_an_opioid_antagonist_is_not_an_opioid_for_the_cns_depressant_rules(env)
     assert "partial-opioid-antagonists" in env.db.drugs["naltrexone"].class_ids
 
 
+def test_nalmefene_is_graded_as_an_antagonist_not_as_an_opioid(env):
+    """Nalmefene is an opioid antagonist (nalmefene injection label, DESCRIPTION): the opioid-agonist
+    class rules no longer grade it (lorazepam was US-011 major, atropine ANSM-1336 minor, sodium
+    oxybate ANSM-1408 contraindicated), while its pairs with opioid agonists keep the partial
+    antagonists' levels, which Selincro SmPC 4.3 also contraindicates (control)."""
+    for other in ("lorazepam", "atropine", "sodium oxybate", "phenobarbital"):
+        assert env.safety_context.interaction("nalmefene", other) is None, other
+    for opioid, level, rule in (("morphine", "contraindicated", "ANSM-0151"), ("methadone", "contraindicated", "ANSM-1410"),
+                                ("buprenorphine", "contraindicated", "ANSM-1409"), ("tramadol", "major", "ANSM-0149")):
+        found = env.safety_context.interaction("nalmefene", opioid)
+        assert found is not None and found[0] == level and found[1].startswith(rule), (opioid, found)
+    assert env.db.drugs["nalmefene"].class_ids == ["partial-opioid-antagonists"]
+
+
+def test_naloxone_is_not_a_sedative(env):
+    """Naloxone has essentially no pharmacologic activity without opioids and does not depress
+    respiration (naloxone injection label, CLINICAL PHARMACOLOGY): ANSM's sedative-drug rule
+    (ANSM-0439, added CNS depression) no longer grades it with a benzodiazepine or an opioid, while
+    two sedatives keep that rule (control)."""
+    for other in ("lorazepam", "midazolam", "morphine", "sodium oxybate"):
+        assert env.safety_context.interaction("naloxone", other) is None, other
+    control = env.safety_context.interaction("lorazepam", "zolpidem")
+    assert control is not None and control[0] == "minor" and control[1].startswith("ANSM-0439"), control
+    assert not {"sedative-drugs", "other-sedative-drugs", "opioids"} & set(env.db.drugs["naloxone"].class_ids)
+
+
 def test_controls_keep_their_level(env):
     """Pairs the new rules do not cover keep theirs: SSRI + tramadol stays US-006 moderate, quetiapine +
     sertraline (no QT class) stays below major, naltrexone + methadone stays contraindicated (ANSM)."""
