@@ -193,6 +193,10 @@ def administer_epds(responses: list[int]) -> ScoreResult:
 def administer_audit_c(responses: list[int], sex: Literal["male", "female"]) -> ScoreResult:
     """AUDIT-C alcohol-misuse screen (0-12) with sex-specific thresholds.
 
+    The thresholds apply at every adult age: USPSTF 2018 and the VA/DoD SUD guideline set none by
+    age; their age adjustment (65 and older) is to the single-question screen's and item 3's binge
+    count (4 drinks) and to the daily and weekly drinking limits, not to the AUDIT-C cut-off.
+
     Args:
         responses: The three item answers in form order, each an integer 0-4 (frequency of drinking,
             drinks on a typical day, frequency of >= 6 drinks on one occasion).
