@@ -107,6 +107,37 @@ def _node_ip_on_loopback() -> Iterator[None]:
             os.environ[LOOPBACK_SWITCH_ENV] = previous_env
 
 
+# --- Ray's metrics exporter in a process that starts more than one Ray session ------------------------
+#
+# Ray 2.60's driver exports its metrics through one OpenTelemetry MeterProvider per process (a
+# singleton that is never destroyed). `ray.shutdown()` shuts that provider down, and a provider shuts
+# down only once: the periodic metric reader that the next `ray.init` of the same process adds to it
+# is never stopped. Each such reader keeps a thread that wakes every `metrics_report_interval_ms`,
+# exports to the ended session's metrics agent (one "Failed to export metrics" line a time in that
+# session's driver log) and keeps running through interpreter exit, where an export that meets C++
+# static destruction can kill the process with SIGSEGV after every test passed. Measured: n sessions
+# in one process leave n - 1 reader threads (tests/core/test_exit.py). So a process's second and
+# later local sessions start with Ray's OpenTelemetry metrics off (the opencensus path, which Ray
+# stops at shutdown); a process's first session - every production driver's only one - keeps Ray's
+# default. A driver that joins a running cluster takes that cluster's setting: a cluster a test
+# starts itself (`ray.cluster_utils.Cluster`) gets the same `_system_config` from
+# `later_session_system_config()`.
+
+def ray_session_ended_in_this_process() -> bool:
+    """True once this process has been a Ray driver (a `ray.init` that connected) and is not one now."""
+    import ray
+    from ray._private import worker
+
+    # Ray gives the global worker its GCS error subscriber when a driver connects and never removes it.
+    return not ray.is_initialized() and hasattr(worker.global_worker, "gcs_error_subscriber")
+
+
+def later_session_system_config() -> dict[str, Any]:
+    """The `_system_config` a new Ray cluster started by this process needs (see above): Ray's
+    OpenTelemetry metrics off when this process already ended a session, else nothing."""
+    return {"enable_open_telemetry": False} if ray_session_ended_in_this_process() else {}
+
+
 def init_ray(address: str | None = None, **options: Any) -> Any:
     """Connect to a Ray cluster, or start a fresh local one that listens on 127.0.0.1 only.
 
@@ -129,6 +160,9 @@ def init_ray(address: str | None = None, **options: Any) -> Any:
         raise ValueError(f"init_ray: dashboard_host={dashboard_host!r} would expose the local cluster's "
                          "job-submission API (code execution) to the network; local runs keep it on "
                          f"{LOOPBACK_HOST} (reach a remote head's dashboard through `ray dashboard`'s SSH tunnel)")
+    system_config = {**later_session_system_config(), **(options.pop("_system_config", None) or {})}
+    if system_config:
+        options["_system_config"] = system_config
     with _node_ip_on_loopback():
         context = ray.init(address="local", dashboard_host=dashboard_host, **options)
     node_ip = ray.util.get_node_ip_address()

@@ -82,12 +82,31 @@ def test_a_simulated_cluster_comes_and_goes():
     sim.shutdown()
     out = sys.argv[-1].replace("test_cluster.py", "threads_at_exit.txt")
     atexit.register(lambda: open(out, "w").write(str(_running("client.poll0"))))
+
+def test_a_second_session_leaves_no_metric_exporter_running():
+    """Runs after the simulated cluster: this process's second Ray session."""
+    import glob, time
+    import ray
+    from envs._runtime import init_ray, later_session_system_config
+
+    assert later_session_system_config() == {"enable_open_telemetry": False}
+    init_ray("local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    assert ray.get(ray.put(8)) == 8
+    logs = ray._private.worker._global_node.get_logs_dir_path()
+    ray.shutdown()
+    time.sleep(2.5)  # past two export intervals of a reader left running
+    lines = 0
+    for path in glob.glob(f"{logs}/python-core-driver-*.log"):
+        lines += sum("open_telemetry_metric_recorder" in line and "Failed to export" in line for line in open(path))
+    out = sys.argv[-1].replace("test_cluster.py", "exports_after_shutdown.txt")
+    open(out, "w").write(str(lines))
 '''
 
 
-def test_a_stopped_ray_cluster_leaves_no_grpc_client_thread_running_into_exit(tmp_path):
+def test_stopped_ray_sessions_leave_no_grpc_client_or_metric_exporter_running_into_exit(tmp_path):
     (tmp_path / "test_cluster.py").write_text(CLUSTER_TEST)
-    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "PYTHONFAULTHANDLER": "1", "RAY_USAGE_STATS_ENABLED": "0"}
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT), "PYTHONFAULTHANDLER": "1", "RAY_USAGE_STATS_ENABLED": "0",
+           "RAY_metrics_report_interval_ms": "1000"}
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path),
                            "-p", "tests.exit_guard", str(tmp_path / "test_cluster.py")],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
@@ -95,3 +114,7 @@ def test_a_stopped_ray_cluster_leaves_no_grpc_client_thread_running_into_exit(tm
     # Ray keeps every node it started in-process (and the node's GCS client with its gRPC polling
     # thread) alive until interpreter exit; the guard releases them at the end of the session.
     assert (tmp_path / "threads_at_exit.txt").read_text() == "0"
+    # Ray's OpenTelemetry metric reader of a process's second session is never stopped (its meter
+    # provider was shut down with the first session): it would export every interval to the dead
+    # session's agent and on through interpreter exit. That session starts with those metrics off.
+    assert (tmp_path / "exports_after_shutdown.txt").read_text() == "0"

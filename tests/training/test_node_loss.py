@@ -60,8 +60,10 @@ def cluster():
     # A node killed outright (no goodbye to the GCS) is found dead by the GCS's health checks:
     # 3 missed checks 1 s apart here, instead of Ray's default 5 x 3 s.
     health = {"health_check_period_ms": 1000, "health_check_timeout_ms": 1000, "health_check_failure_threshold": 3}
+    from envs._runtime import later_session_system_config
+
     sim = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
-                                                        "_system_config": health})
+                                                        "_system_config": {**health, **later_session_system_config()}})
     try:
         nodes = {name: sim.add_node(**args) for name, args in NODES.items()}
         ray.init(address=sim.address, namespace="hcgym-node-loss-tests", log_to_driver=False)

@@ -59,7 +59,10 @@ def cluster():
     session_was_up = ray.is_initialized()
     if session_was_up:
         ray.shutdown()
-    sim = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    from envs._runtime import later_session_system_config
+
+    sim = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
+                                                        "_system_config": later_session_system_config()})
     try:
         ids = {"head": sim.head_node.node_id}
         for name, args in NODES.items():
