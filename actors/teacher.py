@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict
 from actors.types import RolloutSample, TeacherBatch, TeacherOutput
 from modeling.checkpoint import load_tensors, read_json, save_tensors, write_json_atomic
 from modeling.config_models import TeacherConfig, teacher_update_action
-from modeling.model import (IM_START, load_policy, pad_batch, packing_unsupported, packs_sequences, split_by_budget,
+from modeling.model import (IM_START, load_policy, pad_batch, packing_unsupported, packs_sequences, split_batches,
                             token_stats)
 
 GENERATION_PROMPT = f"{IM_START}assistant\n"
@@ -143,13 +143,16 @@ class Teacher:
 
     # -- computing -------------------------------------------------------------------------------
     def compute(self, samples: list[RolloutSample]) -> list[TeacherOutput]:
-        """Teacher log-probs for `samples` now (batched), aligned to each student's positions."""
+        """Teacher log-probs for `samples` now (batched, by `batch_order`), in the order of `samples`,
+        aligned to each student's positions."""
         contexts = [self.build_context(s) for s in samples]
         lengths = [len(c.input_ids) for c in contexts]
-        results: list[TeacherOutput] = []
-        for group in split_by_budget(list(range(len(samples))), lengths, self.config.batch_size,
-                                     self.config.max_tokens_per_batch):
-            results.extend(self._compute_batch([samples[i] for i in group], [contexts[i] for i in group]))
+        results: list[TeacherOutput | None] = [None] * len(samples)
+        for group in split_batches(self.config.batch_order, list(range(len(samples))), lengths,
+                                   self.config.batch_size, self.config.max_tokens_per_batch):
+            outs = self._compute_batch([samples[i] for i in group], [contexts[i] for i in group])
+            for i, out in zip(group, outs):
+                results[i] = out
         return results
 
     def _compute_batch(self, samples: list[RolloutSample], contexts: list | None = None) -> list[TeacherOutput]:
@@ -270,13 +273,18 @@ class Teacher:
 
     def _take_batch(self) -> list[RolloutSample]:
         """Up to batch_size pending samples (and max_tokens_per_batch of their tokens), the ones a caller is
-        waiting for first (call under the lock)."""
+        waiting for first (call under the lock). By length (`batch_order`): among those waited for (else
+        all pending), the oldest with the ones nearest it in length, so no sample waits behind a stream
+        of others while the forward pads little."""
         first = [i for i in self._pending if i in self._wanted]
         rest = [i for i in self._pending if i not in self._wanted]
         order = first + rest
+        if self.config.batch_order == "length":
+            order = first or rest
         lengths = [len(self._pending[i].input_ids) for i in order]
-        chosen = [order[k] for k in split_by_budget(list(range(len(order))), lengths, self.config.batch_size,
-                                                     self.config.max_tokens_per_batch)[0]]
+        groups = split_batches(self.config.batch_order, list(range(len(order))), lengths, self.config.batch_size,
+                               self.config.max_tokens_per_batch)
+        chosen = [order[k] for k in next(g for g in groups if 0 in g)]
         batch = [self._pending.pop(i) for i in chosen]
         self._in_flight.update(chosen)
         return batch

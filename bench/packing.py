@@ -9,11 +9,19 @@ backward. Packed, the decoder runs on the real tokens only, but attention under 
 block-diagonal [N, N] mask over the whole packed row; padded, each row attends over its own [T, T].
 Prints tokens/s of both and the ratio packed / padded (the baseline), and the padding share.
 
-    .venv/bin/python bench/packing.py
+Then micro-batches by length: a long-tail batch of 32 sequences (64 tokens and up, at most 1,024, in a shuffled
+order as a step's episodes arrive) cut into micro-batches of 8 in batch order and after sorting by
+length (`modeling.model.split_by_length`, the learner's `optim.micro_batch_order: length`), each
+micro-batch padded or packed as `pack_sequences: auto` decides on CPU; prints both padding fractions and
+the whole batch's forward + backward time, and the ratio, on the tiny and the wider model.
+
+    .venv/bin/python bench/packing.py [--only packing|micro-batches]
 """
 
 from __future__ import annotations
 
+import argparse
+import random
 import statistics
 import tempfile
 import time
@@ -21,7 +29,8 @@ from pathlib import Path
 
 import torch
 
-from modeling.model import build_tiny_model, build_twin_model, load_policy, pad_batch, token_stats, train_tokenizer
+from modeling.model import (build_tiny_model, build_twin_model, load_policy, pad_batch, packs_sequences, padding_fraction,
+                            split_by_budget, split_by_length, token_stats, train_tokenizer)
 
 MIXES = {"long tail": [96, 128, 160, 192, 256, 384, 1024, 2048],  # two long episodes among short ones
          "even": [480, 496, 512, 512, 512, 528, 528, 544]}         # little padding to remove
@@ -38,7 +47,58 @@ def timed(model, ids, mask, trained, packed: bool) -> float:
     return statistics.median(times)
 
 
+def long_tail_batch(count: int = 32, seed: int = 0) -> list[int]:
+    """Episode lengths of a step: mostly short, a few long (a log-normal between 64 and 1,024 tokens,
+    median about 190), in a shuffled order."""
+    rng = random.Random(seed)
+    return [max(64, min(1024, int(rng.lognormvariate(5.25, 0.8)))) for _ in range(count)]
+
+
+def timed_batch(model, sequences: list[list[int]], groups: list[list[int]]) -> tuple[float, float]:
+    """(median seconds, padding fraction) of the forward + backward of every micro-batch in `groups`,
+    each packed or padded as `pack_sequences: auto` decides."""
+    batches = []
+    padded = computed = 0
+    for group in groups:
+        ids, mask = pad_batch([sequences[i] for i in group], 0)
+        trained = mask.bool().clone()
+        trained[:, :32] = False
+        packed = packs_sequences("auto", model, mask)
+        pad, total = padding_fraction(mask, packed)
+        padded, computed = padded + pad, computed + total
+        batches.append((ids, mask, trained, packed))
+    times = []
+    for _ in range(ROUNDS):
+        model.zero_grad()
+        start = time.perf_counter()
+        for ids, mask, trained, packed in batches:
+            token_stats(model, ids, mask, positions=trained, packed=packed).logprobs.sum().backward()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), padded / computed
+
+
+def micro_batches(models: dict) -> None:
+    lengths = long_tail_batch()
+    generator = torch.Generator().manual_seed(1)
+    sequences = [torch.randint(5, 500, (n,), generator=generator).tolist() for n in lengths]
+    real = sum(lengths)
+    print(f"micro-batches of 8 from a long-tail batch: {len(lengths)} sequences, {real} tokens "
+          f"({min(lengths)} ... {max(lengths)}, median {statistics.median(lengths):.0f}), pack_sequences auto")
+    by_index = split_by_budget(list(range(len(lengths))), lengths, 8)
+    by_length = split_by_length(list(range(len(lengths))), lengths, 8)
+    for name, model in models.items():
+        model.train()
+        index_s, index_pad = timed_batch(model, sequences, by_index)
+        length_s, length_pad = timed_batch(model, sequences, by_length)
+        print(f"  {name}: batch order padding {index_pad:.1%}, {real / index_s:,.0f} tok/s ({index_s * 1000:.0f} ms); "
+              f"by length padding {length_pad:.1%}, {real / length_s:,.0f} tok/s ({length_s * 1000:.0f} ms); "
+              f"by length / batch order = {index_s / length_s:.2f}x")
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", choices=("packing", "micro-batches"), help="run one of the two measurements")
+    args = parser.parse_args()
     torch.manual_seed(0)
     root = Path(tempfile.mkdtemp(prefix="bench_packing_"))
     tok = train_tokenizer(["the patient was given warfarin and aspirin"] * 200, 512, root / "tok", max_stdlib_files=5)
@@ -48,9 +108,13 @@ def main() -> None:
                                                   num_attention_heads=4, num_key_value_heads=2, head_dim=64)}
     models = {name: load_policy(build_tiny_model(root / name.split()[0], tok, seed=0, **size))[0]
               for name, size in sizes.items()}
+    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, sdpa attention, median of {ROUNDS}")
+    if args.only != "packing":
+        micro_batches(models)
+    if args.only == "micro-batches":
+        return
     models["Qwen3.5 twin (hidden 128, linear + full attention)"] = load_policy(
         build_twin_model("qwen3_5", root / "qwen3_5", tok, seed=0))[0]
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, sdpa attention, median of {ROUNDS}")
     for mix, lengths in MIXES.items():
         generator = torch.Generator().manual_seed(0)
         ids, mask = pad_batch([torch.randint(5, 500, (n,), generator=generator).tolist() for n in lengths], 0)

@@ -124,6 +124,11 @@ class OptimConfig(ConfigModel):
         default=None, ge=1, description="split each rank's samples into micro-batches of at most this many tokens "
                                         "(a longer sample is a micro-batch alone), up to micro_batch_size samples each; "
                                         "null: micro_batch_size samples. The loss normalisation is the whole batch's")
+    micro_batch_order: Literal["length", "index"] = Field(
+        default="length", description="how each rank's samples are grouped into micro-batches: length = sorted "
+                                       "longest first, then cut, so each micro-batch pads to about its own length; "
+                                       "index = in batch order (sequences of mixed lengths pad to the longest). The "
+                                       "update is the same either way (the loss normalisation is the whole batch's)")
     updates_per_batch: int = Field(default=1, ge=1, description="optimizer steps per batch (clipping matters when > 1)")
 
 
@@ -228,6 +233,10 @@ class TeacherConfig(ConfigModel):
                                                           "max_tokens_per_batch)")
     max_tokens_per_batch: int | None = Field(default=None, ge=1, description="teacher forwards of at most this many "
                                                                              "sample tokens (a longer sample alone)")
+    batch_order: Literal["length", "index"] = Field(
+        default="length", description="which queued samples form a teacher forward: length = the oldest queued "
+                                      "sample with those nearest it in length (sorted, then cut), index = in arrival "
+                                      "order. Samples a learner step waits for go first either way")
     temperature: float = Field(default=1.0, gt=0, description="temperature of the teacher's log-probs")
     dtype: Literal["float32", "bfloat16"] = Field(default="float32", description="dtype of the teacher's weights and "
                                                                               "forwards")

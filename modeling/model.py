@@ -838,6 +838,24 @@ def split_by_budget(indices: list[int], lengths: list[int], max_samples: int,
     return groups
 
 
+def split_by_length(indices: list[int], lengths: list[int], max_samples: int,
+                    max_tokens: int | None = None) -> list[list[int]]:
+    """`indices` sorted longest first (ties keep their order), then cut as `split_by_budget` cuts: each
+    group holds sequences of about one length, so padding a group to its longest adds little. The
+    longest group comes first, so a micro-batch that does not fit in memory fails at once."""
+    return split_by_budget(sorted(indices, key=lambda i: -lengths[i]), lengths, max_samples, max_tokens)
+
+
+def split_batches(order: str, indices: list[int], lengths: list[int], max_samples: int,
+                  max_tokens: int | None = None) -> list[list[int]]:
+    """`split_by_length` (order "length") or `split_by_budget` (order "index")."""
+    if order == "length":
+        return split_by_length(indices, lengths, max_samples, max_tokens)
+    if order == "index":
+        return split_by_budget(indices, lengths, max_samples, max_tokens)
+    raise ValueError(f"batch order must be 'length' or 'index', got {order!r}")
+
+
 def pad_batch(sequences: list[list[int]], pad_id: int, *, side: str = "right") -> tuple[torch.Tensor, torch.Tensor]:
     """Pad id lists into ([B, T] ids, [B, T] mask); right padding keeps position t at column t."""
     if side not in ("left", "right"):

@@ -33,7 +33,7 @@ from learner.losses import (
     group_advantages,
     turn_weights,
 )
-from modeling.model import (pad_batch, packing_unsupported, packs_sequences, padding_fraction, split_by_budget,
+from modeling.model import (pad_batch, packing_unsupported, packs_sequences, padding_fraction, split_batches,
                             token_stats)
 
 
@@ -178,12 +178,14 @@ class RankWorker:
         prep.teacher = outputs
 
     def _micro_batches(self, prep: _Prepared) -> list[list[int]]:
-        """This rank's sample indices split into micro-batches (by count, or by token budget); every
-        rank gets the same count: each works out every rank's split and pads to the longest."""
+        """This rank's sample indices split into micro-batches (by count, or by token budget; sorted by
+        length first with `optim.micro_batch_order: length`); every rank gets the same count: each works
+        out every rank's split and pads to the longest. Which micro-batch a sample is in does not change
+        the update: every loss term is a share of the whole batch (BatchNorms)."""
         optim = self.config.optim
         lengths = [len(s.input_ids) for s in prep.samples]
-        splits = [split_by_budget(list(range(rank, len(lengths), self.world_size)), lengths,
-                                  optim.micro_batch_size, optim.max_tokens_per_micro_batch)
+        splits = [split_batches(optim.micro_batch_order, list(range(rank, len(lengths), self.world_size)), lengths,
+                                optim.micro_batch_size, optim.max_tokens_per_micro_batch)
                   for rank in range(self.world_size)]
         count = max(1, max(len(split) for split in splits))
         mine = splits[self.rank]

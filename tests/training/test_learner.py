@@ -98,6 +98,54 @@ def test_packing_and_token_budget_micro_batches_do_not_change_the_update(model_d
             assert torch.allclose(v, other[k], atol=2e-5), k
 
 
+def _gradient_and_metrics(learner: Learner, batch) -> tuple[dict[str, torch.Tensor], dict[str, float]]:
+    """One train step's gradient before clipping: each parameter's gradients summed over the
+    micro-batches' backward passes (read by hooks as they arrive), and the step's metrics."""
+    params = dict(learner._local.backend.policy.named_parameters())
+    total = {k: torch.zeros_like(p) for k, p in params.items()}
+
+    def add(name):
+        def hook(grad):
+            total[name].add_(grad)  # returns None: the gradient itself is left as it is
+        return hook
+
+    hooks = [p.register_hook(add(k)) for k, p in params.items()]
+    try:
+        metrics = learner.train_step(batch)
+    finally:
+        for h in hooks:
+            h.remove()
+    return total, metrics
+
+
+def test_length_sorted_micro_batches_give_the_index_order_gradient(model_dir, batch):
+    """Micro-batches of 2 cut in batch order and cut after sorting by length hold different pairs; the
+    gradient and the loss are the same (every loss term is a share of the whole batch), and sorted,
+    fewer of the decoder's positions are padding."""
+    from modeling.model import split_by_budget, split_by_length
+
+    lengths = [len(s.input_ids) for s in batch]
+    by_index, by_length = split_by_budget(list(range(6)), lengths, 2), split_by_length(list(range(6)), lengths, 2)
+    assert sorted(map(sorted, by_index)) != sorted(map(sorted, by_length))
+    runs = {order: _gradient_and_metrics(Learner(LearnerConfig(
+        optim={"lr": 1e-3, "micro_batch_size": 2, "micro_batch_order": order}), model_dir), batch)
+        for order in ("index", "length")}
+    (g_index, m_index), (g_length, m_length) = runs["index"], runs["length"]
+    scale = max(float(g.abs().max()) for g in g_index.values())
+    assert scale > 1e-3
+    for k, g in g_index.items():
+        assert torch.allclose(g, g_length[k], rtol=1e-4, atol=1e-6 * scale), k
+    assert m_length["loss"] == pytest.approx(m_index["loss"], rel=1e-5, abs=1e-7)
+    assert m_length["grad_norm"] == pytest.approx(m_index["grad_norm"], rel=1e-5)
+
+    def padding(groups):
+        return 1 - sum(lengths) / sum(len(g) * max(lengths[i] for i in g) for g in groups)
+
+    assert m_index["learner_padding_frac"] == pytest.approx(padding(by_index))
+    assert m_length["learner_padding_frac"] == pytest.approx(padding(by_length))
+    assert m_length["learner_padding_frac"] < m_index["learner_padding_frac"]
+
+
 def test_auto_packing_packs_a_long_tail_and_pads_even_lengths(model_dir):
     """sdpa masks a packed row densely: "auto" packs a micro-batch only when its packed attention area
     N^2 is at most the padded B*T^2 (bench/packing.py: 2x faster on a long tail, 3-5x slower on even
@@ -118,6 +166,18 @@ def test_token_budget_split_keeps_order_counts_and_a_long_sample_alone():
     assert split_by_budget(list(range(6)), lengths, 3, 60) == [[0, 1], [2, 3, 4], [5]]
     assert split_by_budget(list(range(6)), lengths, 2) == [[0, 1], [2, 3], [4, 5]]
     assert split_by_budget([], lengths, 2, 10) == []
+
+
+def test_length_split_groups_neighbours_longest_first_within_the_budget():
+    from modeling.model import split_batches, split_by_length
+
+    lengths = [10, 50, 30, 5, 5, 100]
+    assert split_by_length(list(range(6)), lengths, 2) == [[5, 1], [2, 0], [3, 4]]
+    assert split_by_length(list(range(6)), lengths, 3, 60) == [[5], [1], [2, 0, 3], [4]]
+    assert split_by_length([0, 2, 4], lengths, 2) == [[2, 0], [4]]  # one rank's share
+    assert split_batches("index", list(range(6)), lengths, 2) == [[0, 1], [2, 3], [4, 5]]
+    with pytest.raises(ValueError, match="'length' or 'index'"):
+        split_batches("random", list(range(6)), lengths, 2)
 
 
 def test_multi_update_batches_use_a_fixed_old_policy_and_clip(model_dir, batch):

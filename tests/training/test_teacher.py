@@ -213,3 +213,34 @@ def test_state_roundtrip_and_checkpoint(model_dir, tmp_path):
     other = Teacher(TeacherConfig(), model_dir, start_worker=False)
     other.set_state(t.get_state())
     assert all(torch.equal(other.get_weights()[k], v) for k, v in t.get_weights().items())
+
+
+def test_length_batches_come_back_in_order_and_pad_less(model_dir):
+    """Teacher forwards of 2 samples grouped by length hold other pairs than in arrival order: the
+    outputs come back in the samples' order with the same log-probs, and less of what the teacher
+    computed is padding. The worker takes the oldest queued sample with its nearest in length, the
+    samples a learner step waits for first."""
+    rng = random.Random(5)
+    samples = [make_sample(rng, group_id="g", index=i, prompt_len=5, turn_lens=[n])
+               for i, n in enumerate((3, 30, 4, 28, 6, 25))]  # lengths 8, 35, 9, 33, 11, 30
+    cfg = {"batch_size": 2, "hints": {"enabled": False}}
+    by_index = Teacher(TeacherConfig(**cfg, batch_order="index"), model_dir, start_worker=False)
+    by_length = Teacher(TeacherConfig(**cfg), model_dir, start_worker=False)
+    index_outs, length_outs = by_index.compute(samples), by_length.compute(samples)
+    assert [o.sample_id for o in length_outs] == [s.sample_id for s in samples]
+    for a, b in zip(index_outs, length_outs):
+        assert max(abs(x - y) for x, y in zip(a.logprobs, b.logprobs)) < 1e-5, a.sample_id
+
+    def padded(outs):
+        return sum(o.padded_positions for o in outs), sum(o.computed_positions for o in outs)
+
+    assert padded(index_outs) == (196 - 126, 196)  # pairs (8, 35), (9, 33), (11, 30)
+    assert padded(length_outs) == (148 - 126, 148)  # pairs (35, 33), (30, 11), (9, 8)
+    by_length.submit(samples)
+    with by_length._cv:
+        oldest = [s.sample_id for s in by_length._take_batch()]
+        by_length._wanted.update(samples[i].sample_id for i in (1, 4, 5))
+        waited = [s.sample_id for s in by_length._take_batch()]
+    assert oldest == [samples[2].sample_id, samples[0].sample_id]
+    # Sample 3 (33 tokens) is nearer to sample 1 (35) than sample 5 (30) is, but no step waits for it.
+    assert waited == [samples[1].sample_id, samples[5].sample_id]
