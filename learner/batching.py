@@ -82,6 +82,9 @@ class Group:
     samples: list[RolloutSample] = field(default_factory=list)
     accepted: bool = False
     failed: str | None = None
+    # Failed because no generator came back within `generator.restart_wait_s`: replaced without
+    # using the step's inspection budget (the wait bounds such failures in time; see collect_batch).
+    outage: bool = False
     error: BaseException | None = None
     teacher_submitted: bool = False
     teacher_submit_ref: Any = None  # the submit call; fetch waits for it (the teacher is a threaded actor)
@@ -176,12 +179,19 @@ class BatchScheduler:
 
     # -- the learner's side ----------------------------------------------------------------------
     async def collect_batch(self) -> tuple[list[Group], dict[str, float]]:
-        """Take the next `batch_size` accepted groups in admission order (FIFO)."""
+        """Take the next `batch_size` accepted groups in admission order (FIFO).
+
+        At most `max_admissions_factor * batch_size` groups are inspected, except those failed by a
+        generator outage (`Group.outage`): each of them waited `generator.restart_wait_s` for a
+        generator Ray is restarting and is replaced like the rest, but an outage longer than the
+        budget's worth of waits would otherwise end the step short, or stop the run with no
+        trainable group, while the generator was on its way back. A generator that will not come
+        back stops the run (`GeneratorDeadError`), so these do not loop for ever."""
         cfg = self.cfg
         batch: list[Group] = []
-        inspected = filtered = failed = stale = 0
+        inspected = filtered = failed = stale = outages = 0
         max_inspect = int(cfg.dynamic_sampling.max_admissions_factor * cfg.batch_size)
-        while len(batch) < cfg.batch_size and inspected < max_inspect:
+        while len(batch) < cfg.batch_size and inspected - outages < max_inspect:
             async with self.cond:
                 await self.cond.wait_for(lambda: self.consume_seq in self.completed)
                 group = self.completed.pop(self.consume_seq)
@@ -192,6 +202,7 @@ class BatchScheduler:
                     from group.error
             if group.failed:
                 failed += 1
+                outages += group.outage
                 self.log(f"[rollout] group {group.seq} dropped: {group.failed}")
                 await self._release()
                 continue

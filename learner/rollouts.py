@@ -52,10 +52,20 @@ class Rollouts:
     async def episodes(self, specs: list[EpisodeSpec], ledger: EpisodeLedger) -> list[RolloutSample]:
         for spec in specs:
             ledger.admit(spec.sample_id)
-        return list(await asyncio.gather(*[
+        # Every episode runs to its end before an error is raised: a plain gather would raise the
+        # first and leave the others running unowned, in the ledger's flight and on the env actors
+        # and generators after their group was replaced, and cancelled mid-episode (neither
+        # completed nor failed) if the run ended first.
+        outcomes = await asyncio.gather(*[
             run_episode(spec, self.loop, self.pool, self.gen_client, ledger, self.cfg.rollout.max_episode_attempts)
             for spec in specs
-        ]))
+        ], return_exceptions=True)
+        errors = [o for o in outcomes if isinstance(o, BaseException)]
+        if errors:
+            # A bug anywhere in the group outranks an expected failure next to it.
+            expected = (EnvActorLost, PromptTooLongError, GeneratorUnavailableError)
+            raise next((e for e in errors if not isinstance(e, expected)), errors[0])
+        return list(outcomes)
 
     async def group(self, seq: int, task: TaskRef, version: int,
                     on_accepted: Callable[[Group], None] | None = None) -> Group:
@@ -86,6 +96,7 @@ class Rollouts:
                 on_accepted(group)
         except (EnvActorLost, PromptTooLongError, GeneratorUnavailableError) as exc:
             group.failed = f"{type(exc).__name__}: {exc}"
+            group.outage = isinstance(exc, GeneratorUnavailableError)
         except Exception as exc:  # a bug: surfaced by the consumer with its group
             group.failed = f"{type(exc).__name__}: {exc}"
             group.error = exc

@@ -314,7 +314,8 @@ class DynamicSamplingConfig(ConfigModel):
                                                               "exceed this")
     max_admissions_factor: float = Field(
         default=4.0, ge=1, description="groups inspected per step at most, as a multiple of trainer.batch_size; past it "
-                                       "the step trains on what it has (a short batch), or skips when it has nothing")
+                                       "the step trains on what it has (a short batch), or skips when it has nothing. "
+                                       "Groups failed by a generator outage (generator.restart_wait_s) do not count")
 
 
 class TrainerConfig(ConfigModel):

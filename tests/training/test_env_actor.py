@@ -42,25 +42,55 @@ async def run_all(pool, loop, policy, specs, ledger):
 
 
 def test_pool_spreads_episodes_and_balances(ray_cluster, setup):
+    """Then (same pool) a training group whose first episode fails: the group's error comes only
+    once its other episode has ended, so nothing of the dropped group is left running."""
+    from actors.generator import GeneratorUnavailableError
+    from learner.config import validate_config
+    from learner.rollouts import Rollouts
+
     tokenizer, limits, tasks, actions = setup
 
     async def go():
         pool = EnvPool(2, 3, limits.max_turns, domain_modules=WARD, env_vars=NO_EMBEDDINGS)
         await pool.ready()
         ledger = EpisodeLedger()
-        samples = await run_all(pool, AgentLoop(tokenizer, limits), GoldReplayPolicy(tokenizer, actions),
-                                specs_for(tasks, 8), ledger)
+        loop, policy = AgentLoop(tokenizer, limits), GoldReplayPolicy(tokenizer, actions)
+        samples = await run_all(pool, loop, policy, specs_for(tasks, 8), ledger)
         pings = await pool.ready()
+
+        failing, other = specs_for(tasks, 2)
+        gate = asyncio.Event()
+
+        async def one_generator_out(request):
+            if request.request_id.startswith(failing.sample_id + ":"):
+                raise GeneratorUnavailableError(f"generate {request.request_id}: no generator came back")
+            await gate.wait()  # the other episode is mid-rollout when its sibling fails
+            return await policy(request)
+
+        rollouts = Rollouts(validate_config({"data": {"domains": ["ward"]}}), loop, pool, one_generator_out,
+                            run_dir=None, log=lambda line: None)
+        group_ledger = EpisodeLedger()
+        group = asyncio.ensure_future(rollouts.episodes([failing, other], group_ledger))
+        while not group_ledger.failed or sum(pool.loads()) > 1:
+            await asyncio.sleep(0.01)
+        await asyncio.sleep(0.1)
+        raised_early = group.done()
+        gate.set()
+        with pytest.raises(GeneratorUnavailableError):
+            await group
+        group_balance, group_loads = group_ledger.balance(), pool.loads()
         for actor in pool.actors:
             ray_cluster.kill(actor)
-        return samples, ledger, pings, pool.loads()
+        return samples, ledger, pings, group_loads, raised_early, group_balance
 
-    samples, ledger, pings, loads = asyncio.run(go())
+    samples, ledger, pings, loads, raised_early, group_balance = asyncio.run(go())
     assert len({s.sample_id for s in samples}) == 8
     assert all(s.correct for s in samples)
     assert all(p["episodes_started"] > 0 for p in pings), pings  # both actors did work
-    assert loads == [0, 0]
     assert ledger.balance() == {"admitted": 8, "completed": 8, "failed": 0, "in_flight": 0, "reruns": 0, "attempts": 8}
+    assert not raised_early, "the group failed while its other episode was still running"
+    assert loads == [0, 0]
+    assert group_balance == {"admitted": 2, "completed": 1, "failed": 1, "in_flight": 0, "reruns": 0, "attempts": 2}
 
 
 @pytest.mark.parametrize("batch_calls", [True, False], ids=["batched", "unbatched"])

@@ -188,3 +188,57 @@ def test_a_generator_back_too_late_fails_its_requests_naming_it_and_a_dead_one_s
     assert isinstance(error, GeneratorDeadError) and name in str(error) and "will not restart" in str(error), error
     assert told_s < 30 and client.dead == {0}, told_s
     assert len(client.outages) == 1 and client.outages[0].back_at is None, client.outages
+
+
+def test_a_generator_back_too_late_fails_its_groups_and_the_run_trains_on_replacements(ray_cluster, ward_policy_dir,
+                                                                                      tmp_path):
+    """The generator is killed while a request waits on it, and restarts far slower than
+    `generator.restart_wait_s`: the requests give up, their episodes end failed, their groups are
+    dropped and replaced by new ones, and the run trains full batches of whole groups, none of them
+    a failed one and no sample twice."""
+    from learner.train import Trainer
+
+    steps = 2
+    cfg = tiny_config(
+        tmp_path / "replaced", ward_policy_dir,
+        # An inspection budget of one batch: a failed group that used it would leave the step short.
+        trainer={"max_steps": steps, "checkpoint_interval": 0,
+                 "dynamic_sampling": {"enabled": False, "max_admissions_factor": 1.0}},
+        # Every batch waits 1 s for company, so a request is surely on the generator when it is
+        # killed; its restart (a new worker importing torch, loading the model) takes seconds.
+        generator={"batch_wait_s": 1.0, "restart_wait_s": 0.5},
+    )
+    logs: list[str] = []
+    trainer = Trainer(cfg, log=logs.append)
+    with training_in_background(trainer, join_timeout=180.0) as outcome:
+        wait_for(lambda: trainer.step >= 1, what="step 1")
+        wait_for(lambda: trainer.gen_client.outstanding[0] > 0, what="requests on the generator")
+        ray_cluster.kill(trainer.generators[0], no_restart=False)
+    summary = outcome["summary"]
+
+    assert summary["steps"] == steps
+    records = read_metrics(cfg.output_dir)
+    assert [r["step"] for r in records] == list(range(1, steps + 1))
+    counters, status = summary["counters"], summary["group_status"]
+    # The replacement is counted: the step's own figure, the run's counter and the requests that gave up.
+    assert records[1]["groups_failed"] >= 1 and records[0]["groups_failed"] == 0, records
+    assert counters["groups_failed"] == status["failed"] == sum(r["groups_failed"] for r in records) >= 1
+    assert records[-1]["generator_gave_up"] >= 1 and summary["generator"]["generator_outages"] >= 1
+    assert any("did not answer for" in line for line in logs), logs
+    # Every failed group ended failed in the ledger, with the generator's error; none was trained.
+    ledger = trainer.rollouts.ledger
+    failed_seqs = {seq for seq, state in trainer.scheduler.group_status.items() if state == "failed"}
+    assert ledger.failed and all("GeneratorUnavailableError" in why for why in ledger.failed.values()), ledger.failed
+    balance = summary["ledger"]
+    assert balance["failed"] == len(ledger.failed) and balance["reruns"] == 0, balance
+    assert balance["in_flight"] == 0 and balance["admitted"] == balance["completed"] + balance["failed"], balance
+    assert sum(status.values()) == counters["groups_admitted"] and status.get("in_flight", 0) == 0, status
+    seen: set[str] = set()
+    for step in range(1, steps + 1):
+        samples, _ = read_samples(tmp_path / "replaced" / "trajectories" / f"step_{step:06d}.parquet")
+        ids = [s.sample_id for s in samples]
+        assert len(ids) == 4 and len(set(ids)) == 4 and not (seen & set(ids)), ids  # a full batch, nothing twice
+        seen.update(ids)
+        seqs = {int(s.group_id.split(":")[0][1:]) for s in samples}
+        assert len(seqs) == 2 and not (seqs & failed_seqs), (seqs, failed_seqs)
+    assert not (seen & set(ledger.failed)), "a failed episode was trained on"

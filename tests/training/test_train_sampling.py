@@ -79,6 +79,21 @@ def test_bounded_attempts_top_up_with_filtered_groups():
     assert t.consume_seq == 3  # group 3 waits for the next step
 
 
+def test_groups_failed_by_a_generator_outage_are_replaced_without_using_the_budget():
+    # A budget of one batch (3 groups). Four groups failed waiting for a generator: the batch is still full.
+    t = trainer(dynamic_sampling={"max_admissions_factor": 1.0})
+    out = [group(seq, failed="GeneratorUnavailableError: x") for seq in range(4)]
+    for g in out:
+        g.outage = True
+    batch, info = collect(t, out + [group(4), group(5), group(6)])
+    assert [g.seq for g in batch] == [4, 5, 6] and info["groups_failed"] == 4 and info["groups_inspected"] == 7
+    assert t.counters["short_batches"] == 0
+    # Any other failure still uses it: the step ends short.
+    t = trainer(dynamic_sampling={"max_admissions_factor": 1.0})
+    batch, info = collect(t, [group(0, failed="EnvActorLost: x"), group(1), group(2), group(3)])
+    assert [g.seq for g in batch] == [1, 2] and t.counters["short_batches"] == 1
+
+
 def test_over_stale_groups_are_dropped():
     t = trainer(max_staleness=1)
     t.version = 3
