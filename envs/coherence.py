@@ -478,6 +478,26 @@ def _news2_not_on_ventilator(s: Subject):
                 yield ("at_time", "ventilation"), f"NEWS2 asked for the vital set at {charted[-1]}, charted on invasive ventilation"
 
 
+# The GCS eye responses each ACVPU level allows: RCP NEWS2 (2017) chart 4 and its ACVPU definitions: Alert is
+# fully awake with spontaneous eye opening (GCS eye 4); Voice responds (eyes, words or movement) only when
+# spoken to; Pain only to a painful stimulus; Unresponsive to neither (eye 1). New confusion allows any.
+AVPU_GCS_EYE: dict[str, tuple[int, ...]] = {"alert": (4,), "voice": (1, 2, 3), "pain": (1, 2), "unresponsive": (1,)}
+
+
+@rule("avpu_matches_gcs_eye", "a vital set's ACVPU level and its GCS eye response",
+      "RCP NEWS2 (2017), ACVPU: Alert = fully awake, eyes open spontaneously (GCS eye 4); a patient who opens the eyes "
+      "only to voice or pain is V or P; Teasdale et al., Lancet Neurol 2014;13:844-854 (eye 3 = to sound)",
+      ("triage_emergency",))
+def _avpu_matches_gcs_eye(s: Subject):
+    for v in (s.record or {}).get("vitals") or []:
+        if not isinstance(v, dict) or v.get("avpu") is None or v.get("gcs_eye") is None:
+            continue
+        allowed = AVPU_GCS_EYE.get(str(v["avpu"]))
+        if allowed is not None and int(v["gcs_eye"]) not in allowed:
+            yield (("vitals.avpu", "vitals.gcs_eye"),
+                   f"ACVPU {v['avpu']!r} with GCS eye {v['gcs_eye']} at {v.get('time')} (allowed: {list(allowed)})")
+
+
 @rule("order_status_matches_clock", "a medication order's status, start and stop and the record clock",
       "HL7 FHIR R4 MedicationRequest.status: 'active' while the order is in force, 'completed' once all its actions are "
       "done; an order stopped before the record clock is not active", ("ehr_management",))

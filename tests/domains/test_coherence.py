@@ -84,6 +84,10 @@ CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] =
         (_task(), _breast("baseline screening recall", "MG bilateral diagnostic mammogram",
                           "solid oval circumscribed mass, no prior films"), {})),
     "intubated_gcs_verbal": ("ehr_management", (_task(), _icu(14), ICU_CLOCK), (_task(), _icu(10), ICU_CLOCK)),
+    "avpu_matches_gcs_eye": (
+        "triage_emergency",
+        (_task(), {"vitals": [{"time": "2025-03-01T13:59", "avpu": "alert", "gcs_eye": 3, "gcs_verbal": 5, "gcs_motor": 6}]}, {}),
+        (_task(), {"vitals": [{"time": "2025-03-01T13:59", "avpu": "voice", "gcs_eye": 3, "gcs_verbal": 5, "gcs_motor": 6}]}, {})),
     "news2_not_on_ventilator": ("ehr_management", (_news2_task("2025-02-26T15:00"), _icu(10), ICU_CLOCK),
                                 (_news2_task("2025-03-01T11:00"), _icu(10), ICU_CLOCK)),
     "order_status_matches_clock": ("ehr_management", (_task(), _icu(10, status="active"), ICU_CLOCK),

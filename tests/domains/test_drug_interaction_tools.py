@@ -353,6 +353,25 @@ def test_renal_tiers_match_open_medicine_calculator(env, raw_renal):
     assert patient["adjustment_type"] == "dose_reduction"
 
 
+def test_renal_label_doses_per_indication(env, built):
+    from envs.domains.drug_interaction import logic as L
+
+    # Zosyn 2 (renal impairment table): the 4.5 g q6h regimen (nosocomial pneumonia) reduces to 3.375 g q6h at
+    # CrCl 20-40 and 2.25 g q6h below 20; the table gave only the 3.375 g regimen's 2.25 g q6h / q8h
+    mid = call(env, "get_renal_dose_adjustment", drug="piperacillin and tazobactam", renal_value=38, metric="crcl")
+    assert mid["recommended_dose"].startswith("2.25 g IV q6h") and "3.375 g IV q6h" in mid["recommended_dose"]
+    assert mid["source_recommended_dose"] == "2.25 g IV q6h" and "Zosyn" in mid["label_rule"]["source"]
+    low = call(env, "get_renal_dose_adjustment", drug="piperacillin and tazobactam", renal_value=12, metric="crcl")
+    assert low["recommended_dose"].startswith("2.25 g IV q8h") and "2.25 g IV q6h for the 4.5 g" in low["recommended_dose"]
+    normal = call(env, "get_renal_dose_adjustment", drug="piperacillin and tazobactam", renal_value=60, metric="crcl")
+    assert normal["recommended_dose"] == "3.375-4.5 g IV q6h" and "label_rule" not in normal
+    # every band names a tier of the built table, so a changed table cannot drop a label regimen silently
+    db = di_env.load_db()
+    for drug, bands in L.RENAL_LABEL_DOSES.items():
+        tiers = {(t.min, t.max) for t in db.renal_profiles[drug].tiers}
+        assert {(b.min, b.max) for b in bands} <= tiers, (drug, tiers)
+
+
 def test_hepatic_policy(env, raw_drugdose):
     assert raw_drugdose["morphine"]["hepatic_caution"] is True
     assert call(env, "check_hepatic_adjustment", drug="morphine", child_pugh_class="B")["recommendation"] == "reduce_dose_and_monitor"

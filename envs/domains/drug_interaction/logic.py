@@ -519,10 +519,43 @@ RENAL_LABEL_RULES: dict[str, RenalLabelRule] = {
 }
 
 
+@dataclass(frozen=True)
+class RenalLabelDose:
+    """A renal band whose regimen the US label gives per indication where open-medicine's table gives one:
+    `dose` replaces the table's text for the band [min, max] (the table's metric, which is the label's)."""
+    min: float
+    max: float | None
+    dose: str
+    label: str
+    statement: str
+
+
+_ZOSYN_RENAL = ("Zosyn (piperacillin and tazobactam) USPI 2 DOSAGE AND ADMINISTRATION, dosage in adult patients with "
+                "renal impairment (table: all indications except nosocomial pneumonia / nosocomial pneumonia)")
+
+# Bands where one regimen in the table stands for two in the label. Piperacillin-tazobactam: the table's
+# normal dose is "3.375-4.5 g q6h" but its reduced bands carry only the 3.375 g regimen's reduction; the
+# 4.5 g q6h regimen (nosocomial pneumonia, and the antipseudomonal dose ATS/IDSA 2019 gives for pneumonia
+# with P. aeruginosa risk) reduces to 3.375 g q6h at CrCl 20-40 and 2.25 g q6h below 20.
+RENAL_LABEL_DOSES: dict[str, tuple[RenalLabelDose, ...]] = {
+    "piperacillin and tazobactam": (
+        RenalLabelDose(20, 40, "2.25 g IV q6h (3.375 g IV q6h for the 4.5 g q6h regimen: nosocomial pneumonia)",
+                       _ZOSYN_RENAL, "creatinine clearance 20-40 mL/min: 2.25 g every 6 hours, nosocomial pneumonia "
+                       "3.375 g every 6 hours"),
+        RenalLabelDose(0, 19, "2.25 g IV q8h (2.25 g IV q6h for the 4.5 g q6h regimen: nosocomial pneumonia)",
+                       _ZOSYN_RENAL, "creatinine clearance below 20 mL/min: 2.25 g every 8 hours, nosocomial "
+                       "pneumonia 2.25 g every 6 hours"),
+    ),
+}
+
+
 def renal_label_tiers(profile: RenalProfile) -> list[dict]:
-    """The drug's renal tiers (highest band first) with its label rule applied: a tier inside the rule's
-    band takes the label's level and wording; the package's own are kept as `source_*`."""
+    """The drug's renal tiers (highest band first) with its label rules applied: a tier inside a
+    contraindication rule's band takes the label's level and wording (RENAL_LABEL_RULES), a band whose
+    regimen the label gives per indication takes the label's regimens (RENAL_LABEL_DOSES); the package's
+    own are kept as `source_*`."""
     rule = RENAL_LABEL_RULES.get(profile.drug_id)
+    doses = {(d.min, d.max): d for d in RENAL_LABEL_DOSES.get(profile.drug_id, ())}
     out = []
     for tier in profile.tiers:
         row = tier.model_dump()
@@ -531,6 +564,10 @@ def renal_label_tiers(profile: RenalProfile) -> list[dict]:
             row.update(source_adjustment_type=tier.adjustment_type, source_dose=tier.dose,
                        adjustment_type=rule.level, dose=rule.dose,
                        label_rule={"source": rule.label, "statement": rule.statement})
+        elif (tier.min, tier.max) in doses:
+            dose = doses[(tier.min, tier.max)]
+            row.update(source_adjustment_type=tier.adjustment_type, source_dose=tier.dose, dose=dose.dose,
+                       label_rule={"source": dose.label, "statement": dose.statement})
         out.append(row)
     return out
 
