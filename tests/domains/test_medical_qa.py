@@ -16,6 +16,7 @@ from envs.validate import check_domain_contamination
 from envs.core.tools import ToolError
 from envs.domains.medical_qa import build as mqa_build
 from envs.domains.medical_qa.data_model import MedicalQADB, QAQuestion
+from envs.domains.medical_qa.generate import disease_family
 from envs.domains.medical_qa.knowledge import load_knowledge, norm
 from envs.domains.medical_qa.tools import MedicalQATools
 
@@ -98,6 +99,14 @@ def test_hpo_tools(tools):
     assert "OMIM:154700" in {r["disease_id"] for r in found}
     with pytest.raises(ToolError, match="HPO phenotype"):
         use(tools, "lookup_hpo_term", term="not a phenotype at all")
+
+
+def test_disease_family_reads_the_words_before_a_subtype():
+    assert disease_family("Glycogen storage disease Ia") == disease_family(
+        "Glycogen storage disease due to glucose-6-phosphatase deficiency") == "glycogen storage disease"
+    assert disease_family("Cardiomyopathy, familial hypertrophic, 14") == "cardiomyopathy familial hypertrophic"
+    assert disease_family("Costello syndrome") == "costello syndrome"
+    assert disease_family("Costello syndrome") != disease_family("Stuve-Wiedemann syndrome")
 
 
 def test_drug_tools(tools):
@@ -198,6 +207,9 @@ def test_generated_answers_follow_from_the_data(tasks, kb):
                     other = kb.resolve_disease(name)[0]
                     covered = sum(kb.phenotype_match(other, h)[0] != "none" for h in meta["phenotypes"])
                     assert covered <= len(meta["phenotypes"]) // 2, (t.id, name)
+                    # no distractor of the answer's own family (mqa_hpo_dx_ORPHA_364 offered "Glycogen storage
+                    # disease Ia", one of the answer's two types, beside the answer)
+                    assert disease_family(name) != disease_family(gold), (t.id, name, gold)
         elif tt == "hpo_inheritance":
             assert kb.diseases[meta["disease_id"]]["inheritance"] == [gold]
         elif tt == "drug_class":

@@ -166,6 +166,21 @@ def _informative_terms(kb: MedicalKnowledge, did: str) -> list[tuple[str, float]
     return out
 
 
+# A name token that starts a disease's subtype or cause ("type", "due to", "Ia", "III", "2", "B"): the words
+# before it name the family, e.g. "glycogen storage disease" for both "Glycogen storage disease Ia" (OMIM) and
+# "Glycogen storage disease due to glucose-6-phosphatase deficiency" (Orphanet, types a and b).
+_SUBTYPE_TOKEN = re.compile(r"^(type|due|[ivx]+[a-z]?|\d+[a-z]?|[a-z])$")
+
+
+def disease_family(name: str) -> str:
+    """The family words of a disease name (at least two words before a subtype token), else the whole name."""
+    tokens = norm(name).split()
+    for i, tok in enumerate(tokens):
+        if i >= 2 and _SUBTYPE_TOKEN.match(tok):
+            return " ".join(tokens[:i])
+    return " ".join(tokens)
+
+
 def hpo_diagnosis_tasks(kb: MedicalKnowledge, rng: random.Random, n: int, used: set[str]) -> list[dict]:
     candidates = sorted(d for d, rec in kb.diseases.items()
                         if len(rec["phenotypes"]) >= 10 and len(rec["name"]) <= 70 and len(kb.disease_by_name[norm(rec["name"])]) == 1)
@@ -205,6 +220,7 @@ def hpo_diagnosis_tasks(kb: MedicalKnowledge, rng: random.Random, n: int, used: 
                 if other != did:
                     shared[other] += 1
         name_key = norm(kb.diseases[did]["name"])
+        family = disease_family(kb.diseases[did]["name"])
         limit = len(chosen) // 2
         scored = []
         names_seen = {name_key}
@@ -214,6 +230,11 @@ def hpo_diagnosis_tasks(kb: MedicalKnowledge, rng: random.Random, n: int, used: 
         for other, count in ranked:
             oname = norm(kb.diseases[other]["name"])
             if oname in names_seen or count > limit:
+                continue
+            # a disease of the answer's family may be the answer itself under another source's name (OMIM's
+            # "Glycogen storage disease Ia" is one of Orphanet's "glycogen storage disease due to glucose-6-
+            # phosphatase deficiency" types), so it is no distractor
+            if disease_family(oname) == family:
                 continue
             cov = _coverage(kb, other, chosen)
             # a distractor's name must not also name a disease that covers more of the features (OMIM and
