@@ -244,11 +244,24 @@ def test_no_generated_thyroid_nodule_has_an_impossible_tirads_combination(radiol
     {"composition": "cystic", "echogenicity": "anechoic", "shape": "wider_than_tall", "margin": "smooth", "echogenic_foci": ["punctate"]},
     {"composition": "spongiform", "echogenicity": "very_hypoechoic", "shape": "wider_than_tall", "margin": "smooth",
      "echogenic_foci": ["none"]},
+    # ACR TI-RADS: reconsider "spongiform" with suspicious echogenic foci (RAD-126 read spongiform with punctate foci)
+    {"composition": "spongiform", "echogenicity": "isoechoic", "shape": "wider_than_tall", "margin": "smooth",
+     "echogenic_foci": ["macrocalcifications", "punctate"]},
+    {"composition": "spongiform", "echogenicity": "hyperechoic", "shape": "wider_than_tall", "margin": "smooth",
+     "echogenic_foci": ["peripheral_rim"]},
 ])
 def test_impossible_tirads_combinations_are_named(feats):
     from envs.domains.radiology_report import generate as G
 
     assert G.tirads_implausibility(feats)
+
+
+def test_a_spongiform_nodule_with_comet_tails_or_no_foci_is_plausible():
+    from envs.domains.radiology_report import generate as G
+
+    for foci in (["none"], ["large_comet_tail"]):
+        assert G.tirads_implausibility({"composition": "spongiform", "echogenicity": "isoechoic", "shape": "wider_than_tall",
+                                        "margin": "smooth", "echogenic_foci": foci}) is None
 
 
 # -- clinical_diagnosis: rare-disease vignettes the differential identifies -------------------------------

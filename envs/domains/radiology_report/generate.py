@@ -96,7 +96,11 @@ def tirads_implausibility(feats: dict) -> str | None:
     ill-defined margin, taller-than-wide shape, punctate foci, macro- or rim calcification); a
     spongiform nodule (> 50 % small cystic spaces) is iso- or hyperechoic, with smooth or
     ill-defined margins and no extrathyroidal extension; large comet-tail artefacts arise in
-    colloid within cystic spaces, so not in a solid nodule.
+    colloid within cystic spaces, so not in a solid nodule. Spongiform is the benign appearance
+    that takes no further points (Tessler 2017), and ACR's TI-RADS guidance is to reconsider
+    "spongiform" where there are suspicious echogenic foci: a spongiform nodule carries no
+    point-scoring foci (macrocalcifications, rim calcification, punctate foci), only none or
+    comet-tail artefacts.
     """
     comp, echo, margin, shape, foci = (feats["composition"], feats["echogenicity"], feats["margin"], feats["shape"],
                                        set(feats["echogenic_foci"]))
@@ -114,6 +118,8 @@ def tirads_implausibility(feats: dict) -> str | None:
             return f"a spongiform nodule that is {echo!r}"
         if margin not in ("smooth", "ill_defined"):
             return f"a spongiform nodule with a {margin!r} margin"
+        if foci - {"none", "large_comet_tail"}:
+            return f"a spongiform nodule with echogenic foci {sorted(foci)} (reconsider spongiform)"
     if comp == "solid" and "large_comet_tail" in foci:
         return "large comet-tail artefacts in a solid nodule"
     return None
