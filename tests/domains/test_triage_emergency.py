@@ -3,6 +3,8 @@ handbook import, and the task set (counts, splits, gold replay)."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from envs import registry
@@ -116,6 +118,9 @@ def test_tasks_and_splits(built):
     assert sum(t.description.task_type == "esi_handbook" for t in tasks) == 50
     assert sum(t.description.source == "authored" for t in tasks) >= 20
     assert {t.emergency for t in tasks} >= {"stemi", "stroke", "sepsis"}
+    # each GCS vignette reads "a patient <verb> ..., <verb> ... and <verb> ..." (E1 once read "a patient no eye opening")
+    gcs = [t.ticket for t in tasks if t.description.task_type == "calc_gcs"]
+    assert gcs and all(re.match(r"After a head injury a patient (opens|does not open) ", tk) for tk in gcs), gcs[:3]
 
 
 def test_gold_replay_and_calculator_answers(built, monkeypatch):

@@ -314,7 +314,7 @@ def _task(kind: str, idx: int, ticket: str, tool: str, args: dict, value: float,
     )
 
 
-EYE = {4: "opens eyes spontaneously", 3: "opens eyes to voice", 2: "opens eyes only to pressure", 1: "no eye opening"}
+EYE = {4: "opens eyes spontaneously", 3: "opens eyes to voice", 2: "opens eyes only to pressure", 1: "does not open the eyes"}
 VERBAL = {5: "is oriented", 4: "is confused", 3: "says inappropriate words", 2: "makes only sounds", 1: "makes no sound"}
 MOTOR = {6: "obeys commands", 5: "localises to pain", 4: "withdraws from pain", 3: "flexes abnormally to pain",
          2: "extends to pain", 1: "has no motor response"}
