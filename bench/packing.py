@@ -15,7 +15,12 @@ length (`modeling.model.split_by_length`, the learner's `optim.micro_batch_order
 micro-batch padded or packed as `pack_sequences: auto` decides on CPU; prints both padding fractions and
 the whole batch's forward + backward time, and the ratio, on the tiny and the wider model.
 
-    .venv/bin/python bench/packing.py [--only packing|micro-batches]
+With `--run RUN_DIR` (a finished `hcgym train` run, e.g. the demo's): its steps' batches (trajectories
+and the teacher log-probs stored with them) are trained again from RUN_DIR/model/sft by two learners of
+the run's config, micro-batches in batch order and by length, alternating which goes first; prints
+each step's padding fraction and learner time (reference forwards, forward + backward) of both.
+
+    .venv/bin/python bench/packing.py [--only packing|micro-batches] [--run RUN_DIR]
 """
 
 from __future__ import annotations
@@ -95,11 +100,58 @@ def micro_batches(models: dict) -> None:
               f"by length / batch order = {index_s / length_s:.2f}x")
 
 
+def replay_run(run_dir: Path) -> None:
+    """Train a run's stored batches again with micro-batches in batch order and by length (see the module doc)."""
+    from actors.types import TeacherBatch, TeacherOutput
+    from learner.config import load_config
+    from learner.learner_actor import Learner
+    from learner.metrics import read_samples
+
+    cfg = load_config(str(run_dir / "config.yaml"), [])
+    steps = []
+    for path in sorted((run_dir / "trajectories").glob("step_*.parquet")):
+        samples, extras = read_samples(path)
+        samples = [s for s in samples if extras[s.sample_id]["accepted"]]
+        teacher = None
+        if cfg.learner.loss.distill.enabled:
+            teacher = TeacherBatch(outputs=[TeacherOutput(
+                sample_id=s.sample_id, teacher_version=int(extras[s.sample_id]["teacher_version"]),
+                hint=extras[s.sample_id]["teacher_hint"] or "none", input_length=len(s.input_ids),
+                logprobs=list(extras[s.sample_id]["teacher_logprobs"])) for s in samples])
+        steps.append((path.stem, samples, teacher))
+    if not steps:
+        raise FileNotFoundError(f"{run_dir}/trajectories: no step_*.parquet to replay")
+    learners = {}
+    for order in ("index", "length"):
+        learner_cfg = cfg.learner.model_copy(deep=True)
+        learner_cfg.optim.micro_batch_order = order
+        learners[order] = Learner(learner_cfg, str(run_dir / "model" / "sft"), cfg.seed)
+    print(f"{run_dir}: micro-batches of {cfg.learner.optim.micro_batch_size}, pack_sequences "
+          f"{cfg.learner.pack_sequences}; seconds: learner (reference forwards, forward + backward)")
+    totals = {"index": 0.0, "length": 0.0}
+    for k, (name, samples, teacher) in enumerate(steps):
+        lengths = sorted(len(s.input_ids) for s in samples)
+        line = []
+        for order in (("index", "length") if k % 2 == 0 else ("length", "index")):
+            m = learners[order].train_step(samples, teacher, step=k + 1)
+            totals[order] += m["learner_s"]
+            line.append(f"{order}: padding {m['learner_padding_frac']:.1%}, {m['learner_s']:.2f} s "
+                        f"({m['learner_ref_s']:.2f}, {m['learner_forward_backward_s']:.2f})")
+        print(f"  {name}: {len(samples)} samples, {lengths[0]} ... {lengths[-1]} tokens; " + "; ".join(line))
+    print(f"  learner time by length / batch order: {totals['length'] / totals['index']:.2f}")
+    for learner in learners.values():
+        learner.shutdown()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", choices=("packing", "micro-batches"), help="run one of the two measurements")
+    parser.add_argument("--run", type=Path, help="replay this run's batches in batch order and by length, only")
     args = parser.parse_args()
     torch.manual_seed(0)
+    if args.run is not None:
+        replay_run(args.run)
+        return
     root = Path(tempfile.mkdtemp(prefix="bench_packing_"))
     tok = train_tokenizer(["the patient was given warfarin and aspirin"] * 200, 512, root / "tok", max_stdlib_files=5)
     sizes = {"tiny (hidden 64, 2 layers)": dict(hidden_size=64, intermediate_size=128, num_hidden_layers=2,
