@@ -131,6 +131,10 @@ def thyroid_study(sid: str, rng: random.Random, want_level: int | None) -> tuple
         feats = {"composition": comp, "echogenicity": rng.choice(ECHO), "shape": rng.choice(["wider_than_tall"] * 3 + ["taller_than_wide"]),
                  "margin": rng.choice(MARGIN), "echogenic_foci": rng.choice(FOCI)}
         dims = sorted([round(rng.uniform(0.4, 3.2), 1) for _ in range(3)], reverse=True)
+        if comp == "spongiform" and set(feats["echogenic_foci"]) - {"none", "large_comet_tail"}:
+            # a spongiform nodule has no point-scoring foci (tirads_implausibility); set, not redrawn, so every
+            # other study keeps its draws (spongiform scores TR1 whatever the foci)
+            feats["echogenic_foci"] = ["none"]
         if tirads_implausibility(feats):
             continue
         res = CALCULATORS["calculate_tirads"](**feats, max_diameter_cm=dims[0])
