@@ -89,7 +89,8 @@ class Teacher:
             "corrective": self._encode(hints.template.format(hint=hints.corrective)),
         }
         self._gen_prompt_ids = self._encode(GENERATION_PROMPT)
-        # Request bookkeeping: pending (FIFO, requested ids jump the queue), done, failed.
+        # Request bookkeeping: pending (oldest first, with its neighbours in length under batch_order: length;
+        # requested ids jump the queue), done, failed.
         self._cv = threading.Condition()
         self._weights_lock = threading.RLock()
         self._pending: OrderedDict[str, RolloutSample] = OrderedDict()
