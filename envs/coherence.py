@@ -19,7 +19,7 @@ import json
 import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from datetime import date, datetime
+from datetime import date, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -513,6 +513,54 @@ def _order_status_matches_clock(s: Subject):
             if m.get("status") == "active" and m.get("stop") and _t(m["stop"]) <= now:
                 yield (("medication_orders.status", "medication_orders.stop", "clock"),
                        f"order {m['order_id']} is 'active' but stopped at {m['stop']}, before the record clock {clock}")
+
+
+# JBDS-IP, The Management of Diabetic Ketoacidosis in Adults (revised June 2021; Dhatariya, Diabet Med 2022;39:e14788):
+# DKA is bicarbonate below 15 mmol/L and/or venous pH below 7.3; the fixed-rate IV insulin infusion continues until it
+# has resolved, and subcutaneous insulin is started (with a meal) before the infusion stops. A day after the charted
+# resolution covers the wait for a meal and the overlap; an infusion still running then contradicts the chart.
+DKA_RESOLVED_PH = 7.3
+DKA_RESOLVED_BICARBONATE = 15.0
+DKA_TRANSFER_WINDOW = timedelta(hours=24)
+
+
+def _dka_resolved_at(adm: dict) -> datetime | None:
+    """The first charted time with pH above 7.3 and bicarbonate at least 15 in a DKA admission, else None."""
+    if "ketoacidosis" not in str(adm.get("admission_diagnosis", "")).lower():
+        return None
+    by_time: dict[str, dict[str, Any]] = {}
+    for lab in adm.get("lab_events") or []:
+        by_time.setdefault(lab["time"], {})[lab.get("test")] = lab.get("value")
+    resolved = sorted(t for t, v in by_time.items() if (v.get("ph_arterial") or 0) > DKA_RESOLVED_PH
+                      and (v.get("bicarbonate") or 0) >= DKA_RESOLVED_BICARBONATE)
+    return _t(resolved[0]) if resolved else None
+
+
+@rule("dka_insulin_infusion_stops_after_resolution",
+      "a DKA admission's IV insulin infusion, the labs that show the ketoacidosis resolved, subcutaneous insulin and "
+      "the record clock",
+      "JBDS-IP DKA in adults (2021): DKA is bicarbonate < 15 mmol/L and/or venous pH < 7.3; the fixed-rate IV insulin "
+      "infusion continues until DKA has resolved and stops once subcutaneous insulin has been given with a meal",
+      ("ehr_management",))
+def _dka_insulin_infusion(s: Subject):
+    clock = s.context.get("clock")
+    for adm in (s.record or {}).get("admissions") or []:
+        resolved = _dka_resolved_at(adm)
+        if resolved is None:
+            continue
+        orders = adm.get("medication_orders") or []
+        subcutaneous = [_t(m["start"]) for m in orders if "insulin" in m["drug"].lower() and m.get("route") == "subcutaneous"]
+        for m in orders:
+            if "insulin" not in m["drug"].lower() or m.get("route") != "iv":
+                continue
+            stop = _t(m["stop"]) if m.get("stop") else None
+            if clock and (stop is None or stop > _t(clock)) and _t(clock) - resolved > DKA_TRANSFER_WINDOW:
+                yield (("medication_orders.status", "lab_events", "clock"),
+                       f"order {m['order_id']} ({m['drug']}) runs at the record clock {clock}, over a day after the "
+                       f"ketoacidosis resolved at {resolved:{_FMT}}")
+            if stop is not None and not any(start <= stop for start in subcutaneous):
+                yield (("medication_orders.stop", "medication_orders.route"),
+                       f"order {m['order_id']} ({m['drug']}) stopped at {m['stop']} with no subcutaneous insulin started")
 
 
 @rule("sex_factor_matches_sex", "a creatinine-clearance task's stated sex factor and the patient's sex",

@@ -30,6 +30,20 @@ def _icu(gcs: int, *, status: str = "completed", stop: str = "2025-03-01T15:00")
                                "status": status}]}]}
 
 
+def _dka(stop: str | None, subcutaneous: bool = True) -> dict:
+    """EHR-008 as it was (the infusion running four days after pH 7.34, bicarbonate 20) or as it is now."""
+    labs = [{"time": t, "test": k, "value": v} for t, ph, hco3 in (("2025-02-28T21:00", 7.24, 18.0),
+                                                                  ("2025-03-01T09:00", 7.34, 20.0))
+            for k, v in (("ph_arterial", ph), ("bicarbonate", hco3))]
+    orders = [{"order_id": "MED-1", "drug": "insulin regular infusion", "route": "iv", "start": "2025-02-27T07:00",
+               "stop": stop, "status": "active" if stop is None else "completed"}]
+    if subcutaneous:
+        orders.append({"order_id": "MED-5", "drug": "insulin aspart", "route": "subcutaneous",
+                       "start": "2025-03-01T12:00", "status": "active"})
+    return {"name": "Hugo Eriks", "sex": "male", "admissions": [{"admission_diagnosis": "diabetic ketoacidosis",
+                                                                  "lab_events": labs, "medication_orders": orders}]}
+
+
 def _breast(indication: str, exam: str, description: str, shape: str = "oval", margin: str = "circumscribed",
             stable: bool = False) -> dict:
     return {"region": "breast", "indication": indication, "exam": exam, "exam_complete": True, "prior": None,
@@ -92,6 +106,8 @@ CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] =
                                 (_news2_task("2025-03-01T11:00"), _icu(10), ICU_CLOCK)),
     "order_status_matches_clock": ("ehr_management", (_task(), _icu(10, status="active"), ICU_CLOCK),
                                    (_task(), _icu(10, status="completed"), ICU_CLOCK)),
+    "dka_insulin_infusion_stops_after_resolution": ("ehr_management", (_task(), _dka(stop=None), ICU_CLOCK),
+                                                    (_task(), _dka(stop="2025-03-01T13:00"), ICU_CLOCK)),
     "sex_factor_matches_sex": ("drug_interaction",
                                (_task(description={"key_challenges": ["Female sex factor 0.85."]}), {"sex": "male"}, {}),
                                (_task(description={"key_challenges": ["No sex factor for a man."]}), {"sex": "male"}, {})),
@@ -124,6 +140,15 @@ def test_a_patient_brought_in_is_not_seen_by_telehealth():
     reason = {"chief_complaint": "brought in by family after a crisis"}
     assert check_subject(Subject("psychiatry", _task(), {**reason, "setting": "telehealth follow-up"}), rule)
     assert check_subject(Subject("psychiatry", _task(), {**reason, "setting": "emergency department"}), rule) == []
+
+
+def test_a_dka_insulin_infusion_stops_only_after_resolution_and_subcutaneous_insulin():
+    rule = [RULES["dka_insulin_infusion_stops_after_resolution"]]
+    # stopped with no subcutaneous insulin started: rebound ketoacidosis (JBDS-IP)
+    bare = check_subject(Subject("ehr_management", _task(), _dka("2025-03-01T13:00", subcutaneous=False), ICU_CLOCK), rule)
+    assert [v.fields for v in bare] == [("medication_orders.stop", "medication_orders.route")]
+    # within a day of the charted resolution the infusion may still run
+    assert check_subject(Subject("ehr_management", _task(), _dka(None), {"clock": "2025-03-02T08:00"}), rule) == []
 
 
 def test_a_first_name_in_neither_list_is_reported():
