@@ -574,6 +574,30 @@ def _sex_factor_matches_sex(s: Subject):
 
 
 
+# A renal dosing task plans a drug for the patient; the generator states the reason it drew it with this prefix.
+RENAL_INDICATION_PREFIX = "Indication on the record: "
+
+
+@rule("renal_drug_has_indication", "a renal dosing task's planned drug and the patient's conditions or the "
+      "indication of an active order for that drug",
+      "each drug's US label, section 1 INDICATIONS AND USAGE (the generator's table, drug_interaction/generate.py "
+      "RENAL_INDICATIONS): a drug is planned for a condition on the record, not drawn on its own",
+      ("drug_interaction",))
+def _renal_drug_has_indication(s: Subject):
+    if s.task.description.task_type != "renal_adjustment_patient":
+        return
+    drug = next((a.get("drug") for a in _action_args(s.task, "get_renal_dose_adjustment") if a.get("drug")), None)
+    rec = s.record or {}
+    stated = next((c[len(RENAL_INDICATION_PREFIX):].rstrip(".") for c in s.task.description.key_challenges
+                   if c.startswith(RENAL_INDICATION_PREFIX)), None)
+    reasons = set(rec.get("conditions") or []) | {m.get("indication") for m in rec.get("medications") or []
+                                                   if m.get("drug_id") == drug and m.get("status") == "active"}
+    if stated is None or stated not in reasons:
+        yield (("key_challenges", "conditions", "medications"),
+               f"{drug} planned for {rec.get('patient_id', s.task.patient_id)} with no indication on the record "
+               f"(stated: {stated!r})")
+
+
 @rule("vignette_matches_arguments", "the age and sex a ticket states and the same values in the gold tool call",
       "record consistency (no guideline): the gold answer is computed from the person the ticket describes")
 def _vignette_matches_arguments(s: Subject):

@@ -44,6 +44,20 @@ def _dka(stop: str | None, subcutaneous: bool = True) -> dict:
                                                                   "lab_events": labs, "medication_orders": orders}]}
 
 
+# P014 as drug_interaction's record has it: nothing on it is treated with methotrexate
+P014 = {"patient_id": "P014", "sex": "female", "conditions": ["Alzheimer dementia", "overactive bladder", "insomnia",
+                                                           "hypertension"],
+        "medications": [{"drug_id": "amlodipine", "indication": "hypertension", "status": "active"}]}
+
+
+def _renal_task(drug: str, indication: str | None) -> Task:
+    challenges = ["The label metric (CrCl or eGFR) decides which value to use."]
+    challenges += [f"Indication on the record: {indication}."] if indication else []
+    return _task(patient_id="P014", description={"task_type": "renal_adjustment_patient", "key_challenges": challenges},
+                 evaluation_criteria={"actions": [{"name": "get_renal_dose_adjustment",
+                                                   "arguments": {"drug": drug, "patient_id": "P014"}}]})
+
+
 def _breast(indication: str, exam: str, description: str, shape: str = "oval", margin: str = "circumscribed",
             stable: bool = False) -> dict:
     return {"region": "breast", "indication": indication, "exam": exam, "exam_complete": True, "prior": None,
@@ -108,6 +122,8 @@ CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] =
                                    (_task(), _icu(10, status="completed"), ICU_CLOCK)),
     "dka_insulin_infusion_stops_after_resolution": ("ehr_management", (_task(), _dka(stop=None), ICU_CLOCK),
                                                     (_task(), _dka(stop="2025-03-01T13:00"), ICU_CLOCK)),
+    "renal_drug_has_indication": ("drug_interaction", (_renal_task("methotrexate", None), P014, {}),
+                                  (_renal_task("spironolactone", "hypertension"), P014, {})),
     "sex_factor_matches_sex": ("drug_interaction",
                                (_task(description={"key_challenges": ["Female sex factor 0.85."]}), {"sex": "male"}, {}),
                                (_task(description={"key_challenges": ["No sex factor for a man."]}), {"sex": "male"}, {})),

@@ -320,8 +320,10 @@ def test_generated_renal_tasks_follow_the_label_rules():
 
     tasks = [t for s in E.get_splits() for t in E.get_tasks(s) if t.description.task_type == "renal_adjustment_patient"]
     drug = {t.id: t.id.split("-", 4)[4] for t in tasks}
+    # no patient with a reason for lithium, methotrexate or spironolactone has a renal function in their
+    # "avoid" band (the tool's label level there is tested above); any such task must cite the label
     avoided = [t for t in tasks if t.correct_answer == "avoid"]
-    assert avoided and {drug[t.id] for t in avoided} <= {"lithium", "methotrexate", "spironolactone"}
+    assert {drug[t.id] for t in avoided} <= {"lithium", "methotrexate", "spironolactone"}
     assert all("no renal contraindication" in t.description.provenance["guideline"] for t in avoided)
     contraindicated = [t for t in tasks if t.correct_answer == "contraindicated"]
     assert contraindicated and {drug[t.id] for t in contraindicated} <= {"metformin", "sotalol"}

@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import hashlib
 import random
+import re
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from envs.coherence import RENAL_INDICATION_PREFIX
 from envs.core.task import EvaluationCriteria, ExpectedAction, Task, TaskDescription
 
 from . import logic as L
@@ -117,6 +119,43 @@ def guideline_for(db: DrugInteractionDB, task_type: str, results: list[Any]) -> 
     if not cited and task_type in TYPE_SOURCES:
         cited.append(TYPE_SOURCES[task_type])
     return "; ".join(cited)
+
+
+# What each renal-table drug is for, from its US label's section 1 INDICATIONS AND USAGE: a renal task plans a
+# drug only for a patient whose record has one of these conditions (or already takes the drug for its stated
+# indication). Drugs whose indications no patient has (acyclovir, the antibiotics, morphine...) are not drawn.
+RENAL_INDICATIONS: dict[str, tuple[str, str]] = {
+    "allopurinol": ("Zyloprim INDICATIONS AND USAGE (signs and symptoms of primary or secondary gout)", r"\bgout"),
+    "colchicine": ("Colcrys 1 INDICATIONS AND USAGE (prophylaxis and treatment of gout flares; familial "
+                   "Mediterranean fever)", r"\bgout"),
+    "dapagliflozin": ("Farxiga 1 INDICATIONS AND USAGE (type 2 diabetes; heart failure; chronic kidney disease)",
+                      r"type 2 diabetes|heart failure|chronic kidney disease"),
+    "digoxin": ("Lanoxin 1 INDICATIONS AND USAGE (heart failure in adults; ventricular rate control in chronic atrial "
+                "fibrillation)", r"heart failure|atrial fibrillation"),
+    "sacubitril/valsartan": ("Entresto 1 INDICATIONS AND USAGE (chronic heart failure in adults)", r"heart failure"),
+    "spironolactone": ("Aldactone 1 INDICATIONS AND USAGE (heart failure; add-on for hypertension; edema of cirrhosis "
+                       "or nephrotic syndrome; primary hyperaldosteronism)", r"heart failure|hypertension|ascites"),
+    "pregabalin": ("Lyrica 1 INDICATIONS AND USAGE (neuropathic pain of diabetic peripheral neuropathy; postherpetic "
+                   "neuralgia; fibromyalgia; adjunct for partial-onset seizures)",
+                   r"painful neuropathy|post-herpetic neuralgia|focal epilepsy"),
+    "gabapentin": ("Neurontin INDICATIONS AND USAGE (postherpetic neuralgia; adjunct for partial seizures)",
+                   r"post-herpetic neuralgia|focal epilepsy"),
+    "metformin": ("Glucophage 1 INDICATIONS AND USAGE (type 2 diabetes)", r"type 2 diabetes"),
+    "lithium": ("lithium 1 INDICATIONS AND USAGE (bipolar I disorder)", r"bipolar"),
+    "methotrexate": ("methotrexate tablets 1 INDICATIONS AND USAGE (rheumatoid arthritis)", r"rheumatoid arthritis"),
+}
+
+
+def renal_indication(patient, drug_id: str) -> str | None:
+    """The patient's reason for the drug: the indication of an active order for it, else the first of the
+    patient's conditions its label indicates it for (`RENAL_INDICATIONS`); None when the record gives none."""
+    for med in patient.medications:
+        if med.drug_id == drug_id and med.status == "active" and med.indication:
+            return med.indication
+    if drug_id in RENAL_INDICATIONS and not patient.pregnant:
+        pattern = re.compile(RENAL_INDICATIONS[drug_id][1], re.I)
+        return next((c for c in patient.conditions if pattern.search(c)), None)
+    return None
 
 
 @dataclass
@@ -455,19 +494,27 @@ class TaskGenerator:
             if p.age < 18:
                 continue
             for drug_id, profile in sorted(db.renal_profiles.items()):
+                indication = renal_indication(p, drug_id)  # None: no reason on the record to give the drug
                 value = L.cockcroft_gault(p) if profile.metric == "crcl" else L.ckd_epi_2021(p)
                 # stay clear of tier edges so that rounding of the renal function cannot change the tier
                 if any(abs(value - t.min) < 1.0 for t in profile.tiers if t.min > 0):
                     continue
                 tier = L.renal_tier(profile, value)
-                items.append((tier["adjustment_type"], pid, drug_id))
+                items.append((tier["adjustment_type"], pid, drug_id, indication))
         by_type: dict[str, list] = {}
         for item in items:
             by_type.setdefault(item[0], []).append(item)
+        # only a drug the record gives a reason for is planned; the indicated pairs are drawn from a stream of
+        # their own, and the main stream advances as a draw over every pair of the kind, so the task types
+        # drawn after this one keep their draws whatever the indication filter keeps
+        renal_rng = random.Random(f"{SEED}:renal_adjustment_patient")
         for kind, group in sorted(by_type.items()):
-            for _, pid, drug_id in self.sample(sorted(group), 6):
-                ticket = (f"Renal dosing check for {pid}: {drug_id} is planned. Using {pid}'s renal function and the "
-                          f"open-medicine renal table (its contraindicated bands checked against the US label), which "
+            self.sample(sorted(group), 6)
+            indicated = sorted(i for i in group if i[3] is not None)
+            drawn = indicated if len(indicated) <= 6 else renal_rng.sample(indicated, 6)
+            for _, pid, drug_id, indication in drawn:
+                ticket = (f"Renal dosing check for {pid}: {drug_id} is planned ({indication}). Using {pid}'s renal "
+                          f"function and the open-medicine renal table (its contraindicated bands checked against the US label), which "
                           f"adjustment applies? One of: no_adjustment, dose_reduction, interval_extension, "
                           f"use_with_caution, avoid, contraindicated.")
                 self.add(Spec(
@@ -477,7 +524,8 @@ class TaskGenerator:
                            ("get_renal_dose_adjustment", {"drug": drug_id, "patient_id": pid}, ["drug", "patient_id"])],
                     answer=lambda r: r[1]["adjustment_type"], answer_type="category",
                     source="generated:open-medicine+authored-patients", provenance=_prov(self.renal, drug_id),
-                    category="renal dosing", challenges=["The label metric (CrCl or eGFR) decides which value to use."],
+                    category="renal dosing", challenges=["The label metric (CrCl or eGFR) decides which value to use.",
+                                                         RENAL_INDICATION_PREFIX + indication + "."],
                 ))
         for drug_id, profile in sorted(db.renal_profiles.items()):
             tiers = profile.tiers
