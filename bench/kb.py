@@ -315,8 +315,14 @@ class Ours:
         from kb_service.ingest import build_kb, file_input
 
         budget = os.environ.get("HCGYM_BENCH_KB_BUDGET_MB")
-        build_kb([file_input(corpus)], index, progress=False, resume=False, echo=lambda s: None,
-                 memory_budget_mb=int(budget) if budget else None)
+        workers = os.environ.get("HCGYM_BENCH_KB_WORKERS")
+        t0 = time.perf_counter()
+        # --kb-workers: the build's progress lines on stderr, timed, to split the index stage.
+        echo = ((lambda s: print(f"[{time.perf_counter() - t0:7.1f}s] {s}", file=sys.stderr, flush=True))
+                if workers else (lambda s: None))
+        return build_kb([file_input(corpus)], index, progress=False, resume=False, echo=echo,
+                        memory_budget_mb=int(budget) if budget else None,
+                        workers=int(workers) if workers else None)
 
     def __init__(self, index: Path) -> None:
         from kb_service.kb import KnowledgeBase
@@ -490,8 +496,12 @@ ENGINES = {e.name: e for e in (Ours, OursRank, FTS5, Tantivy, BM25S)}
 
 def _build_worker(engine: str, corpus: str, index: str) -> None:
     t = time.perf_counter()
-    ENGINES[engine].build(Path(corpus), Path(index))
-    print(json.dumps({"build_s": time.perf_counter() - t}))
+    summary = ENGINES[engine].build(Path(corpus), Path(index))
+    out = {"build_s": time.perf_counter() - t}
+    if isinstance(summary, dict) and summary.get("bm25_shards"):
+        out["bm25_shards"] = summary["bm25_shards"]
+        out["stage_s"] = summary.get("seconds")
+    print(json.dumps(out))
 
 
 def _available_bytes() -> int:
@@ -501,7 +511,7 @@ def _available_bytes() -> int:
 
 
 def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None = None,
-                 cap_bytes: int | None = None) -> dict:
+                 cap_bytes: int | None = None, workers: int | None = None) -> dict:
     """Build in a child process: its build time, peak RSS (wait4) and size on disk. `cap_bytes`
     limits the child's address space, so that an engine that would need more memory than the
     machine has fails with a MemoryError instead of waking the OOM killer on a shared machine."""
@@ -510,6 +520,8 @@ def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None =
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     if budget_mb:
         env["HCGYM_BENCH_KB_BUDGET_MB"] = str(budget_mb)
+    if workers:
+        env["HCGYM_BENCH_KB_WORKERS"] = str(workers)
     limit = None
     if cap_bytes:
         import resource
@@ -520,7 +532,8 @@ def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None =
     # generator's vocabulary), so measured from here every build would peak at least at ours.
     launch = ("import json, os, subprocess, sys\nproc = subprocess.Popen(sys.argv[1:])\n"
               "_pid, status, usage = os.wait4(proc.pid, 0)\n"
-              "print(json.dumps({'rc': os.waitstatus_to_exitcode(status), 'maxrss_kb': usage.ru_maxrss}))\n")
+              "print(json.dumps({'rc': os.waitstatus_to_exitcode(status), 'maxrss_kb': usage.ru_maxrss,\n"
+              "                  'cpu_s': usage.ru_utime + usage.ru_stime}))\n")
     proc = subprocess.Popen([sys.executable, "-c", launch, sys.executable, __file__, "--worker-build", engine,
                              str(corpus), str(index)], stdout=subprocess.PIPE, env=env, preexec_fn=limit)
     out, _ = proc.communicate()
@@ -532,6 +545,7 @@ def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None =
                            + (f"; address space capped at {cap_bytes / 1024 ** 3:.1f} GB)" if cap_bytes else ")"))
     res = json.loads(lines[-2])
     res["peak_rss_gb"] = measured["maxrss_kb"] / 1024 ** 2
+    res["cpu_s"] = measured.get("cpu_s")  # user + system of the build and every process it waited for
     res["disk_gb"] = sum(f.stat().st_size for f in index.rglob("*") if f.is_file()) / 1024 ** 3
     return res
 
@@ -644,14 +658,64 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reuse", action="store_true",
                     help="reuse indexes kept by an earlier --keep run (their recorded build figures are reported)")
     ap.add_argument("--articles", type=int, default=0, help="also measure the article store with this many articles")
+    ap.add_argument("--kb-workers", default=None, metavar="N,M",
+                    help="measure only our build, once per number of bm25 worker processes listed (build time by "
+                    "stage, peak RSS; no queries): the parallel build against the single-process one")
     args = ap.parse_args(argv)
     sizes = [int(x) for x in str(args.n_passages).split(",") if x.strip()]
+    if args.kb_workers:
+        for n in sizes:
+            run_workers(args, n, [int(w) for w in args.kb_workers.split(",")])
+        return 0
     curve = {}
     for n in sizes:
         curve[n] = run_size(args, n)
     if len(sizes) > 1 or args.profile != "medical":
         scaling_report(curve, args)
     return 0
+
+
+def run_workers(args, n_passages: int, counts: list[int]) -> dict:
+    """Our build with each number of bm25 workers in `counts`, one after the other on one corpus.
+
+    Peak RSS two ways: wait4 of the build process (Linux gives the largest single process of the
+    tree, not a sum) and the build's own account (VmHWM of the build process plus each worker's;
+    the sum bounds what they held together)."""
+    work = Path(args.workdir)
+    work.mkdir(parents=True, exist_ok=True)
+    corpus, _queries = make_corpus(work, n_passages, args.n_queries, args.seed, args.profile)
+    results = {}
+    for w in counts:
+        index = work / f"index-ours-w{w}-{args.profile}-{n_passages}"
+        load = os.getloadavg()
+        print(f"[bench] ours, {w} worker(s), budget {args.memory_budget_mb} MB: building (load average "
+              f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}) ...", flush=True)
+        res = build_engine("ours", corpus, index, budget_mb=args.memory_budget_mb, workers=w)
+        res["load_before"] = load
+        res["load_after"] = os.getloadavg()
+        peak = (res.get("bm25_shards") or {}).get("peak_rss_mb")
+        res["own_peak_sum_mb"] = peak["main"] + sum(peak["workers"]) if peak else None
+        results[w] = res
+        print(f"[bench] ours, {w} worker(s): {res['build_s']:.0f}s (stages {res.get('stage_s')}), "
+              f"{res['disk_gb']:.2f} GB, "
+              f"CPU {res['cpu_s']:.0f}s, peak RSS wait4 {res['peak_rss_gb']:.2f} GB, own account {peak} (load average after "
+              f"{res['load_after'][0]:.1f})", flush=True)
+        if not args.keep:
+            shutil.rmtree(index, ignore_errors=True)
+    base = results[counts[0]]["build_s"]
+    print(f"\n| passages | workers | build | index stage | build peak RSS (wait4) | main + workers' own peaks | "
+          f"time vs {counts[0]} worker(s) |")
+    print("|---|---|---|---|---|---|---|")
+    for w, r in results.items():
+        own = f"{r['own_peak_sum_mb']} MB" if r["own_peak_sum_mb"] else "-"
+        print(f"| {n_passages:,} | {w} | {r['build_s']:.0f} s | {(r.get('stage_s') or {}).get('index', '-')} s | "
+              f"{r['peak_rss_gb']:.2f} GB | {own} | {r['build_s'] / base:.2f}x |")
+    out = work / f"results-workers-{args.profile}-{n_passages}.json"
+    out.write_text(json.dumps({str(k): v for k, v in results.items()}, indent=2))
+    print(f"[bench] results -> {out}", flush=True)
+    if not args.keep_corpus:
+        corpus.unlink(missing_ok=True)
+    return results
 
 
 def run_size(args, n_passages: int) -> dict:

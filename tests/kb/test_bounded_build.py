@@ -4,7 +4,9 @@ index built in memory.
 One seeded corpus is built twice in subprocesses (so that each build's peak RSS is its own,
 read with wait4): once in memory (the single bm25 matrix) and once with
 ``memory_budget_mb`` (the budget below), the latter killed with SIGKILL at three commit points (a bm25
-shard, a weighted shard, a tantivy commit: `kb_service.shards.kill_point`) and resumed each time.
+shard, a weighted shard, a tantivy commit: `kb_service.shards.kill_point`) and resumed each time;
+and once more with 2 bm25 worker processes (`kb_service.parallel_build`) under a budget that
+holds them, killed after its second unit's shard and resumed.
 """
 
 from __future__ import annotations
@@ -54,8 +56,9 @@ sys.path.insert(0, sys.argv[1])
 from kb_service.ingest import build_kb, file_input
 budget = None if sys.argv[4] == "-" else int(sys.argv[4])
 shard_docs = None if sys.argv[5] == "-" else int(sys.argv[5])
+workers = int(sys.argv[6])
 summary = build_kb([file_input(sys.argv[2])], sys.argv[3], progress=False, memory_budget_mb=budget,
-                   shard_docs=shard_docs, echo=print)
+                   shard_docs=shard_docs, echo=print, workers=workers)
 print(json.dumps(summary))
 """
 
@@ -88,13 +91,13 @@ print(json.dumps({"rc": os.waitstatus_to_exitcode(status), "peak_mb": usage.ru_m
 
 
 def _start(corpus: Path, out: Path, budget: int | None, shard_docs: int | None,
-           kill_at: str | None = None) -> subprocess.Popen:
+           kill_at: str | None = None, workers: int = 1) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k != KILL_ENV}
     if kill_at:
         env[KILL_ENV] = kill_at
     return subprocess.Popen([sys.executable, "-c", LAUNCH, sys.executable, "-c", BUILD, str(ROOT), str(corpus),
                              str(out), "-" if budget is None else str(budget),
-                             "-" if shard_docs is None else str(shard_docs)],
+                             "-" if shard_docs is None else str(shard_docs), str(workers)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
 
 
@@ -118,7 +121,14 @@ def builds(tmp_path_factory):
     for kill_at in ("bm25-shard:1", "bm25-final:2", "tantivy:3", None):
         runs[kill_at or "done"] = _finish(_start(corpus, tmp / "bounded", budget, SHARD_DOCS, kill_at))
     runs["memory"] = _finish(in_memory)
-    return {"tmp": tmp, "vocab": vocab, "runs": runs, "budget": budget}
+    # 2 workers: the build process keeps what it holds, each worker gets half of the rest, its own
+    # interpreter included (about what the build process holds); three times the budget leaves each
+    # worker at least the working memory the single-process builds above had.
+    budget2 = 3 * budget
+    for kill_at in ("bm25-shard:1", None):
+        runs["w2-" + (kill_at or "done")] = _finish(_start(corpus, tmp / "bounded2", budget2, SHARD_DOCS, kill_at,
+                                                           workers=2))
+    return {"tmp": tmp, "vocab": vocab, "runs": runs, "budget": budget, "budget2": budget2}
 
 
 def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
@@ -132,7 +142,7 @@ def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
         assert rc == -9, f"the build was to be killed at {kill_at}; exit {rc}:\n{out}"
     assert runs["done"][0] == 0, runs["done"][2]
     # ... and every process of the bounded build, the killed ones included, stayed within it.
-    peaks = {k: round(v[1]) for k, v in runs.items() if k != "memory"}
+    peaks = {k: round(v[1]) for k, v in runs.items() if k != "memory" and not k.startswith("w2-")}
     assert max(peaks.values()) < builds["budget"], (peaks, builds["budget"])
     # Each resumed at the commit its predecessor was killed after, and did not redo it.
     first = runs["bm25-shard:1"][2]
@@ -150,16 +160,46 @@ def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
     assert summary["bm25_shards"] == {"shard_docs": SHARD_DOCS, "shards": 5, "memory_budget_mb": builds["budget"]}
 
 
+def test_parallel_build_resumes_its_units_under_the_budget(builds):
+    runs = builds["runs"]
+    rc, _peak, killed = runs["w2-bm25-shard:1"]
+    assert rc == -9, f"the 2-worker build was to be killed after its second shard; exit {rc}:\n{killed}"
+    assert "2 workers (bm25 units, the tantivy pass) with" in killed
+    assert "5 unit(s) of passages and the tantivy pass on 2 worker process(es)" in killed
+    first = set(re.findall(r"bm25 unit (\d) shard-00000: passages [\d,-]+ committed", killed))
+    assert len(first) >= 2, killed
+    rc, _peak, last = runs["w2-done"]
+    assert rc == 0, last
+    # Units committed before the kill are not rebuilt: each says where it resumes; the others commit now.
+    resumed = set(re.findall(r"bm25 unit-0000(\d): resuming after 1 committed shard", last))
+    built = set(re.findall(r"bm25 unit (\d) shard-00000: passages [\d,-]+ committed", last))
+    assert resumed >= first and not resumed & built and resumed | built == set("01234"), last
+    summary = json.loads(last.strip().splitlines()[-1])
+    shards = summary["bm25_shards"]
+    assert shards["workers"] == 2 and shards["shards"] == 5, shards
+    # The build process and both workers together stayed within the budget (each process's own
+    # peak, VmHWM, reported by the build; their sum bounds what they held at any one time).
+    peak = shards["peak_rss_mb"]
+    assert peak["main"] + sum(peak["workers"]) < builds["budget2"], (peak, builds["budget2"])
+    assert len(peak["workers"]) == 2 and min(peak["workers"]) > 50, peak
+
+
 def test_bounded_kb_ranks_exactly_as_the_in_memory_index(builds):
     from kb_service.kb import KnowledgeBase
-    from kb_service.shards import ShardedBM25Searcher
 
     tmp = builds["tmp"]
-    single, bounded = KnowledgeBase.open(tmp / "memory"), KnowledgeBase.open(tmp / "bounded")
+    single = KnowledgeBase.open(tmp / "memory")
+    for name in ("bounded", "bounded2"):  # one process; 2 worker processes
+        _assert_same_kb(single, KnowledgeBase.open(tmp / name), tmp / name, builds["vocab"])
+
+
+def _assert_same_kb(single, bounded, path: Path, vocab: list[str]) -> None:
+    from kb_service.shards import ShardedBM25Searcher
+
     assert isinstance(bounded.bm25, ShardedBM25Searcher) and len(bounded.bm25.shards) == 5
-    assert not (tmp / "bounded.building").exists()
+    assert not path.with_name(path.name + ".building").exists()
     # Every passage once: in the store, in the bm25 shards and in tantivy (no duplicates from the resumes).
-    with sqlite3.connect(f"file:{tmp / 'bounded' / 'passages.sqlite'}?mode=ro", uri=True) as db:
+    with sqlite3.connect(f"file:{path / 'passages.sqlite'}?mode=ro", uri=True) as db:
         assert db.execute("SELECT count(*), count(DISTINCT doc_id) FROM passages").fetchone() == (N_DOCS, N_DOCS)
     assert bounded.bm25.num_docs == N_DOCS and bounded.tantivy.num_docs == N_DOCS
     assert bounded.bm25.meta["vocab"] == len(single.bm25.vocab)
@@ -168,7 +208,6 @@ def test_bounded_kb_ranks_exactly_as_the_in_memory_index(builds):
     assert (bounded._category_ids == single._category_ids).all()
 
     rng = random.Random(3)
-    vocab = builds["vocab"]
     hits = 0
     for trial in range(150):
         words = rng.sample(vocab[:200], rng.randint(0, 2)) + rng.sample(vocab, rng.randint(1, 5))
@@ -209,3 +248,19 @@ def test_budget_below_what_the_process_holds_is_refused(tmp_path, capsys):
     args = parser.parse_args(["kb", "build", str(corpus), "--out", str(tmp_path / "kb"), "--memory-budget-mb", "20"])
     assert args.func(args) == 2
     assert "--memory-budget-mb: memory_budget_mb=20 is too small" in capsys.readouterr().err
+    # Workers share the budget: each needs about what this process holds, so 300 MB cannot hold 2.
+    with pytest.raises(ValueError, match=r"memory_budget_mb=300 is too small for workers=2: each bm25 worker gets an "
+                                         r"equal share .* give at least \d+ MB, or workers=1"):
+        build_kb([file_input(corpus)], tmp_path / "kb", progress=False, memory_budget_mb=300, workers=2)
+    args = parser.parse_args(["kb", "build", str(corpus), "--out", str(tmp_path / "kb"), "--memory-budget-mb", "300",
+                              "--workers", "2"])
+    assert args.func(args) == 2
+    assert "--memory-budget-mb / --workers: memory_budget_mb=300 is too small for workers=2" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="workers=2 applies to the sharded build"):
+        build_kb([file_input(corpus)], tmp_path / "kb", workers=2)
+    assert not (tmp_path / "kb.building").exists()
+    # `hcgym kb shard` takes the same budget, refused the same way (before it reads the KB).
+    args = parser.parse_args(["kb", "shard", "--path", str(tmp_path / "kb"), "--shard-docs", "10",
+                              "--memory-budget-mb", "20"])
+    assert args.func(args) == 2
+    assert "hcgym kb shard: --memory-budget-mb: memory_budget_mb=20 is too small" in capsys.readouterr().err

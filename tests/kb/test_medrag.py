@@ -198,9 +198,12 @@ def test_shard_command_on_a_built_kb_ranks_exactly_as_before(kb_dir, kb, tmp_pat
 
     copy = tmp_path / "kb"
     shutil.copytree(kb_dir, copy)
-    assert _hcgym("kb", "shard", "--path", str(copy), "--shard-docs", "97", "--quiet") == 0
+    # Under a budget that these 97-passage shards fit: the shards are those of --shard-docs alone.
+    assert _hcgym("kb", "shard", "--path", str(copy), "--shard-docs", "97", "--memory-budget-mb", "4096",
+                  "--quiet") == 0
     sharded = KnowledgeBase.open(copy)
     assert len(sharded.bm25.shards) == -(-kb.n_passages // 97)
+    assert sharded.manifest["engine"]["bm25_shards"]["memory_budget_mb"] == 4096
     assert not (copy / "bm25" / "data.csc.index.npy").exists()  # the single index is gone
     filters = [{}, {"source": "guidelines"}, {"category": "cardiology"}, {"source": ["wiki", "drugs"]}]
     assert _assert_same_rankings(kb, sharded, seed=9, trials=300, filters=filters) > 250
