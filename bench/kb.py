@@ -32,6 +32,11 @@ built and queried in turn, then one table with every engine's build time, build 
 p50/p99 and q/s and its q/s ratio to bm25s at the same size. `--memory-budget-mb` builds ours as
 a sharded index within that budget; the peers' build processes run under an address-space cap
 (available memory less 2 GB) so that one that needs more fails alone and is reported as failed.
+
+Workers (`hcgym kb build --workers`): `--kb-workers 1,2` builds ours once per number of worker
+processes listed, one after the other on one corpus, and reports build time, CPU time (user +
+system of the build and its workers, from wait4), peak RSS (wait4: the largest process) and the
+build's own account of each process's peak; no queries.
 """
 
 from __future__ import annotations
