@@ -100,6 +100,30 @@ def test_ticagrelor_with_a_strong_cyp3a_inhibitor_takes_the_brilinta_level(env):
     assert errors == [] and not [v.pattern_id for v in violations if v.severity >= 5], violations
 
 
+def _authored(task_id: str):
+    from envs.domains.drug_interaction import environment as E
+
+    return next(t for s in E.get_splits() for t in E.get_tasks(s) if t.id == task_id)
+
+
+def test_citalopram_with_methadone_takes_the_celexa_level_and_simvastatin_with_ritonavir_stays_contraindicated(env):
+    """Celexa's labelling (FDA DSC 2012, USPI 5.2) does not recommend citalopram with other QT-prolonging drugs
+    and neither its section 4 nor methadone's names the other: US-029 re-rates ANSM's contraindication to major,
+    and the authored task answers so. Zocor 4 and Norvir's contraindicated-drug table do name the statin pair
+    (control: it stays contraindicated, and its task cites those sections)."""
+    level, why = env.safety_context.interaction("methadone", "citalopram")
+    assert level == "major" and why.startswith("US-029"), why
+    qt = _authored("di-auth-21-methadone-citalopram")
+    assert qt.correct_answer == "major" and "US-029" in qt.description.provenance["guideline"]
+    assert not any("contraindicated" in a for a in qt.evaluation_criteria.nl_assertions)
+    statin_level, statin_why = env.safety_context.interaction("simvastatin", "ritonavir")
+    assert statin_level == "contraindicated", statin_why
+    statin = _authored("di-auth-15-statin-ritonavir")
+    assert "Zocor (simvastatin) USPI 4 CONTRAINDICATIONS" in statin.description.provenance["guideline"]
+    # escitalopram is not in the rule: it keeps the ANSM level until its own label is read
+    assert env.safety_context.interaction("methadone", "escitalopram")[1].startswith("ANSM-")
+
+
 def test_no_contraindicated_pair_fires_outside_the_label_list(env):
     """Over every drug pair among the patients' medications and the drugs with dose profiles (what the
     other domains' episodes name), an overlay contraindicated level comes only from a label-contraindicated rule."""
