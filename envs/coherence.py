@@ -563,6 +563,46 @@ def _dka_insulin_infusion(s: Subject):
                        f"order {m['order_id']} ({m['drug']}) stopped at {m['stop']} with no subcutaneous insulin started")
 
 
+def _last_charted(adm: dict) -> datetime | None:
+    """The admission's last charted observation (vital signs or a lab result), else None."""
+    times = [_t(e["time"]) for key in ("vital_events", "lab_events") for e in adm.get(key) or [] if e.get("time")]
+    return max(times) if times else None
+
+
+# A continuous infusion is charted on the ICU flowsheet with the observations (the authored scenarios chart vital
+# signs every 4 hours and labs at least daily); a one-off dose is given when it is ordered. A full day with no
+# charted observation (or since a one-off dose) is more than any charting gap in the records, so an order still
+# 'active' then has no administration behind it: FHIR's status would be 'completed'.
+UNCHARTED_ACTIVE_WINDOW = timedelta(hours=24)
+
+
+@rule("infusion_active_only_while_charted",
+      "a continuous infusion's or one-off dose's status, the admission's last charted observation and the record clock",
+      "HL7 FHIR R4 MedicationRequest.status: 'active' while the order is in force, 'completed' once all its actions are "
+      "done; a one-off dose is done once given, an infusion once the chart stops recording it", ("ehr_management",))
+def _infusion_active_only_while_charted(s: Subject):
+    clock = s.context.get("clock")
+    if not clock:
+        return
+    now = _t(clock)
+    for adm in (s.record or {}).get("admissions") or []:
+        last = _last_charted(adm)
+        for m in adm.get("medication_orders") or []:
+            if m.get("status") != "active" or (m.get("stop") and _t(m["stop"]) <= now):
+                continue
+            if m.get("frequency") == "once":
+                given = _t(m["start"])
+            elif m.get("frequency") == "continuous":
+                given = max(last, _t(m["start"])) if last else _t(m["start"])
+            else:
+                continue
+            if now - given > UNCHARTED_ACTIVE_WINDOW:
+                what = "one-off dose given at" if m.get("frequency") == "once" else "infusion last charted at"
+                yield (("medication_orders.status", "medication_orders.stop", "clock"),
+                       f"order {m['order_id']} ({m['drug']}) is 'active' at the record clock {clock}, {what} "
+                       f"{given:{_FMT}}, over {UNCHARTED_ACTIVE_WINDOW.total_seconds() / 3600:g} h before")
+
+
 @rule("sex_factor_matches_sex", "a creatinine-clearance task's stated sex factor and the patient's sex",
       "Cockcroft & Gault, Nephron 1976;16:31-41: the 0.85 factor applies to women only")
 def _sex_factor_matches_sex(s: Subject):

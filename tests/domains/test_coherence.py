@@ -58,6 +58,17 @@ def _renal_task(drug: str, indication: str | None) -> Task:
                                                    "arguments": {"drug": drug, "patient_id": "P014"}}]})
 
 
+def _infusion(stop: str | None, frequency: str = "continuous", last: str = "2025-03-01T18:00") -> dict:
+    """EHR-016 as it was (propofol 'active' at the clock, charting ended four days before) or as it is now."""
+    order = {"order_id": "MED-2", "drug": "propofol infusion", "route": "iv", "frequency": frequency,
+             "start": "2025-02-26T22:00", "status": "active" if stop is None else "completed"}
+    if stop is not None:
+        order["stop"] = stop
+    return {"name": "Abel Singh", "sex": "male", "admissions": [{
+        "vital_events": [{"time": "2025-02-26T22:00", "gcs": 8}, {"time": last, "gcs": 15}],
+        "lab_events": [{"time": "2025-02-27T05:00", "test": "creatinine", "value": 1.0}], "medication_orders": [order]}]}
+
+
 def _breast(indication: str, exam: str, description: str, shape: str = "oval", margin: str = "circumscribed",
             stable: bool = False) -> dict:
     return {"region": "breast", "indication": indication, "exam": exam, "exam_complete": True, "prior": None,
@@ -124,6 +135,8 @@ CASES: dict[str, tuple[str, tuple[Task, dict, dict], tuple[Task, dict, dict]]] =
                                                     (_task(), _dka(stop="2025-03-01T13:00"), ICU_CLOCK)),
     "renal_drug_has_indication": ("drug_interaction", (_renal_task("methotrexate", None), P014, {}),
                                   (_renal_task("spironolactone", "hypertension"), P014, {})),
+    "infusion_active_only_while_charted": ("ehr_management", (_task(), _infusion(stop=None), ICU_CLOCK),
+                                           (_task(), _infusion(stop="2025-03-01T10:00"), ICU_CLOCK)),
     "sex_factor_matches_sex": ("drug_interaction",
                                (_task(description={"key_challenges": ["Female sex factor 0.85."]}), {"sex": "male"}, {}),
                                (_task(description={"key_challenges": ["No sex factor for a man."]}), {"sex": "male"}, {})),
@@ -165,6 +178,19 @@ def test_a_dka_insulin_infusion_stops_only_after_resolution_and_subcutaneous_ins
     assert [v.fields for v in bare] == [("medication_orders.stop", "medication_orders.route")]
     # within a day of the charted resolution the infusion may still run
     assert check_subject(Subject("ehr_management", _task(), _dka(None), {"clock": "2025-03-02T08:00"}), rule) == []
+
+
+def test_an_active_infusion_needs_a_charted_day_and_a_one_off_dose_is_done_once_given():
+    rule = [RULES["infusion_active_only_while_charted"]]
+    # charted until 2025-03-04T09:00: under 24 h before the clock, the infusion may still run
+    assert check_subject(Subject("ehr_management", _task(), _infusion(None, last="2025-03-04T09:00"), ICU_CLOCK), rule) == []
+    # a one-off dose (calcium gluconate in EHR-010) 'active' days after it was given
+    once = check_subject(Subject("ehr_management", _task(), _infusion(None, frequency="once", last="2025-03-04T09:00"),
+                                 ICU_CLOCK), rule)
+    assert len(once) == 1 and "one-off dose given at 2025-02-26T22:00" in once[0].message
+    # scheduled doses are not infusions: this rule leaves them to order_status_matches_clock
+    scheduled = _infusion(None, frequency="q12h")
+    assert check_subject(Subject("ehr_management", _task(), scheduled, ICU_CLOCK), rule) == []
 
 
 def test_a_first_name_in_neither_list_is_reported():

@@ -58,8 +58,8 @@ def test_context_facts(open_env):
     env = open_env("EHR-010")
     ctx = env.safety_context
     assert isinstance(ctx, EHRSafetyContext) and isinstance(ctx, SafetyContext)
-    assert ctx.patient_medications("EHR-010") == ["lisinopril", "spironolactone", "sodium zirconium cyclosilicate",
-                                                  "calcium gluconate"]
+    # the one-off calcium gluconate dose was given on admission: completed, not a current medication
+    assert ctx.patient_medications("EHR-010") == ["lisinopril", "spironolactone", "sodium zirconium cyclosilicate"]
     conditions = ctx.patient_conditions("EHR-010")
     assert conditions[0] == env.db.patients["EHR-010"].admissions[0].admission_diagnosis.lower()
     # EHR-010: 35-year-old man, 88 kg, latest creatinine 2.73 mg/dL: eGFR 30.4, CrCl 47 -> above every threshold
