@@ -29,12 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--shard-docs", type=int, default=None, metavar="N",
                    help="write the bm25 index as shards of at most N passages (exact global top-k; see `hcgym kb shard`)")
     b.add_argument("--memory-budget-mb", type=int, default=None, metavar="MB",
-                   help="keep the build process's peak RSS under MB megabytes (interpreter and libraries included): "
+                   help="keep the build's peak RSS under MB megabytes (the build process and its workers together, "
+                   "interpreters and libraries included): "
                    "the bm25 index is built as shards sized to fit, committed one by one, so an interrupted build "
                    "resumes after the last one (kb_service/README.md)")
     b.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="processes that build the bm25 shards of a sharded build (--shard-docs or --memory-budget-mb; "
-                   "the same index either way). Default: the machine's cores (at most one per 10,000 passages), "
+                   help="processes that build the indexes of a sharded build (--shard-docs or --memory-budget-mb) "
+                   "at once: the tantivy pass and the bm25 shards (the same index either way). Default: the machine's cores (at most one per 10,000 passages), "
                    "fewer when the budget cannot give each its share: with a budget, the build process keeps what it "
                    "holds and each worker gets an equal share of the rest (about budget/N), its own interpreter "
                    "included")
