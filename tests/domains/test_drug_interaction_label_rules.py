@@ -127,7 +127,7 @@ def test_citalopram_with_methadone_takes_the_celexa_level_and_simvastatin_with_r
 def test_lamotrigine_with_valproate_says_how_to_dose_not_only_that_it_is_major(env):
     """ANSM-1298 grades lamotrigine + valproate 'not recommended' with no management text, so a tool answer
     (and the psychiatry domain, which takes this level) could not say what the lamotrigine label asks for:
-    the valproate schedule (about half the doses, slow escalation) because valproate raises the rash risk
+    the valproate schedule (halved doses, slow escalation) because valproate raises the rash risk
     (boxed warning, 2.1). US-030 restates the pair at the same level with that management."""
     level, why = env.safety_context.interaction("lamotrigine", "valproic acid")
     assert level == "major" and why.startswith("US-030"), why
@@ -137,7 +137,7 @@ def test_lamotrigine_with_valproate_says_how_to_dose_not_only_that_it_is_major(e
     overlay = [(rule, lv) for rule, lv, _ in assessed if rule.id == "US-030"]
     assert overlay, [rule.id for rule, _, _ in assessed]
     said = overlay[0][0].model_dump_json() + overlay[0][1].model_dump_json()
-    assert "about half" in said and "rash" in said and "valproate schedule" in said, said
+    assert "halve" in said and "rash" in said and "valproate schedule" in said, said
 
 
 def test_no_contraindicated_pair_fires_outside_the_label_list(env):
