@@ -37,13 +37,10 @@ import numpy as np
 
 from envs.core.files import as_disk_full
 from kb_service.kb import FORMAT, FORMAT_VERSION
+from kb_service.schema import IngestError
 
 REFERENCE_TABLE = "passages_fts"
 REFERENCE_COLUMNS = ("doc_id", "source", "title", "content", "category", "dataset_name")
-
-
-class IngestError(ValueError):
-    """An input cannot be read at all (wrong format, missing table or columns)."""
 
 
 @dataclass

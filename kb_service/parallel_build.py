@@ -37,6 +37,8 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from kb_service.schema import IngestError
+
 UNITS_DIR = "bm25.raw"
 PARTS_DIR = "docmeta.parts"
 
@@ -423,8 +425,6 @@ def assemble_docmeta(parts: list[Path], out_dir: Path, n: int) -> dict[str, list
                 table = names[kind]
                 remap = np.array([table.setdefault(name, len(table)) for name in local[kind]], dtype=np.int64)
                 if kind == "sources" and len(table) > np.iinfo(np.int16).max:
-                    from kb_service.ingest import IngestError
-
                     raise IngestError(f"too many distinct sources ({len(table)}); sources name collections, "
                                       f"not documents")
                 handles[key].write(remap[arrays[key]].astype(dtype).tobytes() if len(arrays[key]) else b"")
@@ -433,8 +433,6 @@ def assemble_docmeta(parts: list[Path], out_dir: Path, n: int) -> dict[str, list
         for fh in handles.values():
             fh.close()
     if written != n:
-        from kb_service.ingest import IngestError
-
         raise IngestError(f"{out_dir}: the index parts hold {written} passages, the store {n}")
     for key, tmp in tmps.items():
         os.replace(tmp, out_dir / f"{key}.npy")

@@ -12,6 +12,12 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+
+class IngestError(ValueError):
+    """An input cannot be read at all (wrong format, missing table or columns), or the index built from
+    it is inconsistent. Here, beside the passage schema, so the build's worker processes
+    (`kb_service.parallel_build`) raise it without importing `kb_service.ingest`, which starts them."""
+
 PASSAGE_FIELDS = ("doc_id", "source", "title", "content", "category", "dataset_name")
 
 
