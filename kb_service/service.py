@@ -45,9 +45,11 @@ class ShardActorsConfig(BaseModel):
         "of shards); the replicas send every free-text query to all of them and merge the top k exactly; "
         "0 = every replica opens all shards itself"))
     num_cpus: float = Field(default=0.0, ge=0, description="CPUs Ray reserves per shard actor")
-    memory_gb: float | None = Field(default=None, gt=0, description=(
-        "memory Ray reserves per shard actor (GiB; its shards' matrices and vocabularies), so a node only gets "
-        "the shard actors whose reservations fit; null = no reservation"))
+    # At most 64 TiB: Ray counts resources in fixed-point int64 (1e-4 units), so past ~850 TiB a reservation
+    # wraps around and an actor is placed where it does not fit.
+    memory_gb: float | None = Field(default=None, gt=0, le=65536, description=(
+        "memory Ray reserves per shard actor (GiB, at most 65536; its shards' matrices and vocabularies), so a "
+        "node only gets the shard actors whose reservations fit; null = no reservation"))
     resources: dict[str, float] = Field(default_factory=dict, description=(
         "custom resources per shard actor, e.g. {kb_node: 1} with the nodes meant for shards started as "
         "`ray start --resources='{\"kb_node\": 1}'` (one shard actor per such node)"))

@@ -282,3 +282,36 @@ def test_the_driver_trains_across_nodes_with_ranks_placed_and_the_sync_group_at_
     while ray.available_resources().get("learner_node") != 2 and time.monotonic() < deadline:
         time.sleep(0.2)
     assert ray.available_resources().get("learner_node") == 2
+
+
+def test_kb_shard_actors_spread_over_the_nodes_that_hold_their_resource_and_rank_as_one_index(cluster, tmp_path):
+    """A sharded KB served by 2 shard actors that ask for a resource only the two training nodes have
+    (`kb.shards.resources`, SPREAD): one actor lands on each of those nodes, and a search fanned out to
+    them returns the single index's ids, order and float32 scores."""
+    import shutil
+
+    from kb_service.ingest import build_kb, file_input
+    from kb_service.kb import KnowledgeBase
+    from kb_service.reshard import shard_kb
+    from kb_service.service import start_kb_service
+    from tests.kb.conftest import make_corpus, write_jsonl
+
+    docs = make_corpus(n_filler=200, seed=3)
+    single = tmp_path / "single"
+    build_kb([file_input(write_jsonl(tmp_path / "passages.jsonl", docs))], single, progress=False,
+             echo=lambda s: None)
+    sharded = tmp_path / "sharded"
+    shutil.copytree(single, sharded)
+    assert shard_kb(sharded, 60, echo=lambda s: None)["shards"] == 4
+    client = start_kb_service(replicas=1, path=sharded, name="placement-kb", num_cpus=0,
+                              shards={"actors": 2, "resources": {"learner_node": 1}, "start_timeout_s": 120})
+    try:
+        assert sorted(_actor_node(h) for h in client.shard_handles) == sorted([cluster["train_a"], cluster["train_b"]])
+        reference = KnowledgeBase.open(single)
+        words = sorted({w for d in docs[::9] for w in d["content"].rstrip(".").lower().split() if len(w) >= 5})
+        for query in ["pheochromocytoma metanephrines", "secondary hypertension", *words[:12]]:
+            got = [(p.doc_id, p.score) for p in client.search(query, k=8)]
+            assert got == [(p.doc_id, p.score) for p in reference.search(query, k=8)], query
+            assert got, query
+    finally:
+        client.shutdown()
