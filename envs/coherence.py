@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import date, datetime, timedelta
 from pathlib import Path
@@ -498,15 +498,21 @@ def _avpu_matches_gcs_eye(s: Subject):
                    f"ACVPU {v['avpu']!r} with GCS eye {v['gcs_eye']} at {v.get('time')} (allowed: {list(allowed)})")
 
 
-@rule("order_status_matches_clock", "a medication order's status, start and stop and the record clock",
-      "HL7 FHIR R4 MedicationRequest.status: 'active' while the order is in force, 'completed' once all its actions are "
-      "done; an order stopped before the record clock is not active", ("ehr_management",))
-def _order_status_matches_clock(s: Subject):
+def _admissions_at_clock(s: Subject) -> Iterator[tuple[str, datetime, dict]]:
+    """(the record clock as written, as a time, an admission) for each admission of a record that has a clock."""
     clock = s.context.get("clock")
     if not clock:
         return
     now = _t(clock)
     for adm in (s.record or {}).get("admissions") or []:
+        yield clock, now, adm
+
+
+@rule("order_status_matches_clock", "a medication order's status, start and stop and the record clock",
+      "HL7 FHIR R4 MedicationRequest.status: 'active' while the order is in force, 'completed' once all its actions are "
+      "done; an order stopped before the record clock is not active", ("ehr_management",))
+def _order_status_matches_clock(s: Subject):
+    for clock, now, adm in _admissions_at_clock(s):
         for m in adm.get("medication_orders") or []:
             if _t(m["start"]) > now:
                 yield ("medication_orders.start", "clock"), f"order {m['order_id']} starts at {m['start']}, after the record clock {clock}"
@@ -581,11 +587,7 @@ UNCHARTED_ACTIVE_WINDOW = timedelta(hours=24)
       "HL7 FHIR R4 MedicationRequest.status: 'active' while the order is in force, 'completed' once all its actions are "
       "done; a one-off dose is done once given, an infusion once the chart stops recording it", ("ehr_management",))
 def _infusion_active_only_while_charted(s: Subject):
-    clock = s.context.get("clock")
-    if not clock:
-        return
-    now = _t(clock)
-    for adm in (s.record or {}).get("admissions") or []:
+    for clock, now, adm in _admissions_at_clock(s):
         last = _last_charted(adm)
         for m in adm.get("medication_orders") or []:
             if m.get("status") != "active" or (m.get("stop") and _t(m["stop"]) <= now):
