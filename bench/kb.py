@@ -666,6 +666,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kb-workers", default=None, metavar="N,M",
                     help="measure only our build, once per number of bm25 worker processes listed (build time by "
                     "stage, peak RSS; no queries): the parallel build against the single-process one")
+    ap.add_argument("--build-workers", type=int, default=None, metavar="N",
+                    help="build ours with N worker processes (`hcgym kb build --workers N`) before querying it")
     args = ap.parse_args(argv)
     sizes = [int(x) for x in str(args.n_passages).split(",") if x.strip()]
     if args.kb_workers:
@@ -756,7 +758,8 @@ def run_size(args, n_passages: int) -> dict:
                 print(f"[bench] {name}: building" + (f" within a {budget} MB budget" if budget else "")
                       + (f" (address space capped at {cap / 1024 ** 3:.1f} GB)" if cap else "") + " ...", flush=True)
                 try:
-                    res = build_engine(name, corpus, index, budget_mb=budget, cap_bytes=cap)
+                    res = build_engine(name, corpus, index, budget_mb=budget, cap_bytes=cap,
+                                       workers=args.build_workers if name == "ours" else None)
                 except RuntimeError as exc:
                     print(f"[bench] {name}: {exc}; left out at this size", flush=True)
                     shutil.rmtree(index, ignore_errors=True)
