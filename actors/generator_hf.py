@@ -28,6 +28,13 @@ class HFOptions(BaseModel):
     reuse_kv_cache: bool = False
     # Most cached tokens kept over all conversations (least recently used dropped first).
     kv_cache_max_tokens: int = Field(default=262_144, ge=0)
+    # A batch runs until its longest row ends; without this, finished rows keep stepping (a decode
+    # step costs about as much per finished row as per live one). On: once at least a quarter of
+    # the batch's rows have finished, they leave it (their keys/values, mask, positions and sampling
+    # state are dropped), so a batch of 32 re-packs at most 9 times. Same tokens either way (each
+    # row samples from its own uniforms at its own step); off only to measure or compare
+    # (docs/benchmarks.md, "Generation").
+    compact_finished_rows: bool = True
 
     @field_validator("device")
     @classmethod
@@ -63,7 +70,10 @@ class HFGenerator(Generator):
 
         self._prefixes: OrderedDict[str, _CachedPrefix] = OrderedDict()
         self._cached_tokens = 0
-        self.cache_stats = {"reused_requests": 0, "reused_tokens": 0, "encoded_prompt_tokens": 0}
+        # decode_row_steps: rows fed to decode forwards; live_row_steps: of those, rows still
+        # generating (the rest are finished rows stepping with a pad token); compactions: re-packs.
+        self.cache_stats = {"reused_requests": 0, "reused_tokens": 0, "encoded_prompt_tokens": 0,
+                            "decode_row_steps": 0, "live_row_steps": 0, "compactions": 0}
 
     def update_weights(self, state_dict: dict[str, Any], version: int) -> None:
         import torch
@@ -121,19 +131,20 @@ class HFGenerator(Generator):
             return None
         return entry
 
-    def _store_prefixes(self, requests, past, mask, out_ids) -> None:
+    def _store_prefixes(self, entries, past, mask) -> None:
         """Keep each row's keys and values of its real tokens (prompt and all but the last sampled
-        token: the last one was never fed as a real token) for the conversation's next turn."""
+        token: the last one was never fed as a real token) for the conversation's next turn.
+        `entries`: (batch row of `past`/`mask`, request, its sampled ids)."""
         layers = getattr(past, "layers", None)
         if not layers or any(type(layer).__name__ != "DynamicLayer" for layer in layers):
             return  # sliding-window or recurrent layers (Qwen3.5): their state is not a per-token cache
         cap = self.options.kv_cache_max_tokens
-        for i, r in enumerate(requests):
+        for i, r, ids in entries:
             key = self.conversation_key(r)
-            if key is None or not out_ids[i]:
+            if key is None or not ids:
                 continue
             cols = mask[i].nonzero().flatten()
-            tokens = list(r.prompt_ids) + out_ids[i][:-1]
+            tokens = list(r.prompt_ids) + ids[:-1]
             if len(cols) != len(tokens) or len(tokens) > cap:
                 continue
             kv = [(layer.keys[i, :, cols].clone(), layer.values[i, :, cols].clone()) for layer in layers]
@@ -145,6 +156,20 @@ class HFGenerator(Generator):
         while self._cached_tokens > cap and self._prefixes:
             _, dropped = self._prefixes.popitem(last=False)
             self._cached_tokens -= len(dropped.token_ids)
+
+    @staticmethod
+    def _can_drop_rows(past) -> bool:
+        """Whether every layer of this cache keeps its state batch-first in tensors it re-binds on
+        update, so `reorder_cache` with a shorter index list leaves a smaller, consistent cache:
+        dynamic key/value layers and (Qwen3.5) linear-attention conv/recurrent states. Static
+        layers are not: they are allocated once for a fixed batch (and may be captured by a
+        compiled graph), so a batch on them keeps its finished rows."""
+        from transformers.cache_utils import DynamicLayer, LinearAttentionLayer, StaticLayer
+
+        layers = getattr(past, "layers", None)
+        return bool(layers) and callable(getattr(past, "reorder_cache", None)) and all(
+            isinstance(layer, (DynamicLayer, LinearAttentionLayer)) and not isinstance(layer, StaticLayer)
+            for layer in layers)
 
     def _prefill(self, requests, torch):
         """The first forward of a batch: (output, attention mask, next positions).
@@ -205,50 +230,73 @@ class HFGenerator(Generator):
         # Each request's uniforms come from its own seed, drawn up front; a token is the inverse CDF
         # of the step's distribution at that uniform, for every row in one call (a per-row
         # multinomial was a quarter of the generation time). Same seed, same weights: same tokens,
-        # whatever else shares the batch.
+        # whatever else shares the batch (or leaves it).
         uniforms = torch.stack([
             torch.rand(max_new, dtype=torch.float64,
                        generator=torch.Generator(device="cpu").manual_seed(int(r.seed) & 0x7FFF_FFFF_FFFF_FFFF))
             for r in requests])
         greedy = torch.tensor([r.greedy for r in requests])
-        rows = torch.arange(B)
+        live = list(range(B))  # batch row -> request index; rows leave when compacted
+        stats = self.cache_stats
+        reuse = self.options.reuse_kv_cache
 
         with torch.no_grad():
             out, mask, next_pos = self._prefill(requests, torch)
             past = out.past_key_values
+            compact = self.options.compact_finished_rows and self._can_drop_rows(past)
             for step in range(max_new):
+                n = len(live)
                 logp = processed_logprobs(out.logits[:, -1, :], self.sampling).cpu()
                 cdf = logp.exp().double().cumsum(-1)
                 # Zero-probability tokens (top-k / top-p) never win: their CDF step is empty.
                 targets = (uniforms[:, step] * cdf[:, -1]).unsqueeze(-1)
                 sampled = torch.searchsorted(cdf, targets, right=True).squeeze(-1).clamp(max=logp.shape[-1] - 1)
                 chosen = torch.where(greedy, logp.argmax(-1), sampled)
-                chosen_lp = logp[rows, chosen].tolist()
+                chosen_lp = logp[torch.arange(n), chosen].tolist()
                 chosen_ids = chosen.tolist()
-                step_tokens = torch.full((B, 1), self.pad_id, dtype=torch.long)
-                for i in range(B):
+                step_tokens = torch.full((n, 1), self.pad_id, dtype=torch.long)
+                done = []
+                for b, i in enumerate(live):
                     if finish[i] is not None:
+                        done.append(b)
                         continue
-                    token = chosen_ids[i]
+                    token = chosen_ids[b]
                     out_ids[i].append(token)
-                    out_lp[i].append(chosen_lp[i])
-                    step_tokens[i, 0] = token
+                    out_lp[i].append(chosen_lp[b])
+                    step_tokens[b, 0] = token
                     if token in stop:
                         finish[i] = "stop"
                     elif len(out_ids[i]) >= requests[i].max_new_tokens:
                         finish[i] = "length"
-                if all(f is not None for f in finish):
+                    if finish[i] is not None:
+                        done.append(b)
+                if len(done) == n:
                     break
-                # Finished rows keep stepping with a pad token that nothing attends to later;
-                # cheaper than re-packing the cache for a few rows.
-                alive = torch.tensor([[0 if f is not None else 1] for f in finish], dtype=torch.long)
+                # A re-pack costs a fraction of one decode step; a finished row left in costs a row of
+                # every later step. Waiting for a quarter bounds the re-packs (9 for a batch of 32).
+                if compact and 4 * len(done) >= n:
+                    if reuse:  # the leaving rows' keys/values are kept before they are dropped
+                        self._store_prefixes([(b, requests[live[b]], out_ids[live[b]]) for b in done], past, mask)
+                    gone = set(done)
+                    keep = [b for b in range(n) if b not in gone]
+                    index = torch.tensor(keep, dtype=torch.long)
+                    past.reorder_cache(index.to(self.device))
+                    mask, next_pos = mask[index.to(mask.device)], next_pos[index.to(next_pos.device)]
+                    step_tokens, uniforms, greedy = step_tokens[index], uniforms[index], greedy[index]
+                    live = [live[b] for b in keep]
+                    done = []
+                    stats["compactions"] += 1
+                # Finished rows still in the batch step with a pad token that nothing attends to later.
+                alive = torch.tensor([[0 if finish[i] is not None else 1] for i in live], dtype=torch.long)
                 mask = torch.cat([mask, alive.to(self.device)], dim=1)
+                stats["decode_row_steps"] += len(live)
+                stats["live_row_steps"] += len(live) - len(done)
                 out = self.model(input_ids=step_tokens.to(self.device), attention_mask=mask,
                                  position_ids=next_pos, past_key_values=past, use_cache=True)
                 past = out.past_key_values
                 next_pos = next_pos + 1
-            if self.options.reuse_kv_cache:
-                self._store_prefixes(requests, past, mask, out_ids)
+            if reuse:
+                self._store_prefixes([(b, requests[i], out_ids[i]) for b, i in enumerate(live)], past, mask)
         elapsed = time.perf_counter() - started
         return [
             GenerationResult(request_id=r.request_id, token_ids=out_ids[i], logprobs=out_lp[i],

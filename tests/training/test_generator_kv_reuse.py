@@ -1,5 +1,6 @@
 """actors/generator_hf.py: a conversation's KV cache is reused across its turns (HFOptions.reuse_kv_cache),
-and tokens are drawn by the inverse CDF at per-request uniforms.
+tokens are drawn by the inverse CDF at per-request uniforms, and finished rows leave the batch
+(HFOptions.compact_finished_rows).
 
 Turn t+1 of an episode is turn t's context plus the sampled turn and the tool result; with reuse the
 generator encodes only those new tokens. The sampled tokens and their log-probs must be the ones a
@@ -26,7 +27,9 @@ def _generators():
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
     sampling = SamplingConfig(temperature=0.9)
     reuse = HFGenerator(model_dir, sampling, stop, options={"reuse_kv_cache": True})
-    plain = HFGenerator(model_dir, sampling, stop, options={"reuse_kv_cache": False})
+    # The reference keeps finished rows in the batch: reuse (which stores a row's keys/values when it
+    # leaves a compacted batch) is checked against the plainest computation.
+    plain = HFGenerator(model_dir, sampling, stop, options={"reuse_kv_cache": False, "compact_finished_rows": False})
     return tok, reuse, plain
 
 
@@ -37,11 +40,12 @@ def _prompt(tok, ticket):
 
 def _turns(tok, gen, turns=3, lengths=(9, 14, 6)):
     """Run the four conversations for `turns` turns; the second conversation sits out turn 2, so later
-    batches mix rows with and without a cached prefix and of different cached lengths."""
+    batches mix rows with and without a cached prefix and of different cached lengths. Rows get
+    different token limits, so they finish at different steps (and leave a compacting batch)."""
     contexts = {f"ep{i}": _prompt(tok, t) for i, t in enumerate(TICKETS)}
     history = []
     for turn in range(turns):
-        requests = [GenerationRequest(request_id=f"{key}:t{turn}", prompt_ids=ids, max_new_tokens=lengths[turn],
+        requests = [GenerationRequest(request_id=f"{key}:t{turn}", prompt_ids=ids, max_new_tokens=lengths[turn] + 4 * i,
                                       seed=1000 * turn + i)
                     for i, (key, ids) in enumerate(contexts.items()) if not (turn == 1 and key == "ep1")]
         results = gen.generate(requests)
@@ -59,6 +63,7 @@ def test_reuse_gives_the_tokens_and_logprobs_of_a_full_encode():
     without = _turns(tok, plain)
     assert reuse.cache_stats["reused_requests"] == 3 + 4  # turn 2: ep0, ep2, ep3; turn 3: all four
     assert plain.cache_stats["reused_requests"] == 0
+    assert reuse.cache_stats["compactions"] >= 3 and plain.cache_stats["compactions"] == 0
     # Only the new tokens were encoded: the cached prefixes were not read again.
     assert reuse.cache_stats["encoded_prompt_tokens"] + reuse.cache_stats["reused_tokens"] == \
         plain.cache_stats["encoded_prompt_tokens"]
@@ -69,6 +74,38 @@ def test_reuse_gives_the_tokens_and_logprobs_of_a_full_encode():
             assert a.token_ids == b.token_ids, a.request_id
             assert a.finish_reason == b.finish_reason
             assert torch.allclose(torch.tensor(a.logprobs), torch.tensor(b.logprobs), atol=1e-4), a.request_id
+
+
+def test_finished_rows_leave_the_batch_and_every_request_gets_the_same_tokens():
+    """Rows finishing at very different steps: the compacting batch, the batch that keeps its
+    finished rows, and each request alone give the same tokens, log-probs and finish reasons, and
+    the compacting batch computes far fewer row-steps for the same live ones."""
+    model_dir = tiny_model_dir()
+    tok = load_tokenizer(model_dir)
+    stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
+    sampling = SamplingConfig(temperature=0.9)
+    compact = HFGenerator(model_dir, sampling, stop)
+    full = HFGenerator(model_dir, sampling, stop, options={"compact_finished_rows": False})
+    assert compact.options.compact_finished_rows  # the default
+    prompts = [_prompt(tok, t) for t in TICKETS]
+    requests = [GenerationRequest(request_id=f"m{j}", prompt_ids=prompts[j % 4], max_new_tokens=n, seed=50 + j,
+                                  greedy=j == 3)
+                for j, n in enumerate([2, 40, 7, 23, 1, 31, 12, 4])]
+    packed, kept = compact.generate(requests), full.generate(requests)
+    cs, fs = dict(compact.cache_stats), dict(full.cache_stats)
+    alone = [full.generate([r])[0] for r in requests]
+    assert len({len(r.token_ids) for r in packed}) >= 6
+    for a, b, c in zip(packed, kept, alone):
+        assert a.token_ids == b.token_ids == c.token_ids, a.request_id
+        assert a.finish_reason == b.finish_reason == c.finish_reason, a.request_id
+        assert torch.allclose(torch.tensor(a.logprobs), torch.tensor(b.logprobs), atol=1e-4), a.request_id
+        assert torch.allclose(torch.tensor(a.logprobs), torch.tensor(c.logprobs), atol=1e-4), a.request_id
+    # Every row is fed all its sampled tokens but the last, in both batches.
+    live = sum(len(r.token_ids) - 1 for r in packed)
+    assert cs["live_row_steps"] == fs["live_row_steps"] == live
+    assert fs["decode_row_steps"] == len(requests) * (max(len(r.token_ids) for r in packed) - 1)
+    assert fs["compactions"] == 0 and 2 <= cs["compactions"] <= 8
+    assert live <= cs["decode_row_steps"] < 0.6 * fs["decode_row_steps"]
 
 
 def test_new_weights_or_a_changed_prefix_are_never_served_from_the_cache():

@@ -388,6 +388,31 @@ def test_receivers_accept_a_subset_and_name_unknown_weights(twin_root):
     assert generator.version == 3
 
 
+def test_finished_rows_leave_the_batch_for_every_cache_kind(twin_root):
+    """The generator drops finished rows from its KV cache: per-token keys/values (Qwen3, Llama) and
+    Qwen3.5's linear-attention conv/recurrent states alike; tokens and log-probs are those of a
+    batch that keeps its finished rows."""
+    from actors.generator import GenerationRequest, SamplingConfig
+    from actors.generator_hf import HFGenerator
+    from modeling.model import IM_END, load_tokenizer
+
+    for family in TWIN_FAMILIES:
+        model_dir = str(twin_root / family)
+        tokenizer = load_tokenizer(model_dir)
+        stop = [tokenizer.convert_tokens_to_ids(IM_END)]
+        requests = [GenerationRequest(request_id=f"r{i}", prompt_ids=tokenizer.encode(p, add_special_tokens=False),
+                                      max_new_tokens=n, seed=i)
+                    for i, (p, n) in enumerate(zip(PROMPTS + PROMPTS[:1], [1, 12, 3, 7]))]
+        compact = HFGenerator(model_dir, SamplingConfig(), stop)
+        full = HFGenerator(model_dir, SamplingConfig(), stop, options={"compact_finished_rows": False})
+        packed, kept = compact.generate(requests), full.generate(requests)
+        assert compact.cache_stats["compactions"] >= 2, family
+        assert compact.cache_stats["decode_row_steps"] < full.cache_stats["decode_row_steps"], family
+        for a, b in zip(packed, kept):
+            assert a.token_ids == b.token_ids and a.finish_reason == b.finish_reason, (family, a.request_id)
+            assert max(abs(x - y) for x, y in zip(a.logprobs, b.logprobs)) < LOGPROB_TOL, (family, a.request_id)
+
+
 def test_save_sharded_checkpoint_checks_names_and_sft_output_loads(twin_root, tmp_path):
     import transformers
 
