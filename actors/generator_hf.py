@@ -22,9 +22,9 @@ class HFOptions(BaseModel):
     # Multi-turn episodes: keep each conversation's KV cache after a turn, so its next turn encodes
     # only the new tokens (the generated turn's last token and the tool result) instead of the whole
     # context again. Reused only with the same weights and an exactly matching token prefix.
-    # Off by default: on the tiny CPU model re-encoding is faster (docs/benchmarks.md, "Generation"),
-    # as its decode steps dominate and a batch mixing cached lengths attends over more padding; it
-    # pays where the prefill of long contexts dominates.
+    # Off by default: it holds up to `kv_cache_max_tokens` of keys/values per generator, a budget to
+    # size for the model at hand. With finished rows leaving the batch it generates faster than
+    # re-encoding on the tiny CPU model too (docs/benchmarks.md, "Generation").
     reuse_kv_cache: bool = False
     # Most cached tokens kept over all conversations (least recently used dropped first).
     kv_cache_max_tokens: int = Field(default=262_144, ge=0)

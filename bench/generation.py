@@ -16,7 +16,7 @@ generated tokens/s, seconds per episode batch, context tokens encoded per batch 
 CPU-seconds of the process per batch, decode row-steps per batch (rows fed to decode forwards, and
 of those the rows still generating), and ratios against the HF generator without reuse.
 
-Run: python bench/generation.py [--rounds 2] [--batches 2] [--backends hf_reuse,hf,hf_full,vllm]
+Run: python bench/generation.py [--rounds 2] [--batches 2] [--backends hf_reuse,hf,hf_full,hf_reuse_full,vllm]
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 BACKENDS = {"hf_reuse": "HF generator, KV cache reused across turns",
             "hf": "HF generator, context re-encoded every turn",
             "hf_full": "HF generator, re-encoded, finished rows kept in the batch",
+            "hf_reuse_full": "HF generator, KV cache reused, finished rows kept in the batch",
             "vllm": "vLLM CPU build (prefix caching)"}
 
 
@@ -63,7 +64,7 @@ def worker(backend: str, policy: str, batches: int, seed: int) -> dict:
     stop = [tok.convert_tokens_to_ids(IM_END), tok.convert_tokens_to_ids(ENDOFTEXT)]
     options = ({"dtype": "float32", "gpu_memory_utilization": 0.1, "max_model_len": 2048,
                 "max_num_batched_tokens": 65536} if backend == "vllm"
-               else {"reuse_kv_cache": backend == "hf_reuse", "compact_finished_rows": backend != "hf_full"})
+               else {"reuse_kv_cache": backend.startswith("hf_reuse"), "compact_finished_rows": not backend.endswith("_full")})
     gen = make_generator("vllm" if backend == "vllm" else "hf", policy, SamplingConfig(temperature=TEMPERATURE),
                          stop, options=options)
     loop = AgentLoop(tok, RolloutLimits(max_observation_chars=MAX_OBSERVATION_CHARS), "compact")
