@@ -5,15 +5,18 @@ tiny Qwen3 model (hidden 64, 2 layers), on a wider one (hidden 256, 4 layers) an
 (hidden 128, one Gated DeltaNet linear-attention layer and one full-attention layer; packed, the
 linear-attention layer runs each sequence on its own), through
 `modeling.model.token_stats` (the learner's forward: LM head on the trained positions only) and its
-backward. Packed, the decoder runs on the real tokens only, but attention under sdpa takes a dense
-block-diagonal [N, N] mask over the whole packed row; padded, each row attends over its own [T, T].
-Prints tokens/s of both and the ratio packed / padded (the baseline), and the padding share.
+backward. Padded, each row attends over its own [T, T]. Packed, the decoder runs on the real tokens
+only, and attention either runs per sequence (`sdpa_varlen`, modeling/attention.py, what the learner
+and teacher load with: sum of L^2, no mask) or, under plain sdpa, through a dense block-diagonal
+[N, N] mask over the whole packed row. Prints tokens/s of the three and the ratios packed / padded
+(the baseline), and the padding share.
 
 Then micro-batches by length: a long-tail batch of 32 sequences (64 tokens and up, at most 1,024, in a shuffled
 order as a step's episodes arrive) cut into micro-batches of 8 in batch order and after sorting by
 length (`modeling.model.split_by_length`, the learner's `optim.micro_batch_order: length`), each
-micro-batch padded or packed as `pack_sequences: auto` decides on CPU; prints both padding fractions and
-the whole batch's forward + backward time, and the ratio, on the tiny and the wider model.
+micro-batch padded or packed as `pack_sequences: auto` decides: under plain sdpa (packed only where
+N^2 <= B*T^2) and under sdpa_varlen (always packed); prints the padding fractions and the whole
+batch's forward + backward time, and the ratios, on the tiny and the wider model.
 
 With `--run RUN_DIR` (a finished `hcgym train` run, e.g. the demo's): its steps' batches (trajectories
 and the teacher log-probs stored with them) are trained again from RUN_DIR/model/sft by two learners of
@@ -26,6 +29,7 @@ each step's padding fraction and learner time (reference forwards, forward + bac
 from __future__ import annotations
 
 import argparse
+import os
 import random
 import statistics
 import tempfile
@@ -34,12 +38,19 @@ from pathlib import Path
 
 import torch
 
+from modeling.attention import SDPA_VARLEN, decoder_config
 from modeling.model import (build_tiny_model, build_twin_model, load_policy, pad_batch, packs_sequences, padding_fraction,
                             split_by_budget, split_by_length, token_stats, train_tokenizer)
 
 MIXES = {"long tail": [96, 128, 160, 192, 256, 384, 1024, 2048],  # two long episodes among short ones
          "even": [480, 496, 512, 512, 512, 528, 528, 544]}         # little padding to remove
 ROUNDS = 5
+
+
+def attention(model, name: str):
+    """Put `model`'s decoder on attention implementation `name` (sdpa or sdpa_varlen); returns the model."""
+    decoder_config(model)._attn_implementation = name
+    return model
 
 
 def timed(model, ids, mask, trained, packed: bool) -> float:
@@ -93,11 +104,16 @@ def micro_batches(models: dict) -> None:
     by_length = split_by_length(list(range(len(lengths))), lengths, 8)
     for name, model in models.items():
         model.train()
+        attention(model, "sdpa")
         index_s, index_pad = timed_batch(model, sequences, by_index)
         length_s, length_pad = timed_batch(model, sequences, by_length)
-        print(f"  {name}: batch order padding {index_pad:.1%}, {real / index_s:,.0f} tok/s ({index_s * 1000:.0f} ms); "
-              f"by length padding {length_pad:.1%}, {real / length_s:,.0f} tok/s ({length_s * 1000:.0f} ms); "
-              f"by length / batch order = {index_s / length_s:.2f}x")
+        attention(model, SDPA_VARLEN)
+        varlen_s, varlen_pad = timed_batch(model, sequences, by_length)
+        print(f"  {name}: sdpa, batch order: padding {index_pad:.1%}, {real / index_s:,.0f} tok/s "
+              f"({index_s * 1000:.0f} ms); sdpa, by length: padding {length_pad:.1%}, {real / length_s:,.0f} tok/s "
+              f"({length_s * 1000:.0f} ms); sdpa_varlen, by length: padding {varlen_pad:.1%}, "
+              f"{real / varlen_s:,.0f} tok/s ({varlen_s * 1000:.0f} ms); sdpa by length / batch order = "
+              f"{index_s / length_s:.2f}x, sdpa_varlen / sdpa by length = {length_s / varlen_s:.2f}x")
 
 
 def replay_run(run_dir: Path) -> None:
@@ -160,7 +176,8 @@ def main() -> None:
                                                   num_attention_heads=4, num_key_value_heads=2, head_dim=64)}
     models = {name: load_policy(build_tiny_model(root / name.split()[0], tok, seed=0, **size))[0]
               for name, size in sizes.items()}
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, sdpa attention, median of {ROUNDS}")
+    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, load average "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}, median of {ROUNDS}")
     if args.only != "packing":
         micro_batches(models)
     if args.only == "micro-batches":
@@ -177,10 +194,13 @@ def main() -> None:
               f"(padding {1 - real / mask.numel():.1%})")
         for name, model in models.items():
             model.train()
-            padded = timed(model, ids, mask, trained, packed=False)
-            packed = timed(model, ids, mask, trained, packed=True)
-            print(f"  {name}: padded {real / padded:,.0f} tok/s ({padded * 1000:.0f} ms), packed "
-                  f"{real / packed:,.0f} tok/s ({packed * 1000:.0f} ms); packed / padded = {padded / packed:.2f}x")
+            padded = timed(attention(model, SDPA_VARLEN), ids, mask, trained, packed=False)  # = sdpa's padded
+            varlen = timed(model, ids, mask, trained, packed=True)
+            dense = timed(attention(model, "sdpa"), ids, mask, trained, packed=True)
+            print(f"  {name}: padded {real / padded:,.0f} tok/s ({padded * 1000:.0f} ms), packed sdpa_varlen "
+                  f"{real / varlen:,.0f} tok/s ({varlen * 1000:.0f} ms), packed sdpa (dense mask) "
+                  f"{real / dense:,.0f} tok/s ({dense * 1000:.0f} ms); packed / padded = {padded / varlen:.2f}x "
+                  f"sdpa_varlen, {padded / dense:.2f}x sdpa")
 
 
 if __name__ == "__main__":

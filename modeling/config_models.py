@@ -166,10 +166,12 @@ class LearnerConfig(ConfigModel):
     pack_sequences: bool | Literal["auto"] = Field(
         default="auto", description="run the policy, reference and pi_old forwards on each micro-batch's real tokens "
                                     "only (sequences packed into one row, position ids restarting per sequence); "
-                                    "'auto': always with a varlen attention kernel (flash attention), else a micro-batch "
-                                    "whose packed attention area N^2 is at most its padded B*T^2 (a dense block mask "
-                                    "covers the whole packed row); recurrent layers (Qwen3.5's linear attention) run "
-                                    "each packed sequence on its own, so no state crosses sequences")
+                                    "'auto': always with a varlen attention (flash attention, or the sdpa_varlen the "
+                                    "learner loads with where transformers picks sdpa: each packed sequence attends on "
+                                    "its own), else (plain sdpa, eager: a dense block mask covers the whole packed row) "
+                                    "a micro-batch whose packed attention area N^2 is at most its padded B*T^2; "
+                                    "recurrent layers (Qwen3.5's linear attention) run each packed sequence on its "
+                                    "own, so no state crosses sequences")
     loss: LossConfig = Field(default_factory=LossConfig)
     optim: OptimConfig = Field(default_factory=OptimConfig)
     deepspeed: DeepSpeedConfig = Field(default_factory=DeepSpeedConfig)
@@ -243,11 +245,12 @@ class TeacherConfig(ConfigModel):
     device: Literal["cpu", "cuda"] = Field(default="cpu", description="device the teacher runs on")
     logprob_chunk_size: int = Field(default=1024, ge=1, description="positions per LM-head chunk when computing "
                                                                     "log-probs (bounds the logits' memory)")
-    pack_sequences: bool = Field(
-        default=False, description="the teacher's forwards on real tokens only (as learner.pack_sequences). Off by "
-                                   "default: the teacher batches samples in arrival order, and a packed row's values "
-                                   "move at float rounding with its neighbours, so runs and resumes would differ in "
-                                   "the last bits; padded rows do not")
+    pack_sequences: bool | Literal["auto"] = Field(
+        default="auto", description="the teacher's forwards on real tokens only, as learner.pack_sequences (same "
+                                    "values: 'auto' always packs under the sdpa_varlen attention the teacher loads "
+                                    "with, whose packed sequences attend one at a time, so a sample's values do not "
+                                    "depend on the samples it is batched with beyond float rounding, as padded); "
+                                    "false: padded")
     # The master takes 4 bytes per parameter: 38 GB for a 9B model beside its 19 GB of bf16 weights;
     # `hcgym plan` says which one fits.
     ema_shadow_device: Literal["model", "cpu"] = Field(

@@ -29,6 +29,7 @@ import torch
 import torch.nn.functional as F
 
 import envs._runtime  # noqa: F401  (CPU-path environment defaults before transformers loads)
+from modeling.attention import SDPA_VARLEN, decoder_config, use_varlen_attention
 
 ENDOFTEXT = "<|endoftext|>"
 IM_START = "<|im_start|>"
@@ -447,13 +448,15 @@ def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32
         tokenizer_dir: Tokenizer directory when it is not stored next to the model.
 
     Returns:
-        `(model, tokenizer)`; the model is in eval mode.
+        `(model, tokenizer)`; the model is in eval mode, its decoder on `sdpa_varlen` where
+        transformers chose sdpa (`use_varlen_attention`: packed rows attend per sequence).
     """
     from modeling.hf_checkpoint import load_model, resolve_model_path
 
     _quiet_transformers()
     path = resolve_model_path(model_dir)
     model = load_model(path, dtype)
+    use_varlen_attention(model)
     tokenizer = load_tokenizer(tokenizer_dir or path)
     return model, tokenizer
 
@@ -504,19 +507,22 @@ PACKABLE_LAYER_TYPES = frozenset({"full_attention", "sliding_attention"})
 PER_SEQUENCE_LAYER_TYPES = {"linear_attention": "linear_attn"}
 
 
-#: Attention implementations that run packed sequences as variable-length batches (no dense mask).
-#: Under the others (sdpa, eager) a packed row of N tokens attends through a dense block-diagonal
-#: [N, N] mask, so its attention grows with N^2 against B * T^2 padded (docs/benchmarks.md,
-#: "Sequence packing": 2x faster with a long-tail length mix, 3-5x slower with even lengths).
-VARLEN_ATTENTION = frozenset({"flash_attention_2", "flash_attention_3"})
+#: Attention implementations that run packed sequences as variable-length batches (no dense mask):
+#: flash attention's varlen kernels on GPU, and `sdpa_varlen` (modeling/attention.py), the one the
+#: learner and teacher load with where transformers would use sdpa, CPU included, whose cost is the
+#: sum of the sequences' L^2. Under the others (plain sdpa, eager) a packed row of N tokens attends
+#: through a dense block-diagonal [N, N] mask, so its attention grows with N^2 against B * T^2
+#: padded, and "auto" packs only where N^2 <= B * T^2 (docs/benchmarks.md, "Sequence packing").
+VARLEN_ATTENTION = frozenset({"flash_attention_2", "flash_attention_3", SDPA_VARLEN})
 
 
 def packs_sequences(setting: bool | str, model, attention_mask: torch.Tensor) -> bool:
     """Whether this batch of `model` runs packed under a `pack_sequences` setting: True, False, or "auto":
-    always with a varlen attention kernel, else when the packed row's attention area N^2 is no larger
-    than the padded batch's B * T^2. Never where `packing_unsupported` names a reason."""
+    always with a varlen attention (`VARLEN_ATTENTION`, read from the decoder's config), else when the
+    packed row's attention area N^2 is no larger than the padded batch's B * T^2. Never where
+    `packing_unsupported` names a reason."""
     if setting == "auto":
-        if getattr(model.config, "_attn_implementation", None) in VARLEN_ATTENTION:
+        if getattr(decoder_config(model), "_attn_implementation", None) in VARLEN_ATTENTION:
             wanted = True
         else:
             rows, width = attention_mask.shape
@@ -594,27 +600,25 @@ def _decoder_hidden(decoder, input_ids: torch.Tensor, attention_mask: torch.Tens
     """The decoder's last hidden states, [B, T, H]; `packed`: computed on the real tokens only.
 
     Packed, the rows' real tokens run as one sequence [1, N] whose position ids restart at each
-    row and with no attention mask: transformers then masks attention block-diagonally (its
-    packed-sequence detection; a varlen kernel under flash attention), so a token attends only to
-    its own row's earlier tokens, as in the padded pass. A decoder with recurrent layers
-    (`PER_SEQUENCE_LAYER_TYPES`) also gets the rows' boundaries as transformers' varlen kwargs
-    (`cu_seq_lens_q/k`, `max_length_q/k`), from which those layers lay each sequence out in a row of its own.
+    row and with no attention mask, and with the rows' boundaries as transformers' varlen kwargs
+    (`cu_seq_lens_q/k`, `max_length_q/k`): `sdpa_varlen` and flash attention's varlen kernel attend
+    within each sequence from them, plain sdpa and eager through the dense block-diagonal mask
+    transformers builds from the restarting position ids, so a token attends only to its own row's
+    earlier tokens, as in the padded pass. Recurrent layers (`PER_SEQUENCE_LAYER_TYPES`) lay each
+    sequence out in a row of its own from the same boundaries.
     Padding positions come back as zeros (no prediction reads them).
     """
     if not packed:
         return decoder(input_ids=input_ids, attention_mask=attention_mask, position_ids=position_ids).last_hidden_state
     real = attention_mask.bool()
-    boundaries = {}
-    per_sequence = [module for attribute in PER_SEQUENCE_LAYER_TYPES.values()
-                    for module in _per_sequence_modules(decoder, attribute)]
-    if per_sequence:
-        for module in per_sequence:
+    for attribute in PER_SEQUENCE_LAYER_TYPES.values():
+        for module in _per_sequence_modules(decoder, attribute):
             _run_linear_attention_per_sequence(module)
-        lengths = real.sum(-1)
-        lengths = lengths[lengths > 0]
-        cu = F.pad(lengths.cumsum(0), (1, 0)).to(torch.int32)
-        longest = int(lengths.max())
-        boundaries = {"cu_seq_lens_q": cu, "cu_seq_lens_k": cu, "max_length_q": longest, "max_length_k": longest}
+    lengths = real.sum(-1)
+    lengths = lengths[lengths > 0]
+    cu = F.pad(lengths.cumsum(0), (1, 0)).to(torch.int32)
+    longest = int(lengths.max())
+    boundaries = {"cu_seq_lens_q": cu, "cu_seq_lens_k": cu, "max_length_q": longest, "max_length_k": longest}
     flat = decoder(input_ids=input_ids[real].unsqueeze(0), attention_mask=None,
                    position_ids=position_ids[real].unsqueeze(0), use_cache=False, **boundaries).last_hidden_state[0]
     out = flat.new_zeros((*input_ids.shape, flat.shape[-1]))
@@ -667,7 +671,7 @@ def token_stats(
             [vocab]-wide head and softmax is most of the reference and teacher cost.
         packed: Run the decoder on the real tokens only: the rows' tokens concatenated into one
             sequence whose position ids restart at each row, so no layer computes on padding
-            (`packed_decoder_hidden`; `packing_unsupported` says which models cannot). The
+            (`_decoder_hidden`; `packing_unsupported` says which models cannot). The
             statistics come back in the [B, T] layout, equal to the padded pass's within float
             rounding.
 

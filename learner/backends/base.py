@@ -127,9 +127,12 @@ class LearnerBackend(ABC):
 def load_causal_lm(model_dir: str, dtype: torch.dtype, device: str = "cpu", *,
                    train_vision_tower: bool = False) -> torch.nn.Module:
     """The policy from a checkpoint folder or cached hub id (`modeling.hf_checkpoint.load_model`),
-    with the vision tower of a multimodal checkpoint frozen unless `train_vision_tower`."""
+    with the vision tower of a multimodal checkpoint frozen unless `train_vision_tower`, and its
+    decoder on `sdpa_varlen` where transformers chose sdpa (packed micro-batches attend per sequence)."""
+    from modeling.attention import use_varlen_attention
     from modeling.hf_checkpoint import freeze_vision_tower, load_model
 
     model = load_model(model_dir, dtype, device)
+    use_varlen_attention(model)
     freeze_vision_tower(model, train_vision_tower=train_vision_tower)
     return model

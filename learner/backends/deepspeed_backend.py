@@ -135,6 +135,7 @@ class DeepSpeedBackend(LearnerBackend):
             sys.modules["deepspeed.comm.torch"].build_shm_op = lambda: None
         from transformers.utils import logging as hf_logging
 
+        from modeling.attention import use_varlen_attention
         from modeling.hf_checkpoint import build_empty_model, freeze_vision_tower, load_hf_config, resolve_model_path
 
         hf_logging.disable_progress_bar()
@@ -158,6 +159,7 @@ class DeepSpeedBackend(LearnerBackend):
                 model = build_empty_model(load_hf_config(path), self._dtype)
             _load_weights_module_by_module(model, str(path), rank)
             _register_external_parameters(model)
+            use_varlen_attention(model)  # as the torch backend (base.load_causal_lm)
             return model
 
         model = build(model_dir)

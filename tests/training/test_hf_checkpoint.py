@@ -12,6 +12,7 @@ the old log-probs are off by > 1e-3.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -456,19 +457,27 @@ def test_packed_forwards_equal_the_padded_ones(twin_root, family):
     backward recomputes the layers) equal the padded pass's within 1e-5. Qwen3.5's linear-attention
     layers run each packed sequence on its own: a recurrent state or conv window carried over from
     the previous row would move the next row's values far beyond 1e-5."""
-    from modeling.model import load_policy, pad_batch, packing_unsupported, token_stats
+    from modeling.attention import SDPA_VARLEN, decoder_config
+    from modeling.model import load_policy, pad_batch, packing_unsupported, packs_sequences, token_stats
 
     model, _ = load_policy(twin_root / family)
+    assert decoder_config(model)._attn_implementation == SDPA_VARLEN  # packed rows attend per sequence
     generator = torch.Generator().manual_seed(0)
-    ids, mask = pad_batch([torch.randint(5, 900, (n,), generator=generator).tolist() for n in (37, 5, 64, 1, 20)], 0)
+    rows = [torch.randint(5, 900, (n,), generator=generator).tolist() for n in (37, 5, 64, 1, 20)]
+    ids, mask = pad_batch(rows, 0)
     trained = mask.clone()
     trained[:, :3] = 0
-    assert packing_unsupported(model) is None
+    assert packing_unsupported(model) is None and packs_sequences("auto", model, mask)
     for positions in (None, trained > 0):
         padded = token_stats(model, ids, mask, with_entropy=True, positions=positions)
         packed = token_stats(model, ids, mask, with_entropy=True, positions=positions, packed=True)
         assert torch.allclose(padded.logprobs, packed.logprobs, atol=1e-5)
         assert torch.allclose(padded.entropy, packed.entropy, atol=1e-5)
+    left_ids, left_mask = pad_batch(rows, 0, side="left")
+    padded = token_stats(model, left_ids, left_mask, with_entropy=True)
+    packed = token_stats(model, left_ids, left_mask, with_entropy=True, packed=True)
+    assert torch.allclose(padded.logprobs, packed.logprobs, atol=1e-5)
+    assert torch.allclose(padded.entropy, packed.entropy, atol=1e-5)
     model.train()
     for checkpointing in (False, True):
         if checkpointing:
@@ -484,6 +493,88 @@ def test_packed_forwards_equal_the_padded_ones(twin_root, family):
     # A row's statistics do not depend on its neighbours: alone it gives the same values as packed.
     alone = token_stats(model, ids[2:3, :64], mask[2:3, :64], packed=True).logprobs
     assert torch.allclose(alone, token_stats(model, ids, mask, packed=True).logprobs[2:3, :64], atol=1e-5)
+
+
+@contextlib.contextmanager
+def _attention(model, name: str):
+    """`model`'s decoder on attention implementation `name` inside the block."""
+    from modeling.attention import decoder_config
+
+    config = decoder_config(model)
+    before = config._attn_implementation
+    config._attn_implementation = name
+    try:
+        yield model
+    finally:
+        config._attn_implementation = before
+
+
+@pytest.mark.parametrize("family", TWIN_FAMILIES)
+def test_varlen_attention_is_sdpa_except_that_packed_rows_attend_per_sequence(twin_root, family):
+    """`sdpa_varlen` (modeling/attention.py) builds no [N, N] mask for a packed row and attends within
+    each sequence: packed it equals sdpa's dense block mask within 1e-5, and a sequence's values do not
+    move when another sequence of the row changes (they would if attention crossed the boundary).
+    Padded batches (right, left) and cached decoding (a prefill, then 2 tokens and 1 token against the
+    cache, left padded) are transformers' sdpa bit for bit."""
+    from transformers.masking_utils import create_causal_mask
+
+    from modeling.attention import SDPA_VARLEN, decoder_config
+    from modeling.model import load_policy, pad_batch, position_ids_from_mask, token_stats
+
+    model, _ = load_policy(twin_root / family)
+    config = decoder_config(model)
+    generator = torch.Generator().manual_seed(1)
+    rows = [torch.randint(5, 900, (n,), generator=generator).tolist() for n in (23, 40, 9)]
+    ids, mask = pad_batch(rows, 0)
+    # The mask side: none for a packed row under sdpa_varlen, sdpa's dense block mask otherwise.
+    flat_positions = position_ids_from_mask(mask)[mask.bool()].unsqueeze(0)
+    embeds = torch.zeros((1, flat_positions.shape[1], 8))
+    assert create_causal_mask(config, embeds, None, None, position_ids=flat_positions) is None
+    with _attention(model, "sdpa"):
+        dense = create_causal_mask(config, embeds, None, None, position_ids=flat_positions)
+    assert dense.shape == (1, 1, 72, 72) and not dense[0, 0, 30, 10] and dense[0, 0, 30, 23]
+
+    packed = token_stats(model, ids, mask, with_entropy=True, packed=True)
+    with _attention(model, "sdpa"):
+        dense_packed = token_stats(model, ids, mask, with_entropy=True, packed=True)
+    assert torch.allclose(packed.logprobs, dense_packed.logprobs, atol=1e-5)
+    assert torch.allclose(packed.entropy, dense_packed.entropy, atol=1e-5)
+    changed = ids.clone()
+    changed[1, :40] = torch.randint(5, 900, (40,), generator=generator)
+    moved = token_stats(model, changed, mask, packed=True).logprobs
+    assert (moved[1] - packed.logprobs[1]).abs().max() > 1e-3
+    for row in (0, 2):
+        assert (moved[row] - packed.logprobs[row]).abs().max() <= 1e-6, row
+
+    for side in ("right", "left"):
+        ids, mask = pad_batch(rows, 0, side=side)
+        varlen = token_stats(model, ids, mask, with_entropy=True)
+        with _attention(model, "sdpa"):
+            sdpa = token_stats(model, ids, mask, with_entropy=True)
+        assert torch.equal(varlen.logprobs, sdpa.logprobs) and torch.equal(varlen.entropy, sdpa.entropy), side
+
+    ids, mask = pad_batch([r[:12] for r in rows[:2]] + [rows[2][:5]], 0, side="left")
+    steps = [torch.randint(5, 900, (3, 2), generator=generator), torch.randint(5, 900, (3, 1), generator=generator)]
+
+    def decode() -> list[torch.Tensor]:
+        full_mask = mask
+        out = model(input_ids=ids, attention_mask=mask, position_ids=position_ids_from_mask(mask), use_cache=True)
+        logits, cache = [out.logits], out.past_key_values
+        for step in steps:
+            full_mask = torch.cat([full_mask, torch.ones_like(step)], dim=1)
+            position_ids = position_ids_from_mask(full_mask)[:, -step.shape[1]:]
+            out = model(input_ids=step, attention_mask=full_mask, position_ids=position_ids, past_key_values=cache,
+                        use_cache=True)
+            logits.append(out.logits)
+            cache = out.past_key_values
+        return logits
+
+    with torch.no_grad():
+        varlen = decode()
+        with _attention(model, "sdpa"):
+            sdpa = decode()
+    assert config._attn_implementation == SDPA_VARLEN
+    assert all(torch.equal(a, b) for a, b in zip(varlen, sdpa))
 
 
 def test_packing_is_refused_by_name_for_recurrent_layers_without_a_per_sequence_path():

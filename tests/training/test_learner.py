@@ -127,8 +127,8 @@ def test_length_sorted_micro_batches_give_the_index_order_gradient(model_dir, ba
     lengths = [len(s.input_ids) for s in batch]
     by_index, by_length = split_by_budget(list(range(6)), lengths, 2), split_by_length(list(range(6)), lengths, 2)
     assert sorted(map(sorted, by_index)) != sorted(map(sorted, by_length))
-    runs = {order: _gradient_and_metrics(Learner(LearnerConfig(
-        optim={"lr": 1e-3, "micro_batch_size": 2, "micro_batch_order": order}), model_dir), batch)
+    runs = {order: _gradient_and_metrics(Learner(LearnerConfig(  # padded: the padding share is compared
+        pack_sequences=False, optim={"lr": 1e-3, "micro_batch_size": 2, "micro_batch_order": order}), model_dir), batch)
         for order in ("index", "length")}
     (g_index, m_index), (g_length, m_length) = runs["index"], runs["length"]
     scale = max(float(g.abs().max()) for g in g_index.values())
@@ -147,14 +147,19 @@ def test_length_sorted_micro_batches_give_the_index_order_gradient(model_dir, ba
 
 
 def test_auto_packing_packs_a_long_tail_and_pads_even_lengths(model_dir):
-    """sdpa masks a packed row densely: "auto" packs a micro-batch only when its packed attention area
-    N^2 is at most the padded B*T^2 (bench/packing.py: 2x faster on a long tail, 3-5x slower on even
-    lengths)."""
+    """Under the sdpa_varlen attention the learner and teacher load with, a packed sequence attends
+    on its own (sum of L^2): "auto" always packs. Plain sdpa masks a packed row densely: there "auto"
+    packs a micro-batch only when its packed attention area N^2 is at most the padded B*T^2
+    (docs/benchmarks.md, "Sequence packing")."""
+    from modeling.attention import decoder_config
     from modeling.model import packs_sequences
 
     model, _ = load_policy(model_dir)
     long_tail = pad_batch([[5] * n for n in (96, 128, 160, 192, 256, 384, 1024, 2048)], 0)[1]
     even = pad_batch([[5] * n for n in (480, 496, 512, 512, 512, 528, 528, 544)], 0)[1]
+    assert packs_sequences("auto", model, long_tail) and packs_sequences("auto", model, even)
+    assert not packs_sequences(False, model, long_tail)
+    decoder_config(model)._attn_implementation = "sdpa"
     assert packs_sequences("auto", model, long_tail) and not packs_sequences("auto", model, even)
     assert packs_sequences(True, model, even) and not packs_sequences(False, model, long_tail)
 
@@ -196,6 +201,21 @@ def _teacher_outputs(model_dir, samples, drift: float = 0.0, **cfg):
         gen = torch.Generator().manual_seed(7)
         t.hard_copy({k: v + drift * torch.randn(v.shape, generator=gen) for k, v in t.get_weights().items()})
     return TeacherBatch(outputs=t.compute(samples))
+
+
+def test_teacher_packs_by_default_and_equals_its_padded_forward(model_dir, batch):
+    """teacher.pack_sequences defaults to "auto", which packs under the sdpa_varlen attention the teacher
+    loads with: none of its decoder positions are padding, its log-probs and top-k equal the padded
+    forward's within 1e-5, and a sample's values are the same batched with the others or alone."""
+    packed = Teacher(TeacherConfig(serve_topk=4), model_dir, start_worker=False)
+    padded = Teacher(TeacherConfig(serve_topk=4, pack_sequences=False), model_dir, start_worker=False)
+    a, b = packed.compute(batch), padded.compute(batch)
+    assert all(o.padded_positions == 0 for o in a) and sum(o.padded_positions for o in b) > 0
+    for x, y in zip(a, b):
+        assert max(abs(u - v) for u, v in zip(x.logprobs, y.logprobs)) <= 1e-5
+        assert max(abs(u - v) for p, q in zip(x.topk_logprobs, y.topk_logprobs) for u, v in zip(p, q)) <= 1e-5
+    alone = packed.compute(batch[-1:])[0]
+    assert max(abs(u - v) for u, v in zip(alone.logprobs, a[-1].logprobs)) <= 1e-6
 
 
 def test_ttopd_step_reports_truncation_and_pulls_toward_the_teacher(model_dir, batch):

@@ -223,7 +223,7 @@ def test_length_batches_come_back_in_order_and_pad_less(model_dir):
     rng = random.Random(5)
     samples = [make_sample(rng, group_id="g", index=i, prompt_len=5, turn_lens=[n])
                for i, n in enumerate((3, 30, 4, 28, 6, 25))]  # lengths 8, 35, 9, 33, 11, 30
-    cfg = {"batch_size": 2, "hints": {"enabled": False}}
+    cfg = {"batch_size": 2, "hints": {"enabled": False}, "pack_sequences": False}  # padded: padding is compared
     by_index = Teacher(TeacherConfig(**cfg, batch_order="index"), model_dir, start_worker=False)
     by_length = Teacher(TeacherConfig(**cfg), model_dir, start_worker=False)
     index_outs, length_outs = by_index.compute(samples), by_length.compute(samples)
