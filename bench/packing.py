@@ -20,10 +20,11 @@ batch's forward + backward time, and the ratios, on the tiny and the wider model
 
 With `--run RUN_DIR` (a finished `hcgym train` run, e.g. the demo's): its steps' batches (trajectories
 and the teacher log-probs stored with them) are trained again from RUN_DIR/model/sft by two learners of
-the run's config, micro-batches in batch order and by length, alternating which goes first; prints
-each step's padding fraction and learner time (reference forwards, forward + backward) of both.
+the run's config, micro-batches in batch order and by length (`--compare packing`: by length, padded
+and packed), alternating which goes first; prints each step's padding fraction and learner time
+(reference forwards, forward + backward) of both.
 
-    .venv/bin/python bench/packing.py [--only packing|micro-batches] [--run RUN_DIR]
+    .venv/bin/python bench/packing.py [--only packing|micro-batches] [--run RUN_DIR [--compare order|packing]]
 """
 
 from __future__ import annotations
@@ -116,8 +117,9 @@ def micro_batches(models: dict) -> None:
               f"{index_s / length_s:.2f}x, sdpa_varlen / sdpa by length = {length_s / varlen_s:.2f}x")
 
 
-def replay_run(run_dir: Path) -> None:
-    """Train a run's stored batches again with micro-batches in batch order and by length (see the module doc)."""
+def replay_run(run_dir: Path, compare: str = "order") -> None:
+    """Train a run's stored batches again with micro-batches in batch order and by length, or (`compare`
+    "packing") by length padded and packed (see the module doc)."""
     from actors.types import TeacherBatch, TeacherOutput
     from learner.config import load_config
     from learner.learner_actor import Learner
@@ -138,23 +140,29 @@ def replay_run(run_dir: Path) -> None:
     if not steps:
         raise FileNotFoundError(f"{run_dir}/trajectories: no step_*.parquet to replay")
     learners = {}
-    for order in ("index", "length"):
+    arms = ("index", "length") if compare == "order" else ("padded", "packed")
+    for arm in arms:
         learner_cfg = cfg.learner.model_copy(deep=True)
-        learner_cfg.optim.micro_batch_order = order
-        learners[order] = Learner(learner_cfg, str(run_dir / "model" / "sft"), cfg.seed)
+        if compare == "order":
+            learner_cfg.optim.micro_batch_order = arm
+        else:
+            learner_cfg.optim.micro_batch_order = "length"
+            learner_cfg.pack_sequences = arm == "packed"
+        learners[arm] = Learner(learner_cfg, str(run_dir / "model" / "sft"), cfg.seed)
     print(f"{run_dir}: micro-batches of {cfg.learner.optim.micro_batch_size}, pack_sequences "
-          f"{cfg.learner.pack_sequences}; seconds: learner (reference forwards, forward + backward)")
-    totals = {"index": 0.0, "length": 0.0}
+          f"{cfg.learner.pack_sequences}, arms {' / '.join(arms)}; seconds: learner (reference forwards, "
+          f"forward + backward)")
+    totals = dict.fromkeys(arms, 0.0)
     for k, (name, samples, teacher) in enumerate(steps):
         lengths = sorted(len(s.input_ids) for s in samples)
         line = []
-        for order in (("index", "length") if k % 2 == 0 else ("length", "index")):
+        for order in (arms if k % 2 == 0 else arms[::-1]):
             m = learners[order].train_step(samples, teacher, step=k + 1)
             totals[order] += m["learner_s"]
             line.append(f"{order}: padding {m['learner_padding_frac']:.1%}, {m['learner_s']:.2f} s "
                         f"({m['learner_ref_s']:.2f}, {m['learner_forward_backward_s']:.2f})")
         print(f"  {name}: {len(samples)} samples, {lengths[0]} ... {lengths[-1]} tokens; " + "; ".join(line))
-    print(f"  learner time by length / batch order: {totals['length'] / totals['index']:.2f}")
+    print(f"  learner time {arms[1]} / {arms[0]}: {totals[arms[1]] / totals[arms[0]]:.2f}")
     for learner in learners.values():
         learner.shutdown()
 
@@ -163,10 +171,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", choices=("packing", "micro-batches"), help="run one of the two measurements")
     parser.add_argument("--run", type=Path, help="replay this run's batches in batch order and by length, only")
+    parser.add_argument("--compare", choices=("order", "packing"), default="order",
+                        help="with --run: batch order vs by length, or (by length) padded vs packed")
     args = parser.parse_args()
     torch.manual_seed(0)
     if args.run is not None:
-        replay_run(args.run)
+        replay_run(args.run, args.compare)
         return
     root = Path(tempfile.mkdtemp(prefix="bench_packing_"))
     tok = train_tokenizer(["the patient was given warfarin and aspirin"] * 200, 512, root / "tok", max_stdlib_files=5)
