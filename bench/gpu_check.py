@@ -10,7 +10,8 @@ phase whose packages are missing is skipped with the reason and what to carry):
                why), then a bf16 payload travels and is checked bit for bit; GiB/s.
   smoke        bench/gpu_smoke.py: vLLM CUDA generation, three ZeRO-3 steps, weight sync into vLLM,
                log-prob agreement after the sync.
-  step         bench/gpu_step.py: ZeRO-3 tokens/s and MFU, vLLM tokens/s (0.5B shape).
+  step         bench/gpu_step.py: ZeRO-3 tokens/s and MFU on a long-tail length mix, padded and packed
+               (real tokens only), vLLM tokens/s (0.5B shape).
   twin         bench/gpu_twin.py: the Qwen3.5 tiny twin through the vLLM engine, with log-prob
                agreement against transformers.
 
@@ -301,8 +302,12 @@ def main(argv: list[str] | None = None) -> int:
     # Sizes that fit the 10-minute budget on one H100/H200; tiny ones on the CPU.
     smoke_args = (["--prompts", "8", "--prompt-tokens", "32", "--new-tokens", "32"] if args.cpu
                   else ["--prompts", "32", "--prompt-tokens", "512", "--new-tokens", "256"])
-    step_args = (["--steps", "2", "--batch", "4", "--seq", "128", "--prompts", "8", "--new-tokens", "32"] if args.cpu
-                 else ["--steps", "3", "--batch", "8", "--seq", "2048", "--prompts", "64", "--new-tokens", "256"])
+    # The step phase's learner half: a long-tail length mix, padded and packed arms of 2 steps each
+    # (on the GPU 16 samples in micro-batches of 4, so that sorting by length still leaves padding).
+    step_args = (["--steps", "2", "--batch", "4", "--seq", "128", "--lengths", "long-tail", "--prompts", "8",
+                  "--new-tokens", "32"] if args.cpu
+                 else ["--steps", "2", "--batch", "16", "--micro-batch", "4", "--seq", "2048", "--lengths",
+                       "long-tail", "--prompts", "64", "--new-tokens", "256"])
     for phase in phases:
         if phase == "env":
             continue

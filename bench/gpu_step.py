@@ -9,16 +9,23 @@ half in `--vllm-python` (default auto: this interpreter if it imports vllm, else
 `--json-out` is rewritten after each, so a later failure keeps what was measured.
 
 * learner: our `Learner` with `backend: deepspeed` (ZeRO-3, 1 rank, bf16) on synthetic multi-turn
-  samples; tokens/s counts every position of the batch; FLOPs = 8 (N - N_head) tokens +
-  8 N_head loss_tokens (bench/gpu_figures.py: the LM head runs on the loss positions only);
-  MFU against the dense bf16 peak of the device model (none for an unknown device).
+  samples, `--lengths even` (every sample --seq tokens) or `long-tail` (bench/packing.py's log-normal
+  mix rescaled to --seq: most samples short, a few up to --seq). Two learners from the same weights,
+  `pack_sequences: false` (padded) and `auto` (packed: flash attention or sdpa_varlen), take turns
+  step by step (which goes first alternates). Per arm: tokens/s counting real tokens only (padding
+  positions are work, not throughput), step seconds, the learner's `learner_padding_frac`, and MFU
+  on real tokens: FLOPs = 8 (N - N_head) real tokens + 8 N_head loss_tokens (bench/gpu_figures.py:
+  the LM head runs on the loss positions only), against the dense bf16 peak of the device model
+  (none for an unknown device); and packed / padded. The top-level figures are the packed arm's
+  (the learner's default, `auto`).
 * vllm: `vllm.LLM` on the same weights, sampling with log-probs (as the generator does).
 
 The model: Qwen2 architecture in the 0.5B shape (hidden 896, 24 layers, 14 heads, 2 KV heads,
 intermediate 4864, vocabulary 151,936, tied embeddings), randomly initialised, tokenizer trained
 locally (the prompts are token ids, so its size does not matter).
 
-Run: python bench/gpu_step.py [--steps 5] [--batch 8] [--seq 2048] [--vllm-python PY] [--json-out F]
+Run: python bench/gpu_step.py [--steps 5] [--batch 8] [--seq 2048] [--lengths even|long-tail]
+     [--vllm-python PY] [--json-out F]
 """
 
 from __future__ import annotations
@@ -81,58 +88,110 @@ def build_model(root: Path, cpu: bool = False) -> str:
     return str(out)
 
 
-def synthetic_samples(batch: int, seq: int, vocab: int, seed: int = 0):
-    """Multi-turn episodes in token space: prompt, turn, tool result, turn (random ids)."""
+LENGTHS = ("even", "long-tail")
+
+
+def sample_lengths(mix: str, batch: int, seq: int, seed: int = 0) -> list[int]:
+    """Each sample's tokens: `even`, all `seq`; `long-tail`, bench/packing.py's log-normal mix
+    rescaled to a cap of `seq` (between seq / 16 and seq, median about seq / 5.4), seeded."""
+    if mix == "even":
+        return [seq] * batch
+    if mix == "long-tail":
+        from packing import long_tail_batch
+
+        return long_tail_batch(batch, seed, longest=seq)
+    raise ValueError(f"--lengths: unknown mix {mix!r} (known: {', '.join(LENGTHS)})")
+
+
+def synthetic_samples(batch: int, seq: int, vocab: int, seed: int = 0, lengths: list[int] | None = None):
+    """Multi-turn episodes in token space: prompt, turn, tool result, turn (random ids); sample i has
+    `lengths[i]` tokens (default: all `seq`)."""
     import random
 
     from actors.types import RolloutSample, TurnSpan
 
+    lengths = lengths or [seq] * batch
+    if len(lengths) != batch or min(lengths) < 4:
+        raise ValueError(f"lengths: need {batch} lengths of at least 4 tokens, got {lengths}")
     rng = random.Random(seed)
-    prompt, tool = seq // 4, seq // 16
-    turn = (seq - prompt - tool) // 2
     out = []
-    for i in range(batch):
-        ids = [rng.randrange(10, vocab) for _ in range(seq)]
-        mask = [0] * prompt + [1] * turn + [0] * tool + [1] * (seq - prompt - turn - tool)
-        turns = [TurnSpan(start=prompt, end=prompt + turn), TurnSpan(start=prompt + turn + tool, end=seq)]
+    for i, n in enumerate(lengths):
+        prompt, tool = n // 4, n // 16
+        turn = (n - prompt - tool) // 2
+        ids = [rng.randrange(10, vocab) for _ in range(n)]
+        mask = [0] * prompt + [1] * turn + [0] * tool + [1] * (n - prompt - turn - tool)
+        turns = [TurnSpan(start=prompt, end=prompt + turn), TurnSpan(start=prompt + turn + tool, end=n)]
         out.append(RolloutSample(sample_id=f"s{i}", task_id=f"t{i // 4}", domain="bench", group_id=f"g{i // 4}",
                                  seed=i, prompt_length=prompt, input_ids=ids, loss_mask=mask,
-                                 sampling_logprobs=[0.0] * seq, policy_versions=[0 if m else -1 for m in mask],
+                                 sampling_logprobs=[0.0] * n, policy_versions=[0 if m else -1 for m in mask],
                                  turns=turns, reward=float(i % 2), correct=bool(i % 2), response_tokens=sum(mask)))
     return out
+
+
+ARMS = {"padded": False, "packed": "auto"}  # learner.pack_sequences of each arm
+
+
+def arm_figures(step_seconds: list[float], real_tokens: int, loss_tokens: int, padding_fracs: list[float],
+                meta: dict, peak, reference: bool) -> dict:
+    """One arm's figures from its timed steps: tokens/s and MFU count the real tokens of a step
+    (`real_tokens`, `loss_tokens`: per step), never its padding positions."""
+    dt, steps = sum(step_seconds), len(step_seconds)
+    flops = learner_step_flops(meta["params"], meta["head_params"], steps * real_tokens, steps * loss_tokens,
+                               reference=reference)
+    return {"learner_tokens_per_s": steps * real_tokens / dt, "learner_step_s": dt / steps,
+            "learner_step_s_each": step_seconds, "learner_padding_frac": sum(padding_fracs) / steps,
+            "tflops_achieved": flops / dt / 1e12, "mfu": mfu(flops, dt, peak)}
 
 
 def part_learner(args) -> dict:
     import torch
 
+    from modeling.attention import decoder_config
     from modeling.config_models import LearnerConfig
     from learner.learner_actor import Learner
 
     meta = json.loads((Path(args.model_dir) / "bench_params.json").read_text())
     cuda = not args.cpu
-    cfg = LearnerConfig(backend="deepspeed", device="cuda" if cuda else "cpu",
-                        dtype="bfloat16" if cuda else "float32", gradient_checkpointing=True,
-                        optim={"lr": 1e-6, "micro_batch_size": args.micro_batch},
-                        deepspeed={"world_size": 1, "num_gpus_per_rank": 1 if cuda else 0})
-    learner = Learner(cfg, args.model_dir, seed=0)
-    samples = synthetic_samples(args.batch, args.seq, meta["vocab"])
+    learners = {}
+    for arm, pack in ARMS.items():
+        cfg = LearnerConfig(backend="deepspeed", device="cuda" if cuda else "cpu",
+                            dtype="bfloat16" if cuda else "float32", gradient_checkpointing=True,
+                            pack_sequences=pack, optim={"lr": 1e-6, "micro_batch_size": args.micro_batch},
+                            deepspeed={"world_size": 1, "num_gpus_per_rank": 1 if cuda else 0})
+        learners[arm] = Learner(cfg, args.model_dir, seed=0)
+    lengths = sample_lengths(args.lengths, args.batch, args.seq)
+    samples = synthetic_samples(args.batch, args.seq, meta["vocab"], lengths=lengths)
     sync = torch.cuda.synchronize if cuda else (lambda: None)
-    learner.train_step(samples)  # warm-up (allocations, kernels)
+    for learner in learners.values():
+        learner.train_step(samples)  # warm-up (allocations, kernels)
     sync()
-    t0 = time.perf_counter()
-    for _ in range(args.steps):
-        learner.train_step(samples)
-    sync()
-    dt = time.perf_counter() - t0
-    tokens = args.steps * sum(len(s.input_ids) for s in samples)
-    loss_tokens = args.steps * sum(sum(s.loss_mask) for s in samples)
-    flops = learner_step_flops(meta["params"], meta["head_params"], tokens, loss_tokens,
-                               reference=cfg.loss.grpo.kl_beta > 0)
+    seconds: dict[str, list[float]] = {arm: [] for arm in ARMS}
+    padding: dict[str, list[float]] = {arm: [] for arm in ARMS}
+    order = list(ARMS)
+    for k in range(args.steps):
+        for arm in (order if k % 2 == 0 else order[::-1]):  # neither arm always runs on a warmer machine
+            t0 = time.perf_counter()
+            metrics = learners[arm].train_step(samples)
+            sync()
+            seconds[arm].append(time.perf_counter() - t0)
+            padding[arm].append(metrics["learner_padding_frac"])
+    real = sum(len(s.input_ids) for s in samples)
+    loss_tokens = sum(sum(s.loss_mask) for s in samples)
     peak = device_peak(torch.cuda.get_device_name(0) if cuda else "cpu", args.peak_tflops)
-    learner.shutdown()
-    return {"learner_tokens_per_s": tokens / dt, "learner_step_s": dt / args.steps, "tokens_per_step":
-            tokens // args.steps, "loss_tokens_per_step": loss_tokens // args.steps, "params": meta["params"],
-            "head_params": meta["head_params"], "tflops_achieved": flops / dt / 1e12, "mfu": mfu(flops, dt, peak),
+    reference = learners["packed"].config.loss.grpo.kl_beta > 0
+    arms = {arm: arm_figures(seconds[arm], real, loss_tokens, padding[arm], meta, peak, reference) for arm in ARMS}
+    # The packed arm's attention: flash attention where installed on the GPU, else sdpa_varlen.
+    attention = getattr(decoder_config(learners["packed"]._local.backend.policy), "_attn_implementation", None)
+    for learner in learners.values():
+        learner.shutdown()
+    return {**{k: v for k, v in arms["packed"].items() if k != "learner_step_s_each"},
+            "tokens_per_step": real, "loss_tokens_per_step": loss_tokens,
+            "lengths": args.lengths,
+            "sample_lengths": lengths, "micro_batch": args.micro_batch, "steps_per_arm": args.steps,
+            "packed_attention": attention, "arms": arms,
+            "packed_over_padded_tokens_per_s": arms["packed"]["learner_tokens_per_s"]
+            / arms["padded"]["learner_tokens_per_s"],
+            "params": meta["params"], "head_params": meta["head_params"],
             "peak_tflops": peak.tflops, "peak_reason": peak.reason,
             "max_mem_gib": torch.cuda.max_memory_allocated() / 2**30 if cuda else None}
 
@@ -169,6 +228,7 @@ def run_part(args, part: str, model_dir: str, python: str) -> dict:
     """One half in its own interpreter; its figures, or the reason it has none."""
     cmd = [python, __file__, "--part", part, "--model-dir", model_dir, "--steps", str(args.steps),
            "--batch", str(args.batch), "--micro-batch", str(args.micro_batch), "--seq", str(args.seq),
+           "--lengths", args.lengths,
            "--prompts", str(args.prompts), "--new-tokens", str(args.new_tokens)]
     if args.peak_tflops is not None:
         cmd += ["--peak-tflops", str(args.peak_tflops)]
@@ -196,7 +256,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--batch", type=int, default=8)
     parser.add_argument("--micro-batch", type=int, default=2)
-    parser.add_argument("--seq", type=int, default=2048)
+    parser.add_argument("--seq", type=int, default=2048, help="tokens per sample (even), the longest (long-tail)")
+    parser.add_argument("--lengths", choices=LENGTHS, default="even",
+                        help="the learner half's sample lengths: all --seq, or a seeded log-normal long tail")
     parser.add_argument("--prompts", type=int, default=64)
     parser.add_argument("--new-tokens", type=int, default=512)
     parser.add_argument("--peak-tflops", type=float, default=None,

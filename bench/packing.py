@@ -30,6 +30,7 @@ and packed), alternating which goes first; prints each step's padding fraction a
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import random
 import statistics
@@ -64,11 +65,13 @@ def timed(model, ids, mask, trained, packed: bool) -> float:
     return statistics.median(times)
 
 
-def long_tail_batch(count: int = 32, seed: int = 0) -> list[int]:
+def long_tail_batch(count: int = 32, seed: int = 0, longest: int = 1024) -> list[int]:
     """Episode lengths of a step: mostly short, a few long (a log-normal between 64 and 1,024 tokens,
-    median about 190), in a shuffled order."""
+    median about 190), in a shuffled order. `longest` rescales the mix (bounds and median) to another
+    cap: between longest / 16 and longest, median about longest / 5.4 (bench/gpu_step.py's --seq)."""
     rng = random.Random(seed)
-    return [max(64, min(1024, int(rng.lognormvariate(5.25, 0.8)))) for _ in range(count)]
+    mu = 5.25 + math.log(longest / 1024)
+    return [max(longest // 16, min(longest, int(rng.lognormvariate(mu, 0.8)))) for _ in range(count)]
 
 
 def timed_batch(model, sequences: list[list[int]], groups: list[list[int]]) -> tuple[float, float]:

@@ -74,6 +74,44 @@ def test_an_unknown_or_ambiguous_device_has_no_peak_and_says_why(name):
         device_peak(name, 0.0)
 
 
+def test_learner_arm_figures_count_real_tokens_not_padding():
+    """gpu_step's per-arm figures: tokens/s and MFU on the real tokens of a step, whatever the arm
+    padded; the padding fraction is the mean of the learner's per-step figure."""
+    import gpu_step
+
+    meta = {"params": 1416, "head_params": 800}
+    peak = device_peak("NVIDIA H200")
+    figures = gpu_step.arm_figures([2.0, 4.0], real_tokens=300, loss_tokens=120, padding_fracs=[0.25, 0.35],
+                                   meta=meta, peak=peak, reference=True)
+    assert figures["learner_tokens_per_s"] == pytest.approx(2 * 300 / 6.0)
+    assert figures["learner_step_s"] == pytest.approx(3.0)
+    assert figures["learner_padding_frac"] == pytest.approx(0.30)
+    flops = learner_step_flops(1416, 800, 600, 240)
+    assert figures["tflops_achieved"] == pytest.approx(flops / 6.0 / 1e12)
+    assert figures["mfu"] == pytest.approx(flops / 6.0 / (989.5e12))
+
+
+def test_learner_length_mixes_are_seeded_and_shape_the_samples():
+    import gpu_step
+
+    assert gpu_step.sample_lengths("even", 3, 64) == [64, 64, 64]
+    tail = gpu_step.sample_lengths("long-tail", 16, 2048)
+    assert tail == gpu_step.sample_lengths("long-tail", 16, 2048)  # seeded
+    assert all(128 <= n <= 2048 for n in tail) and max(tail) > 3 * sorted(tail)[len(tail) // 2]  # a long tail
+    samples = gpu_step.synthetic_samples(16, 2048, 500, lengths=tail)
+    assert [len(s.input_ids) for s in samples] == tail
+    for s in samples:
+        assert len(s.loss_mask) == len(s.sampling_logprobs) == len(s.input_ids) and s.turns[-1].end == len(s.input_ids)
+        assert s.response_tokens == sum(s.loss_mask) > 0 and s.loss_mask[:s.prompt_length] == [0] * s.prompt_length
+    # No lengths: the even mix.
+    assert [s.input_ids for s in gpu_step.synthetic_samples(2, 64, 500)] == \
+        [s.input_ids for s in gpu_step.synthetic_samples(2, 64, 500, lengths=[64, 64])]
+    with pytest.raises(ValueError, match="--lengths"):
+        gpu_step.sample_lengths("bimodal", 4, 64)
+    with pytest.raises(ValueError, match="lengths"):
+        gpu_step.synthetic_samples(2, 64, 500, lengths=[64])
+
+
 def test_figures_are_on_disk_after_each_phase(tmp_path, capsys):
     path = tmp_path / "figures.json"
     log = FigureLog(path, {"device": "cpu"})
