@@ -39,6 +39,8 @@ from pathlib import Path
 
 import torch
 
+from modeling.transformers_setup import prepare_transformers
+
 INDEX_FILE = "model.safetensors.index.json"
 SINGLE_FILE = "model.safetensors"
 # Hugging Face's own default shard limit for save_pretrained.
@@ -269,6 +271,7 @@ def read_checkpoint_tensors(model_dir: str | os.PathLike) -> dict[str, torch.Ten
 
 
 def load_hf_config(model_dir: str | os.PathLike):
+    prepare_transformers()
     from transformers import AutoConfig
 
     return AutoConfig.from_pretrained(str(model_dir), local_files_only=True)
@@ -281,6 +284,7 @@ def architecture_class(config):
         ValueError: The named class is not in this transformers version, or is not a generative LM
             (it has no output embeddings, so there are no token log-probs to compute).
     """
+    prepare_transformers()
     import transformers
 
     names = getattr(config, "architectures", None) or []
@@ -300,6 +304,7 @@ def architecture_class(config):
 
 def build_empty_model(config, dtype: torch.dtype) -> torch.nn.Module:
     """The architecture class built from `config` without random initialisation (every tensor is loaded after)."""
+    prepare_transformers()
     from transformers.initialization import no_init_weights
 
     cls = architecture_class(config)
@@ -369,6 +374,7 @@ def load_model(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32,
         device: Where the model goes after loading.
         revision: Hub revision when `model_dir` is a hub id.
     """
+    prepare_transformers()
     from transformers.utils import logging as hf_logging
 
     hf_logging.disable_progress_bar()

@@ -30,6 +30,7 @@ import torch.nn.functional as F
 
 import envs._runtime  # noqa: F401  (CPU-path environment defaults before transformers loads)
 from modeling.attention import SDPA_VARLEN, decoder_config, use_varlen_attention
+from modeling.transformers_setup import prepare_transformers
 
 ENDOFTEXT = "<|endoftext|>"
 IM_START = "<|im_start|>"
@@ -195,7 +196,9 @@ def train_tokenizer(
 
 
 def _quiet_transformers() -> None:
-    """No per-shard progress bars: the driver prints one progress line per step instead."""
+    """No per-shard progress bars: the driver prints one progress line per step instead. Call before
+    importing transformers' tokenizers or models (`prepare_transformers`)."""
+    prepare_transformers()
     from transformers.utils import logging as hf_logging
 
     hf_logging.disable_progress_bar()
@@ -203,6 +206,7 @@ def _quiet_transformers() -> None:
 
 def load_tokenizer(tokenizer_dir: str | os.PathLike):
     """Load a tokenizer saved by `train_tokenizer` (or any local HF tokenizer directory)."""
+    prepare_transformers()
     from transformers import AutoTokenizer
 
     path = Path(tokenizer_dir)
@@ -254,9 +258,9 @@ def build_tiny_model(
     Raises:
         ValueError: On an unknown architecture or config field.
     """
+    _quiet_transformers()
     from transformers import AutoModelForCausalLM, Qwen2Config, Qwen3Config
 
-    _quiet_transformers()
     config_cls = {"qwen3": Qwen3Config, "qwen2": Qwen2Config}.get(architecture)
     if config_cls is None:
         raise ValueError(f"architecture={architecture!r}: expected 'qwen3' or 'qwen2'")
@@ -417,9 +421,9 @@ def build_twin_model(family: str, out_dir: str | os.PathLike, tokenizer_dir: str
     """
     import json
 
+    _quiet_transformers()
     import transformers
 
-    _quiet_transformers()
     tokenizer = load_tokenizer(tokenizer_dir)
     config, eos = _twin_config(family, tokenizer)
     cls = getattr(transformers, TWIN_ARCHITECTURES[family])
