@@ -133,9 +133,25 @@ def test_rollout_node_lost_run_goes_on_learner_node_lost_run_stops_naming_it_res
             # (Copies of the driver thread's dicts and sets are taken in one C call each, under the GIL.)
             seen["rollout lost at"] = trainer.step
             seen["status at the kill"] = dict(trainer.scheduler.group_status)
-            seen["on the node"] = {key.split("#")[0] for key in set(trainer.pool.in_flight[0])}
+            # The episodes on the node while it goes: sampled until the removal returns, since a short
+            # episode seen before the kill may finish, and the next one be leased, before the node is gone.
+            on_node: set[str] = set()
+            removed = threading.Event()
+
+            def sample_on_node():
+                while not removed.is_set():
+                    on_node.update(key.split("#")[0] for key in set(trainer.pool.in_flight[0]))
+                    time.sleep(0.001)
+
+            sampler = threading.Thread(target=sample_on_node, daemon=True)
+            sampler.start()
             seen["killed at"] = time.monotonic()
-            sim.remove_node(nodes.pop("rollout"), allow_graceful=False)
+            try:
+                sim.remove_node(nodes.pop("rollout"), allow_graceful=False)
+            finally:
+                removed.set()
+                sampler.join()
+            seen["on the node"] = on_node
             rollout_actors = [*trainer.generators, *trainer.pool.actors]
             wait_for(lambda: {node_of(a) for a in rollout_actors} == {nodes["spare"].node_id},
                      what="the generator and the env actor restarted on the spare")
