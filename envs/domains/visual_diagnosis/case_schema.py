@@ -7,7 +7,7 @@ complete gold submission gives. Every model is strict: an unknown or misspelt ke
 missing field is a `DataFileError` naming the file, the case (`case #2 'vis_a_pneumonia'`) and the
 field (`image.side`).
 
-Values only the rendered image fixes are written as placeholders, `{name}` or `{name:format}` (e.g.
+Values only the rendered image fixes are written as template fields, `{name}` or `{name:format}` (e.g.
 `"{cardiothoracic_ratio:.2f}"`), in the answer, the aliases and the tool-call arguments; a string
 that is exactly one `{name}` stands for the value itself (a number stays a number). `VALUES` lists
 the names each modality offers; `generate.authored` fills them in.
@@ -27,7 +27,7 @@ from envs.core.models import StrictModel
 CASES_DIR = Path(__file__).resolve().parent / "cases"
 Number = int | float  # keeps the form written (0 stays 0, 1.0 stays 1.0), so the task reads as the case does
 
-# The placeholder names each image offers, with what they stand for.
+# The template fields ({name} in a case's strings) each image fills, with the measured value each stands for.
 VALUES: dict[str, dict[str, str]] = {
     "radiograph": {
         "cardiothoracic_ratio": "the rendered cardiothoracic ratio",
@@ -50,7 +50,7 @@ _FORMATTER = string.Formatter()
 
 
 def placeholders(value: Any) -> set[str]:
-    """The placeholder names in a string, or in the strings of a list or mapping."""
+    """The template field names ({name}) in a string, or in the strings of a list or mapping."""
     if isinstance(value, str):
         try:
             return {name for _, name, _, _ in _FORMATTER.parse(value) if name is not None}
@@ -64,7 +64,7 @@ def placeholders(value: Any) -> set[str]:
 
 
 def fill(value: Any, values: dict[str, Any]) -> Any:
-    """`value` with its placeholders filled from `values`; a string that is exactly one `{name}` becomes
+    """`value` with its template fields filled from `values`; a string that is exactly one `{name}` becomes
     the value itself."""
     if isinstance(value, dict):
         return {k: fill(v, values) for k, v in value.items()}
@@ -142,7 +142,7 @@ class Case(StrictModel):
     options: dict[str, str] | None = None
     answer_unit: str | None = None
     answer_tolerance: Number | None = None
-    answer_aliases: list[str] | str | None = None  # a string: one placeholder standing for a list
+    answer_aliases: list[str] | str | None = None  # a string: one template field that fills in a list
     emergency: str | None = None
     actions: list[Action] = Field(min_length=1)
     assertions: list[str] = Field(min_length=1)
@@ -160,7 +160,7 @@ class Case(StrictModel):
                 raise ValueError(f"{field}: placeholder(s) {unknown} are not values a {self.image.modality} offers "
                                  f"({', '.join(sorted(offered))})")
         if isinstance(self.answer_aliases, str) and placeholders(self.answer_aliases) != {"known_malignancy_aliases"}:
-            raise ValueError("answer_aliases: a list of strings, or the placeholder '{known_malignancy_aliases}'")
+            raise ValueError("answer_aliases: a list of strings, or the template field '{known_malignancy_aliases}'")
         return self
 
 
