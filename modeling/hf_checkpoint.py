@@ -375,9 +375,6 @@ def load_model(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32,
         revision: Hub revision when `model_dir` is a hub id.
     """
     prepare_transformers()
-    from transformers.utils import logging as hf_logging
-
-    hf_logging.disable_progress_bar()
     path = resolve_model_path(model_dir, revision=revision)
     config = load_hf_config(path)
     model = build_empty_model(config, dtype)

@@ -195,15 +195,6 @@ def train_tokenizer(
     return out
 
 
-def _quiet_transformers() -> None:
-    """No per-shard progress bars: the driver prints one progress line per step instead. Call before
-    importing transformers' tokenizers or models (`prepare_transformers`)."""
-    prepare_transformers()
-    from transformers.utils import logging as hf_logging
-
-    hf_logging.disable_progress_bar()
-
-
 def load_tokenizer(tokenizer_dir: str | os.PathLike):
     """Load a tokenizer saved by `train_tokenizer` (or any local HF tokenizer directory)."""
     prepare_transformers()
@@ -258,7 +249,7 @@ def build_tiny_model(
     Raises:
         ValueError: On an unknown architecture or config field.
     """
-    _quiet_transformers()
+    prepare_transformers()
     from transformers import AutoModelForCausalLM, Qwen2Config, Qwen3Config
 
     config_cls = {"qwen3": Qwen3Config, "qwen2": Qwen2Config}.get(architecture)
@@ -421,7 +412,7 @@ def build_twin_model(family: str, out_dir: str | os.PathLike, tokenizer_dir: str
     """
     import json
 
-    _quiet_transformers()
+    prepare_transformers()
     import transformers
 
     tokenizer = load_tokenizer(tokenizer_dir)
@@ -457,7 +448,7 @@ def load_policy(model_dir: str | os.PathLike, dtype: torch.dtype = torch.float32
     """
     from modeling.hf_checkpoint import load_model, resolve_model_path
 
-    _quiet_transformers()
+    prepare_transformers()
     path = resolve_model_path(model_dir)
     model = load_model(path, dtype)
     use_varlen_attention(model)

@@ -1,4 +1,5 @@
-"""What a process does before its first transformers import that reaches a tokenizer or a model.
+"""What a process does before its first transformers import that reaches a tokenizer or a model:
+no per-shard progress bars, and no scikit-learn import.
 
 transformers' generation module (reached by `AutoTokenizer`, `AutoConfig`, every model class)
 imports `sklearn.metrics.roc_curve` whenever scikit-learn is installed
@@ -21,10 +22,12 @@ def _sklearn_left_out() -> bool:
 
 
 def prepare_transformers() -> None:
-    """Call before importing transformers' tokenizers or models (idempotent; does nothing once
-    transformers' generation module is loaded, as the probe has then run)."""
-    if "transformers.generation" in sys.modules:
-        return
+    """Call before importing transformers' tokenizers or models (idempotent). Also turns off
+    transformers' per-shard progress bars: the driver prints one progress line per step instead."""
     import transformers.utils
+    from transformers.utils import logging as hf_logging
 
-    transformers.utils.is_sklearn_available = _sklearn_left_out
+    hf_logging.disable_progress_bar()
+    # Once the generation module is loaded its probe has run: nothing left to skip.
+    if "transformers.generation" not in sys.modules:
+        transformers.utils.is_sklearn_available = _sklearn_left_out

@@ -133,12 +133,11 @@ class DeepSpeedBackend(LearnerBackend):
             # attribute), so patch through sys.modules.
             __import__("deepspeed.comm.torch")
             sys.modules["deepspeed.comm.torch"].build_shm_op = lambda: None
-        from transformers.utils import logging as hf_logging
-
         from modeling.attention import use_varlen_attention
         from modeling.hf_checkpoint import build_empty_model, freeze_vision_tower, load_hf_config, resolve_model_path
+        from modeling.transformers_setup import prepare_transformers
 
-        hf_logging.disable_progress_bar()
+        prepare_transformers()
         torch.manual_seed(seed)
         dist_backend = "gloo" if config.device == "cpu" else "nccl"
         deepspeed.init_distributed(dist_backend=dist_backend, auto_mpi_discovery=False,
