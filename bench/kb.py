@@ -327,10 +327,18 @@ class Ours:
 
         budget = os.environ.get("HCGYM_BENCH_KB_BUDGET_MB")
         workers = os.environ.get("HCGYM_BENCH_KB_WORKERS")
+        drop_corpus = os.environ.get("HCGYM_BENCH_DROP_CORPUS") == "1"
         t0 = time.perf_counter()
-        # --kb-workers: the build's progress lines on stderr, timed, to split the index stage.
-        echo = ((lambda s: print(f"[{time.perf_counter() - t0:7.1f}s] {s}", file=sys.stderr, flush=True))
-                if workers else (lambda s: None))
+
+        def echo(line: str) -> None:
+            # --kb-workers / --build-workers: the build's progress lines on stderr, timed, to split the
+            # index stage.
+            if workers:
+                print(f"[{time.perf_counter() - t0:7.1f}s] {line}", file=sys.stderr, flush=True)
+            if drop_corpus and line.startswith("[kb] ingest done:"):
+                corpus.unlink()
+                print(f"[{time.perf_counter() - t0:7.1f}s] [bench] corpus {corpus.name} deleted after the ingest "
+                      f"(--drop-corpus-after-ingest)", file=sys.stderr, flush=True)
         return build_kb([file_input(corpus)], index, progress=False, resume=False, echo=echo,
                         memory_budget_mb=int(budget) if budget else None,
                         workers=int(workers) if workers else None)
@@ -522,7 +530,7 @@ def _available_bytes() -> int:
 
 
 def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None = None,
-                 cap_bytes: int | None = None, workers: int | None = None) -> dict:
+                 cap_bytes: int | None = None, workers: int | None = None, drop_corpus: bool = False) -> dict:
     """Build in a child process: its build time, peak RSS (wait4) and size on disk. `cap_bytes`
     limits the child's address space, so that an engine that would need more memory than the
     machine has fails with a MemoryError instead of waking the OOM killer on a shared machine."""
@@ -533,6 +541,8 @@ def build_engine(engine: str, corpus: Path, index: Path, budget_mb: int | None =
         env["HCGYM_BENCH_KB_BUDGET_MB"] = str(budget_mb)
     if workers:
         env["HCGYM_BENCH_KB_WORKERS"] = str(workers)
+    if drop_corpus:
+        env["HCGYM_BENCH_DROP_CORPUS"] = "1"
     limit = None
     if cap_bytes:
         import resource
@@ -677,8 +687,17 @@ def main(argv: list[str] | None = None) -> int:
                     "size): at 10M passages the plain JSONL is ~23 GB")
     ap.add_argument("--build-workers", type=int, default=None, metavar="N",
                     help="build ours with N worker processes (`hcgym kb build --workers N`) before querying it")
+    ap.add_argument("--drop-corpus-after-ingest", action="store_true",
+                    help="delete the generated corpus once our build has ingested it (only with --engines among "
+                    "ours,ours-rank, which read it no more): at 10M passages the disk holds the index or the corpus "
+                    "beside the build's peak, not both")
     args = ap.parse_args(argv)
     sizes = [int(x) for x in str(args.n_passages).split(",") if x.strip()]
+    if args.drop_corpus_after_ingest:
+        others = sorted({e.strip() for e in args.engines.split(",") if e.strip()} - {"ours", "ours-rank"})
+        if others or args.keep_corpus or args.kb_workers:
+            ap.error("--drop-corpus-after-ingest needs --engines among ours,ours-rank (it has "
+                     f"{', '.join(others) or 'none other'}), and neither --keep-corpus nor --kb-workers")
     if args.kb_workers:
         for n in sizes:
             run_workers(args, n, [int(w) for w in args.kb_workers.split(",")])
@@ -768,7 +787,8 @@ def run_size(args, n_passages: int) -> dict:
                       + (f" (address space capped at {cap / 1024 ** 3:.1f} GB)" if cap else "") + " ...", flush=True)
                 try:
                     res = build_engine(name, corpus, index, budget_mb=budget, cap_bytes=cap,
-                                       workers=args.build_workers if name == "ours" else None)
+                                       workers=args.build_workers if name == "ours" else None,
+                                       drop_corpus=args.drop_corpus_after_ingest and name == "ours")
                 except RuntimeError as exc:
                     print(f"[bench] {name}: {exc}; left out at this size", flush=True)
                     shutil.rmtree(index, ignore_errors=True)

@@ -38,6 +38,7 @@ import numpy as np
 from envs.core.files import as_disk_full
 from kb_service.kb import FORMAT, FORMAT_VERSION
 from kb_service.schema import IngestError
+from kb_service.store import indexed_text
 
 REFERENCE_TABLE = "passages_fts"
 REFERENCE_COLUMNS = ("doc_id", "source", "title", "content", "category", "dataset_name")
@@ -341,6 +342,8 @@ def _build_kb(inputs: list[Input], out: str | Path, *, article_files: list[Path]
             report.inputs.append(_ingest_one(writer, inp, prog, progress, batch_size, echo))
         report.seconds["ingest"] = round(time.perf_counter() - t0, 1)
         n = writer.count()
+        echo(f"[kb] ingest done: {n:,} passages from {len(inputs)} input(s) in {report.seconds['ingest']:.0f}s; "
+             f"the inputs are no longer read")
         if n == 0:
             rejected = sum(i["rejected"] for i in report.inputs)
             raise IngestError(f"no passages to index: the inputs gave 0 valid records ({rejected} rejected)"
@@ -470,7 +473,7 @@ def _build_indexes(writer, staging: Path, n: int, progress: bool, echo) -> dict:
     for rows in writer.iter_rows():
         for rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
             i = rowid - 1
-            bm.add(analyze(f"{title}\n{content}" if title else content))
+            bm.add(analyze(indexed_text(title, content)))
             source_ids[i] = sources.setdefault(source, len(sources))
             category_ids[i] = categories.setdefault(category, len(categories))
         bar.update(len(rows))
@@ -485,7 +488,7 @@ def _build_indexes(writer, staging: Path, n: int, progress: bool, echo) -> dict:
     bar = _tqdm(progress, total=n, unit=" passages", desc="index tantivy")
     for rows in writer.iter_rows():
         for rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
-            tv.add(rowid - 1, f"{title}\n{content}" if title else content, source, category)
+            tv.add(rowid - 1, indexed_text(title, content), source, category)
         bar.update(len(rows))
     bar.close()
     t = time.perf_counter()
@@ -674,7 +677,7 @@ def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, 
                                       f"not documents")
                 pending_src.append(sid)
                 pending_cat.append(categories.setdefault(category, len(categories)))
-                builder.add(analyze(f"{title}\n{content}" if title else content))
+                builder.add(analyze(indexed_text(title, content)))
             bar.update(len(rows))
         bar.close()
         if builder.n_docs != n:
@@ -707,7 +710,7 @@ def _build_indexes_sharded(writer, staging: Path, n: int, progress: bool, echo, 
         bar = _tqdm(progress, total=n, initial=done, unit=" passages", desc="index tantivy")
         for rows in writer.iter_rows(batch=plan["batch"], after=done):
             for rowid, _doc_id, source, title, content, category, _ds, _prov in rows:
-                tv.add(rowid - 1, f"{title}\n{content}" if title else content, source, category)
+                tv.add(rowid - 1, indexed_text(title, content), source, category)
                 if rowid % every == 0 and rowid < n:
                     tv.writer.commit()
                     prog["tantivy_rows"] = rowid

@@ -38,6 +38,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from kb_service.schema import IngestError
+from kb_service.store import indexed_text
 
 UNITS_DIR = "bm25.raw"
 PARTS_DIR = "docmeta.parts"
@@ -190,7 +191,7 @@ def _build_unit(store: str, staging: str, unit: int, start: int, end: int, shard
             for _rowid, source, title, content, category in rows:
                 pending_src.append(local["sources"].setdefault(source, len(local["sources"])))
                 pending_cat.append(local["categories"].setdefault(category, len(local["categories"])))
-                builder.add(analyze(f"{title}\n{content}" if title else content))
+                builder.add(analyze(indexed_text(title, content)))
             last = rows[-1][0]
             send(("rows", len(rows)))
     finally:
@@ -247,7 +248,7 @@ def _tantivy_task(store: str, staging: str, n: int, batch: int, min_heap_per_thr
             if not rows:
                 break
             for rowid, source, title, content, category in rows:
-                tv.add(rowid - 1, f"{title}\n{content}" if title else content, source, category)
+                tv.add(rowid - 1, indexed_text(title, content), source, category)
                 if rowid % every == 0 and rowid < n:
                     tv.writer.commit()
                     write_json(staging_path / TANTIVY_PROGRESS, {"rows": rowid})

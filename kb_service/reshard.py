@@ -9,6 +9,7 @@ from pathlib import Path
 
 from kb_service.engines import write_json
 from kb_service.shards import DEFAULT_SHARD_DOCS, SHARDS_FILE, ShardedBM25Builder, is_sharded
+from kb_service.store import indexed_text
 
 
 def shard_kb(path: Path, shard_docs: int = DEFAULT_SHARD_DOCS, progress: bool = False,
@@ -65,8 +66,7 @@ def shard_kb(path: Path, shard_docs: int = DEFAULT_SHARD_DOCS, progress: bool = 
             if not rows:
                 break
             for rowid, title, content in rows:
-                # The text the build indexes (kb_service/ingest.py, _build_indexes): title, newline, content.
-                builder.add(analyze(f"{title}\n{content}" if title else content))
+                builder.add(analyze(indexed_text(title, content)))
             last = rows[-1][0]
             bar.update(len(rows))
         bar.close()

@@ -303,7 +303,9 @@ class ShardedBM25Builder:
             return None
         if not isinstance(progress, dict) or progress.get("format") != BUILD_FORMAT:
             return None
-        if any(not (self._work / s.get("raw", s["dir"])).is_dir() for s in progress.get("shards", [])):
+        weighted = set(progress.get("final", []))  # their raw files are dropped once weighted
+        if any(not (self._work / s.get("raw", s["dir"])).is_dir() for s in progress.get("shards", [])
+               if s["dir"] not in weighted):
             return None  # a committed shard's files are gone: nothing to trust
         return progress
 
@@ -459,6 +461,10 @@ class ShardedBM25Builder:
         def weighed(i: int, spec: dict, seconds: float, rss: int) -> None:
             final.append(spec["dir"])
             self._commit()
+            # Committed: a resumed build neither weighs this shard again nor reads its raw postings
+            # (the global statistics are in the progress file), and dropping them as they are
+            # replaced keeps the build's disk peak at the raw shards' size instead of raw + weighted.
+            shutil.rmtree(dirs[i], ignore_errors=True)
             self._echo(f"[kb] bm25 shard {i} weighted ({seconds:.1f}s; RSS {rss >> 20} MB)")
             kill_point("bm25-final", i)
 

@@ -118,8 +118,10 @@ def builds(tmp_path_factory):
     budget = _budget_mb()
     in_memory = _start(corpus, tmp / "memory", None, None)  # alongside the bounded builds (2 cores)
     runs = {}
+    raw_left = {}
     for kill_at in ("bm25-shard:1", "bm25-final:2", "tantivy:3", None):
         runs[kill_at or "done"] = _finish(_start(corpus, tmp / "bounded", budget, SHARD_DOCS, kill_at))
+        raw_left[kill_at or "done"] = sorted(p.name for p in (tmp / "bounded.building" / "bm25.raw").glob("shard-*"))
     runs["memory"] = _finish(in_memory)
     # 2 workers: the build process keeps what it holds, each worker gets half of the rest, its own
     # interpreter included (about what the build process holds); three times the budget leaves each
@@ -128,7 +130,7 @@ def builds(tmp_path_factory):
     for kill_at in ("bm25-shard:1", None):
         runs["w2-" + (kill_at or "done")] = _finish(_start(corpus, tmp / "bounded2", budget2, SHARD_DOCS, kill_at,
                                                            workers=2))
-    return {"tmp": tmp, "vocab": vocab, "runs": runs, "budget": budget, "budget2": budget2}
+    return {"tmp": tmp, "vocab": vocab, "runs": runs, "budget": budget, "budget2": budget2, "raw_left": raw_left}
 
 
 def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
@@ -147,6 +149,10 @@ def test_killed_build_resumes_at_its_last_commit_under_the_budget(builds):
     # Each resumed at the commit its predecessor was killed after, and did not redo it.
     first = runs["bm25-shard:1"][2]
     assert "bm25 shard 1: passages 1,701-3,400 committed" in first and "bm25 shard 2" not in first
+    # A shard's raw postings go once its weights are committed: killed after weighing shards 0-2,
+    # the build held the raw files of shards 3 and 4 only (and the resumed run did not need them).
+    assert builds["raw_left"]["bm25-shard:1"] == ["shard-00000", "shard-00001"]
+    assert builds["raw_left"]["bm25-final:2"] == ["shard-00003", "shard-00004"]
     second = runs["bm25-final:2"][2]
     assert "bm25: resuming after 2 committed shard(s) (3,400 of 8,000 passages indexed)" in second
     assert "bm25 shard 1:" not in second and "bm25 shard 2: passages 3,401-5,100 committed" in second

@@ -4,8 +4,9 @@ before stay, the previous knowledge base is untouched, and the build run again a
 freed resumes after them and ends with every passage exactly once.
 
 The disk is a real 16 MiB tmpfs (tests/small_disk.py) holding the build folder, with a ballast file
-leaving 1.5 MiB free; the input (about 2.6 MB of text) lies elsewhere, so the build fills the disk on
-its own, during ingestion; deleting the ballast frees the space.
+leaving 0.5 MiB free; the input (3.6 MB of text, which the store compresses to 1.3 MB) lies
+elsewhere, so the build fills the disk on its own, during ingestion; deleting the ballast frees
+the space.
 """
 
 from __future__ import annotations
@@ -36,13 +37,14 @@ def test_a_full_disk_stops_the_build_naming_it_and_the_rerun_resumes_without_dup
     rng = random.Random(0)
     n = 2500
     docs = [{"doc_id": f"d{i}", "source": "s", "title": f"T{i}",
-             "content": " ".join(rng.choice(WORDS) for _ in range(150)) + f" marker{i}"} for i in range(n)]
+             "content": " ".join(f"{rng.choice(WORDS)}{rng.randrange(100)}" for _ in range(150)) + f" marker{i}"}
+            for i in range(n)]
     source = tmp_path / "passages.jsonl"
     source.write_text("".join(json.dumps(d) + "\n" for d in docs), encoding="utf-8")
     out = disk.root / "kb"
     staging = disk.root / "kb.building"
     quiet = {"progress": False, "echo": lambda line: None, "batch_size": 200}
-    disk.fill(leave=3 << 19)
+    disk.fill(leave=1 << 19)
 
     with pytest.raises(DiskFullError) as info:
         build_kb([file_input(source)], out, **quiet)
