@@ -343,10 +343,18 @@ class Ours:
                         memory_budget_mb=int(budget) if budget else None,
                         workers=int(workers) if workers else None)
 
+    # One KnowledgeBase per index in a query process: `ours` and `ours-rank` query the same KB, as
+    # one replica serves both calls (two copies of a 10M-passage KB's vocabularies, 6.3 GB each,
+    # would leave the page cache too little of the index).
+    _opened: dict[Path, object] = {}
+
     def __init__(self, index: Path) -> None:
         from kb_service.kb import KnowledgeBase
 
-        self.kb = KnowledgeBase.open(index)
+        key = Path(index).resolve()
+        if key not in Ours._opened:
+            Ours._opened[key] = KnowledgeBase.open(index)
+        self.kb = Ours._opened[key]
 
     def search(self, q: str) -> list[str]:
         return [p.doc_id for p in self.kb.search(q, k=K)]

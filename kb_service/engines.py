@@ -26,6 +26,7 @@ import functools
 import json
 import os
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +203,74 @@ def _topk_kernel():
     return topk
 
 
+class TermLookup(Mapping):
+    """A bm25s vocabulary (term -> matrix column) held in ~30 bytes a term: the columns' terms as
+    one UTF-8 blob with offsets, and their hashes sorted beside the columns.
+
+    bm25s loads the vocabulary as a dict, ~190 bytes a term; a 10M-passage KB's 25 shards hold
+    35M terms, 6.3 GB a process, which crowds the index's postings out of the page cache
+    (docs/benchmarks.md, "10M passages"). `columns` looks many terms up with one `searchsorted`;
+    a hash match is confirmed against the term's bytes, so a collision never maps a term to
+    another's column. The hashes are this process's own `hash(str)` (built at load, never stored).
+    """
+
+    def __init__(self, vocab: dict[str, int]) -> None:
+        n = len(vocab)
+        by_column: list[str | None] = [None] * n
+        for term, column in vocab.items():
+            if not 0 <= column < n or by_column[column] is not None:
+                raise ValueError(f"bm25s vocabulary columns are not 0..{n - 1} (term {term!r} has {column})")
+            by_column[column] = term
+        encoded = [t.encode("utf-8") for t in by_column]
+        self._offsets = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.fromiter(map(len, encoded), dtype=np.int64, count=n), out=self._offsets[1:])
+        self._blob = b"".join(encoded)
+        del encoded
+        hashes = np.fromiter(map(hash, by_column), dtype=np.int64, count=n)
+        order = np.argsort(hashes, kind="stable")
+        self._hashes = hashes[order]
+        self._columns = order.astype(np.int32 if n < 2 ** 31 else np.int64)
+
+    def __len__(self) -> int:
+        return len(self._hashes)
+
+    def term(self, column: int) -> str:
+        return self._blob[self._offsets[column]:self._offsets[column + 1]].decode("utf-8")
+
+    def __iter__(self):  # terms in column order, as the dict bm25s wrote
+        return (self.term(j) for j in range(len(self)))
+
+    def __getitem__(self, term: str) -> int:
+        column = self.columns([term])[0]
+        if column is None:
+            raise KeyError(term)
+        return column
+
+    def __contains__(self, term: object) -> bool:
+        return isinstance(term, str) and self.columns([term])[0] is not None
+
+    def columns(self, terms: list[str]) -> list[int | None]:
+        """Each term's column, or None for a term this vocabulary lacks."""
+        if not terms or not len(self._hashes):
+            return [None] * len(terms)
+        wanted = np.fromiter(map(hash, terms), dtype=np.int64, count=len(terms))
+        starts = np.searchsorted(self._hashes, wanted).tolist()
+        hashes, columns, offsets, blob = self._hashes, self._columns, self._offsets, self._blob
+        out: list[int | None] = []
+        for term, h, i in zip(terms, wanted.tolist(), starts):
+            found = None
+            raw = None
+            while i < len(hashes) and hashes[i] == h:
+                j = int(columns[i])
+                raw = raw if raw is not None else term.encode("utf-8")
+                if blob[offsets[j]:offsets[j + 1]] == raw:
+                    found = j
+                    break
+                i += 1
+            out.append(found)
+        return out
+
+
 class BM25Searcher:
     """A loaded (memory-mapped) bm25s index."""
 
@@ -209,8 +278,14 @@ class BM25Searcher:
         import bm25s
 
         self.path = Path(path)
-        self.retriever = bm25s.BM25.load(str(self.path), mmap=True, load_corpus=False, show_progress=False)
-        self.vocab: dict[str, int] = self.retriever.vocab_dict
+        # The vocabulary is read here, not by bm25s, which would keep it as a dict and a set of its
+        # column ids (~250 bytes a term together); `TermLookup` holds it in ~30.
+        self.retriever = bm25s.BM25.load(str(self.path), mmap=True, load_corpus=False, load_vocab=False,
+                                         show_progress=False)
+        from bm25s.utils import json_functions
+
+        with open(self.path / "vocab.index.json", encoding="utf-8") as fh:
+            self.vocab = TermLookup(json_functions.loads(fh.read()))
         s = self.retriever.scores
         self.data, self.indptr, self.indices = s["data"], s["indptr"], s["indices"]
         self.num_docs = int(s["num_docs"])
@@ -224,7 +299,7 @@ class BM25Searcher:
             raise ValueError("bm25s arrays are inconsistent (truncated or mismatched files)")
 
     def term_ids(self, terms: list[str], max_terms: int) -> list[int]:
-        ids = [self.vocab[t] for t in terms if t in self.vocab]
+        ids = [j for j in self.vocab.columns(terms) if j is not None]
         if len(ids) > max_terms:  # keep the most selective terms (smallest document frequency)
             df = [int(self.indptr[i + 1] - self.indptr[i]) for i in ids]
             keep = sorted(range(len(ids)), key=lambda j: (df[j], j))[:max_terms]
@@ -263,8 +338,8 @@ class BM25Searcher:
 
     def warmup(self) -> None:
         """Load (or compile) the numba kernel now (the first call otherwise pays for it)."""
-        if self.vocab:
-            self.search([next(iter(self.vocab.values()))], 1)
+        if len(self.vocab):
+            self.search([0], 1)
 
 
 # --------------------------------------------------------------------------------------------

@@ -30,7 +30,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from kb_service.kb import KBCorruptError, KBError, KnowledgeBase
-from kb_service.shards import SHARDS_FILE, SHARDS_FORMAT, is_sharded, merge_top_k, search_shards, select_terms
+from kb_service.shards import (SHARDS_FILE, SHARDS_FORMAT, is_sharded, merge_top_k, search_shards, select_terms,
+                               shards_df)
 
 #: The files of one bm25s shard directory (`engines.save_bm25s`).
 SHARD_FILES = ("params.index.json", "vocab.index.json", "data.csc.index.npy", "indices.csc.index.npy",
@@ -147,15 +148,7 @@ class ShardSet:
             shard.warmup()
 
     def df(self, terms: list[str]) -> list[int]:
-        out = []
-        for t in terms:
-            total = 0
-            for shard in self.shards:
-                j = shard.vocab.get(t)
-                if j is not None:
-                    total += int(shard.indptr[j + 1] - shard.indptr[j])
-            out.append(total)
-        return out
+        return shards_df(self.shards, terms)
 
     def mask(self, flt: ShardFilter | np.ndarray | None) -> np.ndarray | None:
         """This group's slice of the filter's mask: `KnowledgeBase._mask`'s rule over our documents."""

@@ -574,6 +574,16 @@ def merge_top_k(docs: list[np.ndarray], raw: list[np.ndarray], k: int) -> tuple[
     return all_docs[order], all_raw[order]
 
 
+def shards_df(shards: list[BM25Searcher], terms: list[str]) -> list[int]:
+    """Each term's document frequency summed over `shards` (the lengths of its columns)."""
+    totals = [0] * len(terms)
+    for shard in shards:
+        for i, j in enumerate(shard.vocab.columns(terms)):
+            if j is not None:
+                totals[i] += int(shard.indptr[j + 1] - shard.indptr[j])
+    return totals
+
+
 def search_shards(shards: list[BM25Searcher], offsets: list[int], terms: list[str], k: int,
                   weight_mask: np.ndarray | None = None, mask_start: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The merged top k of `shards` (shard i holds global documents from `offsets[i]`) for the
@@ -584,7 +594,7 @@ def search_shards(shards: list[BM25Searcher], offsets: list[int], terms: list[st
         return np.zeros(0, np.int64), np.zeros(0, np.float32)
     all_docs, all_scores = [], []
     for offset, shard in zip(offsets, shards):
-        ids = [shard.vocab[t] for t in terms if t in shard.vocab]
+        ids = [j for j in shard.vocab.columns(terms) if j is not None]
         if not ids:
             continue
         start = offset - mask_start
@@ -625,16 +635,15 @@ class ShardedBM25Searcher:
 
     def df(self, term: str) -> int:
         """The term's document frequency over the whole corpus (the sum of its shards' columns)."""
-        total = 0
-        for shard in self.shards:
-            j = shard.vocab.get(term)
-            if j is not None:
-                total += int(shard.indptr[j + 1] - shard.indptr[j])
-        return total
+        return self.dfs([term])[0]
+
+    def dfs(self, terms: list[str]) -> list[int]:
+        """Each term's document frequency over the whole corpus."""
+        return shards_df(self.shards, terms)
 
     def term_ids(self, terms: list[str], max_terms: int) -> list[str]:
         """The query terms any shard knows, cut to `max_terms` by global df (as `BM25Searcher`)."""
-        return select_terms(terms, [self.df(t) for t in terms], max_terms)
+        return select_terms(terms, self.dfs(terms), max_terms)
 
     def search(self, terms: list[str], k: int, weight_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Global top-k (document numbers, scores), best first; ties go to the lower document."""
