@@ -284,13 +284,13 @@ PROFILES = {"medical": Generator, "pubmed": PubMedGenerator}
 
 
 def make_corpus(workdir: Path, n: int, n_queries: int, seed: int, profile: str = "medical",
-                gzip_corpus: bool = False) -> tuple[Path, list[str]]:
+                gzip_corpus: bool = False, need_corpus: bool = True) -> tuple[Path, list[str]]:
     gen_cls = PROFILES[profile]
     tag = "" if profile == "medical" else f"{profile}-"
     corpus = workdir / f"corpus-{tag}{n}-{seed}.jsonl{'.gz' if gzip_corpus else ''}"
     qfile = workdir / f"queries-{tag}{n}-{n_queries}-{seed}.json"
     gen = gen_cls(seed)
-    if not corpus.exists():
+    if need_corpus and not corpus.exists():
         t = time.perf_counter()
         tmp = corpus.with_name(corpus.name + ".tmp")
         # gzip level 1: about half the JSONL's size (random Zipf words compress poorly) for little CPU;
@@ -768,12 +768,16 @@ def run_size(args, n_passages: int) -> dict:
     t_size = time.perf_counter()
     print(f"[bench] {n_passages:,} passages ({args.profile} profile), {args.n_queries} queries, seed {args.seed}, "
           f"{os.cpu_count()} CPUs, load average {load[0]:.1f}", flush=True)
-    corpus, queries = make_corpus(work, n_passages, args.n_queries, args.seed, args.profile, args.gzip_corpus)
     engines = [e.strip() for e in args.engines.split(",") if e.strip()]
+    tag = "" if args.profile == "medical" else f"{args.profile}-"
+    # --reuse with every index kept: the queries alone (a 10M corpus takes ~16 minutes to generate).
+    kept = args.reuse and all((work / f"index-{name}-{tag}{n_passages}" / "bench-build.json").is_file()
+                              for name in engines if name != "ours-rank")
+    corpus, queries = make_corpus(work, n_passages, args.n_queries, args.seed, args.profile, args.gzip_corpus,
+                                  need_corpus=not kept)
     rng = np.random.default_rng(args.seed + 2)
     results: dict[str, dict] = {}
     specs: list[tuple[str, Path]] = []
-    tag = "" if args.profile == "medical" else f"{args.profile}-"
     for name in engines:
         if name == "ours-rank" and "failed" in results.get("ours", {}):
             continue
