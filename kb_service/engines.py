@@ -259,14 +259,14 @@ class TermLookup(Mapping):
         out: list[int | None] = []
         for term, h, i in zip(terms, wanted.tolist(), starts):
             found = None
-            raw = None
-            while i < len(hashes) and hashes[i] == h:
-                j = int(columns[i])
-                raw = raw if raw is not None else term.encode("utf-8")
-                if blob[offsets[j]:offsets[j + 1]] == raw:
-                    found = j
-                    break
-                i += 1
+            if i < len(hashes) and hashes[i] == h:  # candidates: the run of equal hashes from i
+                raw = term.encode("utf-8")
+                while i < len(hashes) and hashes[i] == h:
+                    j = int(columns[i])
+                    if blob[offsets[j]:offsets[j + 1]] == raw:
+                        found = j
+                        break
+                    i += 1
             out.append(found)
         return out
 
